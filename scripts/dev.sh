@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# crumple's one entry point for a fresh Debian 12 machine (run as root, apt reachable):
+#   bash scripts/dev.sh demo   install what is missing, build Release, run `crumple detect` on the
+#                              built-in default scene
+#   bash scripts/dev.sh test   install what is missing, build Release and the asan preset, run
+#                              every test of both (ends with ctest's summary)
+#   bash scripts/dev.sh deps   only install the Debian packages
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+JOBS=${JOBS:-$(nproc)}
+PACKAGES=(g++ cmake make libeigen3-dev libtbb-dev libpugixml-dev libcli11-dev libgtest-dev
+          libgmock-dev libbenchmark-dev)
+
+install_deps() {
+  local missing=()
+  for p in "${PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  if ((${#missing[@]})); then
+    echo "== installing: ${missing[*]}"
+    local sudo=""
+    [ "$(id -u)" -eq 0 ] || sudo="sudo"
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+  fi
+}
+
+build() {  # build PRESET
+  cmake --preset "$1" >/dev/null
+  cmake --build --preset "$1" -j "$JOBS"
+}
+
+case "${1:-}" in
+  deps)
+    install_deps
+    ;;
+  demo)
+    install_deps
+    build release
+    ./build/release/apps/cli/crumple detect
+    ;;
+  test)
+    install_deps
+    build release
+    build asan
+    echo "== Release tests"
+    ctest --preset release -j "$JOBS" --timeout 900
+    echo "== AddressSanitizer + UBSan tests"
+    ctest --preset asan -j "$JOBS" --timeout 1500
+    ;;
+  *)
+    echo "usage: bash scripts/dev.sh demo|test|deps" >&2
+    exit 2
+    ;;
+esac

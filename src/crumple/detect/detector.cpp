@@ -1,0 +1,81 @@
+#include <crumple/core/error.hpp>
+#include <crumple/detect/detector.hpp>
+#include <crumple/detect/naive.hpp>
+
+#include <cmath>
+
+namespace crumple {
+
+void DetectorStats::set(std::string_view key, double value) {
+  for (auto& [k, v] : items_) {
+    if (k == key) {
+      v = value;
+      return;
+    }
+  }
+  items_.emplace_back(std::string(key), value);
+}
+
+void DetectorStats::add(std::string_view key, double value) {
+  for (auto& [k, v] : items_) {
+    if (k == key) {
+      v += value;
+      return;
+    }
+  }
+  items_.emplace_back(std::string(key), value);
+}
+
+double DetectorStats::get(std::string_view key) const {
+  for (const auto& [k, v] : items_) {
+    if (k == key) return v;
+  }
+  return 0;
+}
+
+Detector::Detector(DetectorOptions options) : options_(options) {
+  if (!(std::isfinite(options_.thickness) && options_.thickness >= 0)) {
+    throw InputError("thickness must be a finite number >= 0, got " +
+                     std::to_string(options_.thickness));
+  }
+  if (options_.threads < 0) {
+    throw InputError("threads must be >= 0 (0 = all), got " + std::to_string(options_.threads));
+  }
+}
+
+void Detector::set_topology(std::shared_ptr<const Topology> topology) {
+  CRUMPLE_CHECK(topology != nullptr, "set_topology: null topology");
+  topology_ = std::move(topology);
+  stats_.clear();
+  on_topology();
+}
+
+const Topology& Detector::topology() const {
+  CRUMPLE_CHECK(topology_ != nullptr, "detector used before set_topology");
+  return *topology_;
+}
+
+void Detector::update(PositionsView positions, ContactSet& out) { update({}, positions, out); }
+
+void Detector::update(PositionsView previous, PositionsView positions, ContactSet& out) {
+  const Topology& topo = topology();
+  CRUMPLE_CHECK(positions.size() == static_cast<std::size_t>(topo.num_vertices()),
+                "update: positions has " + std::to_string(positions.size()) +
+                    " entries, the topology " + std::to_string(topo.num_vertices()) + " vertices");
+  CRUMPLE_CHECK(previous.empty() || previous.size() == positions.size(),
+                "update: previous positions count differs from current");
+  out.clear();
+  stats_.clear();
+  detect(previous, positions, out);
+  out.sort();
+}
+
+std::unique_ptr<Detector> make_detector(const MethodSpec& spec, const DetectorOptions& options) {
+  switch (spec.method()) {
+    case Method::Naive:
+      return std::make_unique<NaiveDetector>(options);
+  }
+  throw InputError("no factory for method " + std::string(to_string(spec.method())));
+}
+
+}  // namespace crumple

@@ -1,0 +1,88 @@
+#pragma once
+/// \file
+/// The one detector interface (STYLE.md §2, §3). Lifecycle: `set_topology` once, then
+/// `update(positions)` — or `update(previous, positions)` for methods that use motion — every
+/// frame. One virtual call per frame fills a `ContactSet`; state that persists across frames
+/// (trees, active pair lists, grids) lives in the detector object.
+///
+/// Contact definition (the oracle's), with thickness h:
+///  - VF: vertex v and face f with v not a corner of f and dist(v, f) < h;
+///  - EE: edges sharing no vertex with dist < h;
+///  - TT: faces sharing no vertex that intersect (closed triangles; touching counts).
+
+#include <crumple/core/types.hpp>
+#include <crumple/detect/contact.hpp>
+#include <crumple/detect/method.hpp>
+#include <crumple/mesh/mesh.hpp>
+
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace crumple {
+
+/// Options common to every detector.
+struct DetectorOptions {
+  Scalar thickness = 0;  ///< h, in scene units; contact when distance < h. Must be >= 0.
+  ContactKinds kinds{};  ///< which kinds to report (default VF + EE)
+  int threads = 0;       ///< worker threads: 0 = all hardware threads, 1 = serial
+};
+
+/// Named counters of the last update, in a stable order (for `--json` and benchmarks).
+class DetectorStats {
+ public:
+  void clear() { items_.clear(); }
+  /// Sets a counter, appending it if new.
+  void set(std::string_view key, double value);
+  void add(std::string_view key, double value);
+  double get(std::string_view key) const;  ///< 0 when absent
+  const std::vector<std::pair<std::string, double>>& items() const { return items_; }
+
+ private:
+  std::vector<std::pair<std::string, double>> items_;
+};
+
+/// Base of every detection method.
+class Detector {
+ public:
+  explicit Detector(DetectorOptions options);
+  virtual ~Detector() = default;
+  Detector(const Detector&) = delete;
+  Detector& operator=(const Detector&) = delete;
+
+  virtual Method method() const = 0;
+  Capabilities capabilities() const { return method_info(method()).capabilities; }
+  const DetectorOptions& options() const { return options_; }
+
+  /// Sets the mesh connectivity (once, or again to start over: resets all frame state).
+  void set_topology(std::shared_ptr<const Topology> topology);
+  const Topology& topology() const;
+
+  /// Detects the contacts at `positions` (#V entries). `out` is cleared, filled and sorted
+  /// canonically (see `ContactSet::sort`).
+  void update(PositionsView positions, ContactSet& out);
+  /// Same, with the previous frame's positions for methods that use motion (others ignore them).
+  void update(PositionsView previous, PositionsView positions, ContactSet& out);
+
+  /// Counters of the last update (pairs tested, candidates, ...), method-specific.
+  const DetectorStats& stats() const { return stats_; }
+
+ protected:
+  /// Called after a new topology is set; detectors build their per-mesh structures here.
+  virtual void on_topology() {}
+  /// Fills `out` (already empty). `previous` is empty when no motion is given.
+  virtual void detect(PositionsView previous, PositionsView positions, ContactSet& out) = 0;
+
+  DetectorStats stats_;
+
+ private:
+  DetectorOptions options_;
+  std::shared_ptr<const Topology> topology_;
+};
+
+/// Creates the detector for a method spec (the one factory). Throws `InputError` on bad
+/// parameters. The detector has no topology yet.
+std::unique_ptr<Detector> make_detector(const MethodSpec& spec, const DetectorOptions& options);
+
+}  // namespace crumple

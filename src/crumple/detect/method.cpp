@@ -1,0 +1,180 @@
+#include <crumple/core/error.hpp>
+#include <crumple/detect/method.hpp>
+
+#include <algorithm>
+#include <array>
+#include <charconv>
+#include <cstdlib>
+
+namespace crumple {
+
+namespace {
+
+constexpr std::array<ParamInfo, 0> kNaiveParams{};
+
+constexpr std::array<MethodInfo, 1> kMethods{{
+    {Method::Naive, "naive",
+     "O(n^2) test of every vertex-face and edge-edge pair (the thesis baseline and the exact "
+     "reference)",
+     {.exact = true, .stochastic = false, .uses_motion = false}, kNaiveParams},
+}};
+
+std::string join_names() {
+  std::string out;
+  for (const auto& m : kMethods) {
+    if (!out.empty()) out += ", ";
+    out += m.name;
+  }
+  return out;
+}
+
+std::string join_keys(const MethodInfo& info) {
+  if (info.params.empty()) return "(none)";
+  std::string out;
+  for (const auto& p : info.params) {
+    if (!out.empty()) out += ", ";
+    out += p.key;
+  }
+  return out;
+}
+
+const ParamInfo* find_param(const MethodInfo& info, std::string_view key) {
+  for (const auto& p : info.params) {
+    if (p.key == key) return &p;
+  }
+  return nullptr;
+}
+
+std::string_view trim(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+  return s;
+}
+
+}  // namespace
+
+std::span<const MethodInfo> all_methods() { return kMethods; }
+
+const MethodInfo& method_info(Method method) {
+  for (const auto& m : kMethods) {
+    if (m.method == method) return m;
+  }
+  throw InputError("unknown method enum value " + std::to_string(static_cast<int>(method)));
+}
+
+std::string_view to_string(Method method) { return method_info(method).name; }
+
+Method parse_method(std::string_view name) {
+  for (const auto& m : kMethods) {
+    if (m.name == name) return m.method;
+  }
+  throw InputError("unknown method '" + std::string(name) + "' (valid: " + join_names() + ")");
+}
+
+MethodSpec MethodSpec::parse(std::string_view text) {
+  text = trim(text);
+  const std::size_t colon = text.find(':');
+  MethodSpec spec(parse_method(trim(text.substr(0, colon))));
+  if (colon == std::string_view::npos) return spec;
+  std::string_view rest = text.substr(colon + 1);
+  if (trim(rest).empty()) return spec;
+  std::size_t start = 0;
+  while (start <= rest.size()) {
+    const std::size_t end = std::min(rest.find(',', start), rest.size());
+    const std::string_view item = trim(rest.substr(start, end - start));
+    const std::size_t eq = item.find('=');
+    if (eq == std::string_view::npos || trim(item.substr(0, eq)).empty()) {
+      throw InputError("method spec '" + std::string(text) + "': expected key=value, got '" +
+                       std::string(item) + "' (valid keys for " +
+                       std::string(crumple::to_string(spec.method_)) + ": " +
+                       join_keys(method_info(spec.method_)) + ")");
+    }
+    const std::string key(trim(item.substr(0, eq)));
+    if (spec.get(key)) {
+      throw InputError("method spec '" + std::string(text) + "': key '" + key + "' given twice");
+    }
+    spec.set(key, std::string(trim(item.substr(eq + 1))));
+    start = end + 1;
+  }
+  return spec;
+}
+
+MethodSpec& MethodSpec::set(std::string key, std::string value) {
+  const MethodInfo& info = method_info(method_);
+  if (!find_param(info, key)) {
+    throw InputError("method " + std::string(info.name) + ": unknown key '" + key +
+                     "' (valid keys: " + join_keys(info) + ")");
+  }
+  for (auto& [k, v] : params_) {
+    if (k == key) {
+      v = std::move(value);
+      return *this;
+    }
+  }
+  params_.emplace_back(std::move(key), std::move(value));
+  return *this;
+}
+
+std::optional<std::string> MethodSpec::get(std::string_view key) const {
+  for (const auto& [k, v] : params_) {
+    if (k == key) return v;
+  }
+  return std::nullopt;
+}
+
+void MethodSpec::bad_value(std::string_view key, const std::string& value,
+                           std::string_view expected) const {
+  throw InputError("method " + std::string(crumple::to_string(method_)) + ": key '" + std::string(key) +
+                   "' expects " + std::string(expected) + ", got '" + value + "'");
+}
+
+long long MethodSpec::get_int(std::string_view key, long long fallback) const {
+  const auto value = get(key);
+  if (!value) return fallback;
+  long long out = 0;
+  const auto [ptr, ec] = std::from_chars(value->data(), value->data() + value->size(), out);
+  if (ec != std::errc() || ptr != value->data() + value->size()) bad_value(key, *value, "an integer");
+  return out;
+}
+
+double MethodSpec::get_double(std::string_view key, double fallback) const {
+  const auto value = get(key);
+  if (!value) return fallback;
+  double out = 0;
+  const auto [ptr, ec] = std::from_chars(value->data(), value->data() + value->size(), out);
+  if (ec != std::errc() || ptr != value->data() + value->size()) bad_value(key, *value, "a number");
+  return out;
+}
+
+bool MethodSpec::get_bool(std::string_view key, bool fallback) const {
+  const auto value = get(key);
+  if (!value) return fallback;
+  if (*value == "on" || *value == "true" || *value == "1") return true;
+  if (*value == "off" || *value == "false" || *value == "0") return false;
+  bad_value(key, *value, "on or off");
+}
+
+std::string MethodSpec::get_choice(std::string_view key, std::string_view fallback,
+                                   std::span<const std::string_view> choices) const {
+  const auto value = get(key);
+  if (!value) return std::string(fallback);
+  for (auto c : choices) {
+    if (c == *value) return *value;
+  }
+  std::string expected = "one of";
+  for (auto c : choices) expected += " " + std::string(c);
+  bad_value(key, *value, expected);
+}
+
+std::string MethodSpec::to_string() const {
+  std::string out(crumple::to_string(method_));
+  char sep = ':';
+  for (const auto& [k, v] : params_) {
+    out += sep;
+    out += k + "=" + v;
+    sep = ',';
+  }
+  return out;
+}
+
+}  // namespace crumple

@@ -1,0 +1,200 @@
+// Wavefront OBJ: geometry statements `v` and `f` only.
+
+#include <crumple/core/atomic_file.hpp>
+#include <crumple/io/io_detail.hpp>
+#include <crumple/io/mesh_io.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <ostream>
+
+namespace crumple::io {
+
+namespace {
+
+using detail::fail_at_line;
+using detail::quote;
+
+// Statements that are valid OBJ but carry nothing a triangle mesh needs.
+constexpr std::string_view ignored_keywords[] = {
+    "vt",     "vn",       "vp",      "o",          "g",         "s",          "usemtl", "mtllib",
+    "l",      "p",        "cstype",  "deg",        "bmat",      "step",       "curv",   "curv2",
+    "surf",   "parm",     "trim",    "hole",       "scrv",      "sp",         "end",    "con",
+    "mg",     "lod",      "usemap",  "maplib",     "c_interp",  "d_interp",   "shadow_obj",
+    "trace_obj", "ctech", "stech",   "bevel",      "call",      "csh",        "res"};
+
+bool is_ignored_keyword(std::string_view keyword) {
+  return std::ranges::find(ignored_keywords, keyword) != std::end(ignored_keywords);
+}
+
+class ObjParser {
+ public:
+  ObjParser(const std::filesystem::path& path, std::string_view text)
+      : path_(path), lines_(text, /*backslash_continuation=*/true) {}
+
+  MeshData parse() {
+    while (auto raw = lines_.next()) {
+      const std::string_view line = detail::strip_comment(*raw, '#');
+      detail::Tokens tokens(line);
+      const auto keyword = tokens.next();
+      if (!keyword) continue;
+      if (*keyword == "v") {
+        parse_vertex(tokens);
+      } else if (*keyword == "f") {
+        parse_face(tokens);
+      } else if (!is_ignored_keyword(*keyword)) {
+        fail("unknown statement " + quote(*keyword) +
+             " (expected v, f or another OBJ keyword such as vt, vn, o, g, s, usemtl)");
+      }
+    }
+    if (max_index_ >= 0 && max_index_ >= static_cast<std::int64_t>(data_.positions.size())) {
+      fail_at_line(path_, max_index_line_,
+                   "vertex index " + std::to_string(max_index_ + 1) +
+                       " is out of range: the file has " +
+                       std::to_string(data_.positions.size()) + " vertices");
+    }
+    return std::move(data_);
+  }
+
+ private:
+  [[noreturn]] void fail(const std::string& message) const {
+    fail_at_line(path_, lines_.line_number(), message);
+  }
+
+  void parse_vertex(detail::Tokens& tokens) {
+    std::array<double, 7> values{};
+    std::size_t n = 0;
+    while (auto token = tokens.next()) {
+      if (n == values.size()) fail("too many values after 'v' (expected 'v x y z [w]')");
+      const auto value = detail::to_double(*token);
+      if (!value) fail("expected a number in 'v x y z [w]', found " + quote(*token));
+      values[n++] = *value;
+    }
+    if (n != 3 && n != 4 && n != 6 && n != 7) {
+      fail("expected 'v x y z [w]' (3 or 4 numbers, or 6 or 7 with an RGB colour), found " +
+           std::to_string(n) + " numbers");
+    }
+    const Vec3 p(values[0], values[1], values[2]);
+    if (!p.allFinite()) fail("vertex " + std::to_string(data_.positions.size() + 1) +
+                             " has a non-finite coordinate");
+    if (data_.positions.size() >= static_cast<std::size_t>(std::numeric_limits<Index>::max())) {
+      fail("too many vertices (at most 2^31-1)");
+    }
+    data_.positions.push_back(p);
+  }
+
+  // One `i`, `i/vt`, `i//vn` or `i/vt/vn` reference; returns the 0-based vertex id.
+  Index parse_reference(std::string_view ref) {
+    const std::size_t slash = ref.find('/');
+    const std::string_view vertex_part = ref.substr(0, slash);
+    if (slash != std::string_view::npos) {
+      const std::string_view rest = ref.substr(slash + 1);
+      const std::size_t slash2 = rest.find('/');
+      const std::string_view texture = rest.substr(0, slash2);
+      const std::string_view normal =
+          slash2 == std::string_view::npos ? std::string_view{} : rest.substr(slash2 + 1);
+      const bool ok_texture = texture.empty() ? slash2 != std::string_view::npos
+                                              : detail::to_int(texture).value_or(0) != 0;
+      const bool ok_normal =
+          slash2 == std::string_view::npos || detail::to_int(normal).value_or(0) != 0;
+      if (!ok_texture || !ok_normal || normal.find('/') != std::string_view::npos) {
+        fail("malformed face vertex " + quote(ref) + " (expected i, i/vt, i//vn or i/vt/vn)");
+      }
+    }
+    const auto index = detail::to_int(vertex_part);
+    if (!index) {
+      fail("malformed face vertex " + quote(ref) + " (expected i, i/vt, i//vn or i/vt/vn)");
+    }
+    const auto count = static_cast<std::int64_t>(data_.positions.size());
+    if (*index == 0) fail("vertex index 0 in a face (OBJ indices start at 1)");
+    if (*index < 0) {
+      const std::int64_t id = count + *index;
+      if (id < 0) {
+        fail("relative vertex index " + std::to_string(*index) + " reaches before the first vertex (" +
+             std::to_string(count) + " vertices so far)");
+      }
+      return static_cast<Index>(id);
+    }
+    const std::int64_t id = *index - 1;
+    if (id >= std::numeric_limits<Index>::max()) {
+      fail("vertex index " + std::to_string(*index) + " is out of range");
+    }
+    // Forward references are checked once all vertices are known.
+    if (id >= count && id > max_index_) {
+      max_index_ = id;
+      max_index_line_ = lines_.line_number();
+    }
+    return static_cast<Index>(id);
+  }
+
+  void parse_face(detail::Tokens& tokens) {
+    std::size_t n = 0;
+    Index first = 0;
+    Index previous = 0;
+    while (auto token = tokens.next()) {
+      const Index id = parse_reference(*token);
+      if (n == 0) {
+        first = id;
+      } else if (n >= 2) {
+        if (data_.faces.size() >= static_cast<std::size_t>(std::numeric_limits<Index>::max())) {
+          fail("too many faces (at most 2^31-1)");
+        }
+        data_.faces.push_back({first, previous, id});
+      }
+      previous = id;
+      ++n;
+    }
+    if (n < 3) {
+      fail("a face needs at least 3 vertices, found " + std::to_string(n));
+    }
+  }
+
+  const std::filesystem::path& path_;
+  detail::LineReader lines_;
+  MeshData data_;
+  std::int64_t max_index_ = -1;  // largest forward (not yet defined) 0-based id
+  std::int64_t max_index_line_ = 0;
+};
+
+}  // namespace
+
+MeshData read_obj(const std::filesystem::path& path) {
+  const std::string text = detail::read_whole_file(path);
+  return ObjParser(path, text).parse();
+}
+
+void write_obj(const std::filesystem::path& path, PositionsView positions,
+               std::span<const Face> faces) {
+  detail::check_mesh_for_writing(positions, faces);
+  std::string out;
+  out.reserve(64 + positions.size() * 64 + faces.size() * 24);
+  out += "# written by crumple: ";
+  detail::append_int(out, static_cast<std::int64_t>(positions.size()));
+  out += " vertices, ";
+  detail::append_int(out, static_cast<std::int64_t>(faces.size()));
+  out += " triangles\n";
+  for (const Vec3& p : positions) {
+    out += "v ";
+    detail::append_double(out, p.x());
+    out += ' ';
+    detail::append_double(out, p.y());
+    out += ' ';
+    detail::append_double(out, p.z());
+    out += '\n';
+  }
+  for (const Face& f : faces) {
+    out += 'f';
+    for (const Index id : f) {
+      out += ' ';
+      detail::append_int(out, std::int64_t{id} + 1);
+    }
+    out += '\n';
+  }
+  write_file_atomically(path, [&](std::ostream& stream) {
+    stream.write(out.data(), static_cast<std::streamsize>(out.size()));
+  });
+}
+
+}  // namespace crumple::io

@@ -1,0 +1,188 @@
+// Runs the `crumple` binary as a user would and checks what it prints and writes.
+#include <crumple/io/mesh_io.hpp>
+#include <support/meshes.hpp>
+#include <support/oracle.hpp>
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace crumple {
+namespace {
+
+struct Result {
+  int status;
+  std::string out;  // stdout and stderr together
+};
+
+Result run(const std::string& args) {
+  const std::string command = std::string(CRUMPLE_CLI) + " " + args + " 2>&1";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (!pipe) return {-1, ""};
+  std::string out;
+  std::array<char, 4096> buffer;
+  while (std::size_t n = std::fread(buffer.data(), 1, buffer.size(), pipe)) out.append(buffer.data(), n);
+  const int raw = ::pclose(pipe);
+  return {WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, out};
+}
+
+std::filesystem::path temp_dir(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("crumple-cli-" + name + "-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+std::string funnel(int frame) {
+  return testing::data_path("sample-scalable-ccd/cloth-funnel/frames/" + std::to_string(frame) + ".ply").string();
+}
+
+TEST(Cli, HelpListsCommandsAndMethods) {
+  Result r = run("--help");
+  EXPECT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("detect"), std::string::npos);
+  EXPECT_NE(r.out.find("info"), std::string::npos);
+  r = run("detect --help");
+  EXPECT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("naive"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("--thickness-rel"), std::string::npos);
+}
+
+TEST(Cli, DetectOnBuiltInSceneFindsContacts) {
+  const Result r = run("detect");
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("builtin:folded-cloth"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("vf 0 "), std::string::npos) << r.out;
+}
+
+TEST(Cli, BadInputGivesOneLineErrorAndNonZeroExit) {
+  const auto dir = temp_dir("bad");
+  std::ofstream(dir / "broken.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n";
+  Result r = run("detect " + (dir / "broken.obj").string());
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("broken.obj:4"), std::string::npos) << r.out;
+  r = run("detect --method bogus");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("valid: naive"), std::string::npos) << r.out;
+  r = run("detect --method naive:x=1");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("unknown key 'x'"), std::string::npos) << r.out;
+  r = run("detect --kinds vf,zz");
+  EXPECT_NE(r.status, 0);
+  r = run("detect " + (dir / "missing.ply").string());
+  EXPECT_NE(r.status, 0);
+  r = run("detect --thickness 1 --thickness-rel 0.1");
+  EXPECT_NE(r.status, 0) << "the two thickness options exclude each other";
+  r = run("info " + (dir / "broken.obj").string());
+  EXPECT_NE(r.status, 0);
+}
+
+TEST(Cli, InfoPrintsCountsAndReport) {
+  const Result r = run("info " + funnel(227));
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("vertices: 9450"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("faces: 18484"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("edge length min/mean/max"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("non-manifold edges: "), std::string::npos) << r.out;
+}
+
+TEST(Cli, JsonHasOneObjectPerFrameWithStats) {
+  const auto dir = temp_dir("json");
+  const TriMesh m = shapes::folded_cloth({.n = 10});
+  io::write_obj(dir / "a.obj", m.positions(), m.topology().faces());
+  io::write_obj(dir / "b.obj", testing::jitter(m.positions(), 0.002, 5), m.topology().faces());
+  const Result r = run("detect --json --thickness 0.02 " + (dir / "a.obj").string() + " " +
+                       (dir / "b.obj").string() + " --contacts " + (dir / "out").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  std::istringstream lines(r.out);
+  std::string line;
+  int frames = 0;
+  while (std::getline(lines, line)) {
+    ASSERT_EQ(line.front(), '{') << line;
+    ASSERT_EQ(line.back(), '}') << line;
+    for (const char* key : {"\"frame\":", "\"file\":", "\"vf\":", "\"ee\":", "\"tt\":", "\"ms\":", "\"stats\":{"})
+      EXPECT_NE(line.find(key), std::string::npos) << key << " in " << line;
+    EXPECT_NE(line.find("\"frame\":" + std::to_string(frames)), std::string::npos) << line;
+    ++frames;
+  }
+  EXPECT_EQ(frames, 2);
+  EXPECT_TRUE(std::filesystem::exists(dir / "out" / "a.tsv"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "out" / "b.tsv"));
+}
+
+TEST(Cli, FramesWithDifferentConnectivityAreRejected) {
+  const auto dir = temp_dir("conn");
+  const TriMesh a = shapes::lattice(3, 3), b = shapes::lattice(4, 2);
+  io::write_obj(dir / "a.obj", a.positions(), a.topology().faces());
+  io::write_obj(dir / "b.obj", b.positions(), b.topology().faces());
+  const Result r = run("detect " + (dir / "a.obj").string() + " " + (dir / "b.obj").string());
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("b.obj"), std::string::npos) << r.out;
+}
+
+/// The acceptance check: naive on funnel frame 227 at thickness 1e-3 of the diagonal,
+/// contacts written to a file, checked against the independent oracle of tests/support.
+TEST(Cli, FunnelContactsMatchIndependentOracle) {
+  const auto dir = temp_dir("funnel");
+  const auto out = dir / "out.tsv";
+  const Result r = run("detect " + funnel(227) + " --thickness-rel 1e-3 --contacts " + out.string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  std::cout << r.out;
+
+  const TriMesh mesh = io::read_mesh(funnel(227));
+  const Scalar h = 1e-3 * compute_bounds(mesh.positions()).diagonal();
+  const auto oracle = oracle::brute_force(mesh.topology(), mesh.positions(), h * (1 + 1e-9));
+  const long double lo = h * (1 - 1e-9);
+
+  std::ifstream in(out);
+  std::string kind;
+  std::set<std::pair<Index, Index>> vf_found;
+  std::set<std::array<Index, 4>> ee_found;
+  while (in >> kind) {
+    if (kind == "vf") {
+      Index v, f;
+      double d;
+      in >> v >> f >> d;
+      auto it = oracle.vf.find({v, f});
+      ASSERT_NE(it, oracle.vf.end()) << "false vf " << v << " " << f;
+      EXPECT_NEAR(d, static_cast<double>(it->second), 1e-9 * h);
+      EXPECT_TRUE(vf_found.insert({v, f}).second) << "duplicate line";
+    } else if (kind == "ee") {
+      std::array<Index, 4> k;
+      double d;
+      in >> k[0] >> k[1] >> k[2] >> k[3] >> d;
+      auto it = oracle.ee.find(k);
+      ASSERT_NE(it, oracle.ee.end()) << "false ee " << k[0] << " " << k[1] << " " << k[2] << " " << k[3];
+      EXPECT_NEAR(d, static_cast<double>(it->second), 1e-9 * h);
+      EXPECT_TRUE(ee_found.insert(k).second) << "duplicate line";
+    } else {
+      FAIL() << "unexpected line kind " << kind;
+    }
+  }
+  for (const auto& [k, d] : oracle.vf) {
+    if (d < lo) {
+      EXPECT_TRUE(vf_found.count(k)) << "missed vf " << k.first << " " << k.second << " d=" << static_cast<double>(d);
+    }
+  }
+  for (const auto& [k, d] : oracle.ee) {
+    if (d < lo) {
+      EXPECT_TRUE(ee_found.count(k)) << "missed ee " << k[0] << " " << k[1] << " " << k[2] << " " << k[3];
+    }
+  }
+  std::cout << "funnel 227: " << vf_found.size() << " vf, " << ee_found.size() << " ee (oracle "
+            << oracle.vf.size() << ", " << oracle.ee.size() << ")\n";
+  EXPECT_GT(vf_found.size() + ee_found.size(), 0u) << "the funnel frame has proximity contacts at 1e-3";
+}
+
+}  // namespace
+}  // namespace crumple
