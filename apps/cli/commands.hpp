@@ -11,6 +11,8 @@ namespace crumple::cli {
 using Run = std::function<int()>;
 
 Run add_detect_command(CLI::App& app);
+Run add_compare_command(CLI::App& app);
 Run add_info_command(CLI::App& app);
+Run add_simulate_command(CLI::App& app);
 
 }  // namespace crumple::cli

@@ -20,8 +20,12 @@ int main(int argc, char** argv) {
   };
   add("detect", "Detect self-contacts on one mesh or a sequence of frames",
       crumple::cli::add_detect_command);
+  add("compare", "Measure a method's recall, false contacts and time against a reference",
+      crumple::cli::add_compare_command);
   add("info", "Print counts, bounds, edge lengths and the validation report of a mesh",
       crumple::cli::add_info_command);
+  add("simulate", "Simulate a cloth scene or model with self-collision detection and response",
+      crumple::cli::add_simulate_command);
 
   try {
     app.parse(argc, argv);

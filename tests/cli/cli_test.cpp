@@ -2,6 +2,7 @@
 #include <crumple/io/mesh_io.hpp>
 #include <support/meshes.hpp>
 #include <support/oracle.hpp>
+#include <support/run_cli.hpp>
 
 #include <gtest/gtest.h>
 
@@ -19,29 +20,11 @@
 namespace crumple {
 namespace {
 
-struct Result {
-  int status;
-  std::string out;  // stdout and stderr together
-};
+using Result = testing::CliResult;
 
-Result run(const std::string& args) {
-  const std::string command = std::string(CRUMPLE_CLI) + " " + args + " 2>&1";
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (!pipe) return {-1, ""};
-  std::string out;
-  std::array<char, 4096> buffer;
-  while (std::size_t n = std::fread(buffer.data(), 1, buffer.size(), pipe)) out.append(buffer.data(), n);
-  const int raw = ::pclose(pipe);
-  return {WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, out};
-}
+Result run(const std::string& args) { return testing::run_cli(args); }
 
-std::filesystem::path temp_dir(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("crumple-cli-" + name + "-" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  return dir;
-}
+std::filesystem::path temp_dir(const std::string& name) { return testing::cli_temp_dir(name); }
 
 std::string funnel(int frame) {
   return testing::data_path("sample-scalable-ccd/cloth-funnel/frames/" + std::to_string(frame) + ".ply").string();

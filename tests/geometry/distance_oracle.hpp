@@ -10,18 +10,26 @@
 ///    the domain, and a side minimum is a point-segment distance (closed form). Every
 ///    candidate evaluated is a point of the domain, so the oracle never under-estimates by
 ///    more than its rounding; with 113 bits the differences and pairwise products of double
-///    inputs are exact and near-singular systems (near-parallel segments, slivers down to
-///    sin^2 ~ 1e-24) are still solved to many digits.
+///    inputs are exact, and the interior critical points are computed with cross products
+///    (errors relative to |u x v|, not to |u x v|^2), so near-parallel segments and slivers
+///    down to sin(angle) ~ 1e-16 are still solved to ~1e-18 relative.
 /// None of this shares code or algorithm with the kernels (no region classification, no
 /// clamped-root walk).
 
 #include <crumple/core/types.hpp>
 
 #include <algorithm>
+#include <limits>
 
 namespace crumple::geometry::test {
 
-__extension__ typedef __float128 Quad;
+#if defined(__SIZEOF_FLOAT128__)
+__extension__ typedef __float128 Quad;  // x86-64 (GCC, Clang): software binary128
+#else
+static_assert(std::numeric_limits<long double>::digits >= 113,
+              "the distance oracles need a binary128 type (__float128 or a 128-bit long double)");
+typedef long double Quad;  // AArch64 Linux: long double is binary128
+#endif
 
 struct Q3 {
   Quad x, y, z;
@@ -31,6 +39,9 @@ inline Q3 operator-(const Q3& a, const Q3& b) { return {a.x - b.x, a.y - b.y, a.
 inline Q3 operator+(const Q3& a, const Q3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
 inline Q3 operator*(Quad s, const Q3& a) { return {s * a.x, s * a.y, s * a.z}; }
 inline Quad dot(const Q3& a, const Q3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline Q3 cross(const Q3& a, const Q3& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
 
 /// Squared distance from p to segment [a,b] (closed-form clamp, binary128).
 inline Quad quad_point_segment(const Q3& p, const Q3& a, const Q3& b) {
@@ -51,13 +62,17 @@ inline long double oracle_segment_segment(const Vec3& p0d, const Vec3& p1d, cons
   best = std::min(best, quad_point_segment(p1, q0, q1));
   best = std::min(best, quad_point_segment(q0, p0, p1));
   best = std::min(best, quad_point_segment(q1, p0, p1));
-  const Q3 u = p1 - p0, v = q1 - q0, w = p0 - q0;
-  const Quad a = dot(u, u), b = dot(u, v), c = dot(v, v), d = dot(u, w), e = dot(v, w);
-  const Quad det = a * c - b * b;
-  if (det > 0) {
-    const Quad s = (b * e - c * d) / det, t = (a * e - b * d) / det;
+  // Interior critical point of the two lines, by the cross-product formulas
+  //   s = ((q0 - p0) x v).n / |n|^2,  t = ((q0 - p0) x u).n / |n|^2,  n = u x v,
+  // whose errors stay relative to |n| (Cramer on the Gram matrix, with det = ac - b^2,
+  // would lose 1/sin^2 of the angle even in binary128).
+  const Q3 u = p1 - p0, v = q1 - q0, w = q0 - p0;
+  const Q3 n = cross(u, v);
+  const Quad nn = dot(n, n);
+  if (nn > 0) {
+    const Quad s = dot(cross(w, v), n) / nn, t = dot(cross(w, u), n) / nn;
     if (s >= 0 && s <= 1 && t >= 0 && t <= 1) {
-      const Q3 diff = w + s * u - t * v;
+      const Q3 diff = (p0 + s * u) - (q0 + t * v);
       best = std::min(best, dot(diff, diff));
     }
   }
@@ -71,14 +86,15 @@ inline long double oracle_point_triangle(const Vec3& pd, const Vec3& ad, const V
   Quad best = quad_point_segment(p, a, b);
   best = std::min(best, quad_point_segment(p, b, c));
   best = std::min(best, quad_point_segment(p, c, a));
-  const Q3 e0 = b - a, e1 = c - a, d = a - p;
-  const Quad a00 = dot(e0, e0), a01 = dot(e0, e1), a11 = dot(e1, e1);
-  const Quad b0 = dot(e0, d), b1 = dot(e1, d);
-  const Quad det = a00 * a11 - a01 * a01;
-  if (det > 0) {
-    const Quad s = (a01 * b1 - a11 * b0) / det, t = (a01 * b0 - a00 * b1) / det;
+  // Foot of p on the plane, in barycentrics by the cross-product (area) formulas
+  //   s = ((p - a) x e1).n / |n|^2,  t = (e0 x (p - a)).n / |n|^2,  n = e0 x e1.
+  const Q3 e0 = b - a, e1 = c - a, ap = p - a;
+  const Q3 n = cross(e0, e1);
+  const Quad nn = dot(n, n);
+  if (nn > 0) {
+    const Quad s = dot(cross(ap, e1), n) / nn, t = dot(cross(e0, ap), n) / nn;
     if (s >= 0 && t >= 0 && s + t <= 1) {
-      const Q3 diff = d + s * e0 + t * e1;
+      const Q3 diff = (a + s * e0 + t * e1) - p;
       best = std::min(best, dot(diff, diff));
     }
   }

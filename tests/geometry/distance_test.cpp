@@ -8,10 +8,11 @@
 /// backward-stable kernel returns the exact distance of inputs moved by a few eps*L, and the
 /// distance between sets is 1-Lipschitz under moving their points, so its distance error is
 /// O(eps*L) whatever the conditioning of the closest *points* (near-parallel segments,
-/// slivers). We allow kTol = 64 eps*L (~7e-15 L); the largest error observed, in units of
-/// eps*L, is printed by each test. Exception, by design: triangles below the degeneracy
-/// threshold (sin^2 of the angle at a < 1e-20) are replaced by their sides, which is off by
-/// at most their inradius, <= 1e-10 * L; the sliver family uses that bound.
+/// slivers). We allow kTolUlps = 64 eps*L (~7e-15 L); the largest error observed, printed by
+/// each test in units of eps*L, is below 8 (the margin covers other seeds and compilers).
+/// Parameters, barycentrics and closest points are checked through the distances they
+/// reproduce, with the same tolerance: they are ill-conditioned (parallel segments have a
+/// continuum of closest pairs; a sliver's barycentrics are undetermined across its width).
 
 #include <crumple/geometry/distance.hpp>
 
@@ -349,9 +350,15 @@ TEST(PointTriangle, VoronoiRegions) {
     const Scalar S = rng.scale(-2, 2);
     const Vec3 o = rng.coin() ? Vec3::Zero() : rng.vec(-10 * S, 10 * S);
     Vec3 v[3] = {o + rng.vec(-S, S), o + rng.vec(-S, S), o + rng.vec(-S, S)};
-    const Vec3 nn = (v[1] - v[0]).cross(v[2] - v[0]);
-    if (nn.squaredNorm() < 1e-4 * std::pow(S, 4)) continue;  // want a well-shaped triangle
-    const Vec3 n = nn.normalized();
+    // Want a well-shaped triangle: every angle below 150 degrees (so that each corner's
+    // normal cone has room for the margin below) and a clear normal.
+    bool well_shaped = true;
+    for (int k = 0; k < 3; ++k) {
+      const Vec3 e1 = (v[(k + 1) % 3] - v[k]).normalized(), e2 = (v[(k + 2) % 3] - v[k]).normalized();
+      well_shaped = well_shaped && e1.dot(e2) > -0.85 && e1.cross(e2).norm() > 0.05;
+    }
+    if (!well_shaped) continue;
+    const Vec3 n = (v[1] - v[0]).cross(v[2] - v[0]).normalized();
     const Scalar h = rng.uniform(-S, S);  // height above the plane
     const int feature = i % 7;            // 0 face, 1..3 edges ab, bc, ca, 4..6 vertices
     Vec3 p, expected_closest;
@@ -428,9 +435,9 @@ TEST(PointTriangle, MatchesOracleDegenerate) {
 }
 
 TEST(PointTriangle, MatchesOracleSlivers) {
-  // c = a + lambda (b - a) + width * m: angle at a of order width/|c - a|, down to 1e-14 rad.
-  // Above the degeneracy threshold the face is solved (error O(eps L) expected); below it
-  // the sides stand in for the face, off by at most the inradius <= width.
+  // c = a + lambda (b - a) + width * m: height over ab from 1e-2 down to 1e-14 of |ab|, the
+  // regime where the normal equations of the classic algorithm lose eps/sin^2(angle) and
+  // used to misclassify regions. Points anywhere, on the sliver, or in its plane near it.
   Rng rng("PointTriangle.MatchesOracleSlivers", 9004);
   Checker ck("point_triangle slivers");
   for (int i = 0; i < 30000; ++i) {
@@ -448,10 +455,7 @@ TEST(PointTriangle, MatchesOracleSlivers) {
       case 1: p = a + rng.uniform(0, 1) * (b - a) + rng.uniform(0, 1) * (c - b); break;  // on it
       default: p = a + rng.uniform(-0.2, 1.2) * (c - a) + rng.vec(-1e-3, 1e-3) * width; break;
     }
-    const Scalar L = max_abs_coord({p, a, b, c});
-    // Allowance: kTol, or the inradius bound 1e-10 * |longest side| when below threshold.
-    const Scalar tol = std::max(kTolUlps, 1e-10 * (b - a).norm() / (kEps * L) * 2);
-    check_point_triangle(ck, {p, a, b, c}, tol);
+    check_point_triangle(ck, {p, a, b, c});
   }
   EXPECT_EQ(ck.failures(), 0);
 }

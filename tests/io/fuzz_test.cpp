@@ -89,7 +89,7 @@ TEST(Fuzz, MutatedValidFiles) {
     reader.write(file, mesh);
     const std::string valid = read_bytes(file);
     std::size_t rejected = 0;
-    constexpr int trials = 300;
+    constexpr int trials = 200;
     for (int trial = 0; trial < trials; ++trial) {
       std::string bytes = valid;
       const int edits = 1 + static_cast<int>(rng() % 4);

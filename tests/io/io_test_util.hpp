@@ -149,6 +149,16 @@ inline TestMesh awkward_mesh(std::size_t columns = 8, std::uint64_t seed = 12345
   return m;
 }
 
+/// Cut points for truncation tests of a file of `size` bytes: every byte of the first and last
+/// 64 bytes, and every `stride`-th byte between them (stride 1: every byte).
+inline std::vector<std::size_t> cut_points(std::size_t size, std::size_t stride) {
+  std::vector<std::size_t> cuts;
+  for (std::size_t cut = 0; cut < size; ++cut) {
+    if (cut < 64 || cut + 64 >= size || cut % stride == 0) cuts.push_back(cut);
+  }
+  return cuts;
+}
+
 /// True when every face id is in range and every coordinate finite (what a reader that did not
 /// throw must guarantee).
 inline bool consistent(const MeshData& m) {

@@ -207,7 +207,7 @@ TEST(MassSpring, Errors) {
   }
 }
 
-TEST(MassSpring, EveryTruncationIsHandled) {
+TEST(MassSpring, TruncatedFilesAreRejected) {
   TempDir dir;
   const fs::path file = dir / "cut.x3d";
   MassSpringData d = random_system(1);
@@ -221,7 +221,7 @@ TEST(MassSpring, EveryTruncationIsHandled) {
   d.rest_length.resize(2);
   write_mass_spring(file, d);
   const std::string full = read_bytes(file);
-  for (std::size_t cut = 0; cut < full.size(); ++cut) {
+  for (const std::size_t cut : cut_points(full.size(), 5)) {
     write_bytes(file, full.substr(0, cut));
     try {
       const MassSpringData back = read_mass_spring(file);

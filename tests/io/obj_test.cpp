@@ -94,6 +94,8 @@ TEST(Obj, Errors) {
       {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", 4, "index 0"},
       {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", 4, "vertex index 4 is out of range"},
       {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 99\n", 5, "99"},
+      {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 5\nf 1 2 99\nv 1 1 1\n", 4,
+       "vertex index 5 is out of range: the file has 4 vertices"},
       {"v 0 0 0\nv 1 0 0\nf -1 -2 -3\n", 3, "before the first vertex"},
       {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", 4, "at least 3 vertices"},
       {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf\n", 4, "at least 3 vertices"},
@@ -128,6 +130,32 @@ TEST(Obj, MissingFileAndDirectory) {
   expect_parse_error([&] { read_obj(missing); }, missing, At::Nowhere(), "No such file");
   expect_parse_error([&] { read_obj(dir.path()); }, dir.path(), At::Nowhere(), "directory");
   expect_parse_error([&] { read_mesh(missing); }, missing, At::Nowhere(), "cannot open");
+}
+
+TEST(Obj, TruncationGivesAnErrorOrAPrefix) {
+  // OBJ has no counts: a cut at a line end is a valid shorter file. Anything accepted must be a
+  // consistent prefix of the full mesh.
+  TempDir dir;
+  const fs::path file = dir / "cut.obj";
+  const TestMesh mesh = awkward_mesh(3);
+  write_obj(file, mesh.positions, mesh.faces);
+  const std::string full = read_bytes(file);
+  std::size_t rejected = 0;
+  for (const std::size_t cut : cut_points(full.size(), 5)) {
+    write_bytes(file, full.substr(0, cut));
+    try {
+      const MeshData m = read_obj(file);
+      EXPECT_TRUE(consistent(m)) << "cut at " << cut;
+      ASSERT_LE(m.positions.size(), mesh.positions.size());
+      ASSERT_LE(m.faces.size(), mesh.faces.size());
+      for (std::size_t f = 0; f + 1 < m.faces.size(); ++f) EXPECT_EQ(m.faces[f], mesh.faces[f]);
+    } catch (const ParseError& e) {
+      ++rejected;
+      EXPECT_EQ(e.file(), file.string());
+      EXPECT_TRUE(e.line().has_value()) << e.what();
+    }
+  }
+  EXPECT_GT(rejected, 0u);
 }
 
 TEST(Obj, EmptyFileIsAnEmptyMesh) {

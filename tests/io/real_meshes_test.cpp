@@ -11,6 +11,7 @@
 #include "io_test_util.hpp"
 
 #include <chrono>
+#include <cstdlib>
 
 namespace crumple::io::test {
 namespace {
@@ -86,7 +87,11 @@ const RealMesh real_meshes[] = {
      {39938, 39920, 29985}, 28684.559425496976, 9568968036},
 };
 
-fs::path data_dir() { return fs::path(CRUMPLE_DATA_DIR); }
+// The folder configured at build time; the environment variable CRUMPLE_DATA_DIR overrides it.
+fs::path data_dir() {
+  const char* env = std::getenv("CRUMPLE_DATA_DIR");
+  return fs::path(env && *env ? env : CRUMPLE_DATA_DIR);
+}
 
 // Fails (does not skip) when the shared data is missing: these checks must not pass silently.
 ::testing::AssertionResult data_available() {
@@ -94,7 +99,8 @@ fs::path data_dir() { return fs::path(CRUMPLE_DATA_DIR); }
     return ::testing::AssertionFailure()
            << "CRUMPLE_DATA_DIR = " << data_dir()
            << " does not exist: the real-mesh tests need the shared data folder "
-              "(configure with -DCRUMPLE_DATA_DIR=/path/to/shared/data)";
+              "(configure with -DCRUMPLE_DATA_DIR=/path/to/shared/data or set the environment "
+              "variable CRUMPLE_DATA_DIR)";
   }
   return ::testing::AssertionSuccess();
 }

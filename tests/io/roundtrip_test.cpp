@@ -3,6 +3,7 @@
 #include "io_test_util.hpp"
 
 #include <crumple/io/mesh_io.hpp>
+#include <crumple/io/x3d.hpp>
 
 namespace crumple::io::test {
 namespace {
@@ -108,9 +109,29 @@ TEST(RoundTrip, ReadMeshValidates) {
   const fs::path bad = dir / "repeated.obj";
   write_bytes(bad, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 2\n");
   EXPECT_NO_THROW(read_obj(bad));
-  const std::string message =
-      expect_parse_error([&] { read_mesh(bad); }, bad, At::Nowhere(), "invalid mesh");
-  EXPECT_NE(message.find("1"), std::string::npos) << message;
+  expect_parse_error([&] { read_mesh(bad); }, bad, At::Nowhere(), "invalid mesh: face 1");
+}
+
+TEST(Readers, MissingFileIsAParseErrorNamingIt) {
+  TempDir dir;
+  const std::vector<std::pair<const char*, std::function<void(const fs::path&)>>> readers = {
+      {"m.obj", [](const fs::path& p) { read_obj(p); }},
+      {"m.ply", [](const fs::path& p) { read_ply(p); }},
+      {"m.off", [](const fs::path& p) { read_off(p); }},
+      {"m.x3d", [](const fs::path& p) { read_x3d(p); }},
+      {"m.x3d", [](const fs::path& p) { read_mass_spring(p); }},
+      {"m.ply", [](const fs::path& p) { read_mesh_data(p); }},
+      {"m.off", [](const fs::path& p) { read_mesh(p); }},
+  };
+  for (const auto& [name, read] : readers) {
+    SCOPED_TRACE(name);
+    const fs::path missing = dir / name;
+    expect_parse_error([&] { read(missing); }, missing, At::Nowhere(),
+                       "cannot open the file for reading: No such file or directory");
+    const fs::path folder = dir / (std::string("folder") + fs::path(name).extension().string());
+    fs::create_directories(folder);
+    expect_parse_error([&] { read(folder); }, folder, At::Nowhere(), "it is a directory");
+  }
 }
 
 TEST(Format, FromPath) {

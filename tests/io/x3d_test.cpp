@@ -75,6 +75,26 @@ TEST(X3d, CrlfAndEntities) {
   EXPECT_EQ(m.faces, (std::vector<Face>{{0, 1, 2}}));
 }
 
+TEST(X3d, ByteOrderMarkDoctypeAndComments) {
+  TempDir dir;
+  const std::string text =
+      "\xEF\xBB\xBF<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+      "<!DOCTYPE X3D PUBLIC \"ISO//Web3D//DTD X3D 3.3//EN\" \"http://www.web3d.org/specifications/x3d-3.3.dtd\">\n"
+      "<X3D profile='Interchange' version='3.3'>\n"
+      "<!-- <IndexedFaceSet coordIndex='9 9 9'/> in a comment is not a node -->\n"
+      "<Scene><Shape>\n"
+      "<IndexedFaceSet coordIndex='0 1 9'>\n"  // line 6
+      "<Coordinate point='0 0 0 1 0 0 0 1 0'/>\n"
+      "</IndexedFaceSet></Shape></Scene></X3D>\n";
+  const fs::path file = dir / "bom.x3d";
+  write_bytes(file, text);
+  expect_parse_error([&] { read_x3d(file); }, file, At::Line(6), "is 9");
+  std::string fixed = text;
+  fixed.replace(fixed.find("0 1 9"), 5, "0 1 2");
+  write_bytes(file, fixed);
+  EXPECT_EQ(read_x3d(file).faces, (std::vector<Face>{{0, 1, 2}}));
+}
+
 TEST(X3d, Errors) {
   TempDir dir;
   const fs::path file = dir / "bad.x3d";
@@ -123,14 +143,14 @@ TEST(X3d, Errors) {
   }
 }
 
-TEST(X3d, EveryTruncationIsHandled) {
+TEST(X3d, TruncatedFilesAreRejected) {
   TempDir dir;
   const fs::path file = dir / "cut.x3d";
   const TestMesh mesh = awkward_mesh(2);
   write_x3d(file, mesh.positions, mesh.faces);
   const std::string full = read_bytes(file);
   const std::size_t root_closed = full.rfind("</X3D>");
-  for (std::size_t cut = 0; cut < full.size(); ++cut) {
+  for (const std::size_t cut : cut_points(full.size(), 5)) {
     write_bytes(file, full.substr(0, cut));
     try {
       const MeshData m = read_x3d(file);

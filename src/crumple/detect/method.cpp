@@ -12,11 +12,71 @@ namespace {
 
 constexpr std::array<ParamInfo, 0> kNaiveParams{};
 
-constexpr std::array<MethodInfo, 1> kMethods{{
+constexpr std::array<ParamInfo, 9> kStochasticParams{{
+    {"variant", "direct",
+     "simple | propagate-by-convergence | direct | vertex (thesis 3.2.2.5; docs/stochastic.md)"},
+    {"active", "100", "maximum near pairs kept per pair type (setting=1: 10)"},
+    {"draw", "0", "maximum random pairs drawn per frame and pair type (0 = active)"},
+    {"propagation", "auto",
+     "none | linear | full | auto (full for simple, linear otherwise; none with setting=2)"},
+    {"near", "2", "near distance as a multiple of the thickness (>= 1): farther pairs are dropped"},
+    {"steps", "64", "maximum convergence moves per pair and frame"},
+    {"ef", "off", "also track edge-face pairs (on by itself when tt contacts are asked)"},
+    {"seed", "1", "random seed (same seed and frames: same contacts)"},
+    {"setting", "0",
+     "thesis settings: 1 = 10 active pairs with propagation, 2 = 100 without (keys override)"},
+}};
+
+constexpr std::array<ParamInfo, 7> kKdopParams{{
+    {"k", "18", "6 | 14 | 18 | 26: k-DOP directions"},
+    {"arity", "4", "2 | 4 | 8: children per node"},
+    {"leaf", "4", "maximum faces per leaf (1..64)"},
+    {"rebuild", "2", "rebuild the tree when the refit quality metric grows past this factor"},
+    {"sweep", "on",
+     "on | off: leaves also cover the motion from the previous frame (same contacts; off is "
+     "tighter under large motion)"},
+    {"max_contacts", "0", "cap on the contacts of one frame (0 = none); see overflow"},
+    {"overflow", "error",
+     "error | truncate: over max_contacts, throw, or keep the first contacts in canonical "
+     "order (stats: overflow, contacts_dropped)"},
+}};
+constexpr std::array<ParamInfo, 4> kHashParams{{
+    {"cell", "0", "cell size as a multiple of the mean edge length (0 = max(mean edge, 2h))"},
+    {"table", "0", "number of hash buckets (0 = smallest prime >= 2x the cell entries)"},
+    {"max_contacts", "0", "cap on the contacts of one frame (0 = none); see overflow"},
+    {"overflow", "error",
+     "error | truncate: over max_contacts, throw, or keep the first contacts in canonical "
+     "order (stats: overflow, contacts_dropped)"},
+}};
+constexpr std::array<ParamInfo, 3> kSapParams{{
+    {"axis", "auto", "auto | x | y | z: sweep axis (auto = largest spread of the face boxes)"},
+    {"max_contacts", "0", "cap on the contacts of one frame (0 = none); see overflow"},
+    {"overflow", "error",
+     "error | truncate: over max_contacts, throw, or keep the first contacts in canonical "
+     "order (stats: overflow, contacts_dropped)"},
+}};
+
+constexpr std::array<MethodInfo, 5> kMethods{{
     {Method::Naive, "naive",
      "O(n^2) test of every vertex-face and edge-edge pair (the thesis baseline and the exact "
      "reference)",
      {.exact = true, .stochastic = false, .uses_motion = false}, kNaiveParams},
+    {Method::Stochastic, "stochastic",
+     "random pairs converged to local minima of distance and kept across frames, with "
+     "propagation (the thesis' method; cost set by its parameters, may miss contacts)",
+     {.exact = false, .stochastic = true, .uses_motion = false}, kStochasticParams},
+    {Method::Kdop, "kdop",
+     "exact: inflated, motion-oriented k-DOP hierarchy with refit and self-traversal, feature "
+     "ownership and orphan lists (docs/exact-detectors.md)",
+     {.exact = true, .stochastic = false, .uses_motion = true}, kKdopParams},
+    {Method::Hash, "hash",
+     "exact: spatial hashing of face boxes (Teschner et al. 2003) + the shared exact narrow "
+     "phase",
+     {.exact = true, .stochastic = false, .uses_motion = false}, kHashParams},
+    {Method::Sap, "sap",
+     "exact: sweep and prune of face boxes with insertion sort across frames (I-COLLIDE) + the "
+     "shared exact narrow phase",
+     {.exact = true, .stochastic = false, .uses_motion = false}, kSapParams},
 }};
 
 std::string join_names() {
@@ -162,7 +222,7 @@ std::string MethodSpec::get_choice(std::string_view key, std::string_view fallba
     if (c == *value) return *value;
   }
   std::string expected = "one of";
-  for (auto c : choices) expected += " " + std::string(c);
+  for (auto c : choices) expected.append(" ").append(c);
   bad_value(key, *value, expected);
 }
 

@@ -16,7 +16,11 @@ namespace crumple {
 
 /// Every detection method crumple offers.
 enum class Method {
-  Naive,  ///< the thesis' O(n^2) double loop; the exact reference (oracle)
+  Naive,       ///< the thesis' O(n^2) double loop; the exact reference (oracle)
+  Stochastic,  ///< the thesis' contribution: random pairs + temporal coherence (stochastic.hpp)
+  Kdop,        ///< exact: inflated motion-oriented k-DOP hierarchy (kdop_tree.hpp)
+  Hash,        ///< exact: spatial hashing (hash_grid.hpp)
+  Sap,         ///< exact: sweep and prune, insertion sort across frames (sweep_prune.hpp)
 };
 
 /// What a method guarantees, for tests and tools that treat methods generically.

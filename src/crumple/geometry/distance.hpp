@@ -6,10 +6,21 @@
 /// closest points themselves. Sources: D. Eberly, Geometric Tools (GTE),
 /// `DistSegmentSegment.h` (robust conjugate-gradient version, "ComputeRobust") and
 /// `DistPointTriangle.h` (region classification); P. Schneider & D. Eberly,
-/// *Geometric Tools for Computer Graphics*, 2003, §10.
+/// *Geometric Tools for Computer Graphics*, 2003, §10. Two numerical deviations from GTE,
+/// described in distance_impl.hpp, make them accurate on near-parallel segments and on
+/// sliver triangles.
+///
+/// Accuracy: the distance is within a few eps*L of the exact distance of the given double
+/// inputs (eps = 2^-53, L = largest |coordinate|), including parallel, near-parallel and
+/// zero-length segments and degenerate or sliver triangles; tests/geometry/distance_test.cpp
+/// measures below 8 eps*L against binary128 oracles. Parameters and barycentrics reproduce
+/// the returned closest points up to rounding, but are ill-conditioned where the closest
+/// points are (parallel segments, slivers). Inputs must be finite, with coordinate
+/// differences of magnitude between ~1e-150 and ~1e150 (squared lengths must neither
+/// underflow nor overflow).
 ///
 /// The implementations are inline (in distance_impl.hpp): the O(n^2) reference detector calls
-/// them hundreds of millions of times per frame.
+/// them hundreds of millions of times per frame. No heap, no exceptions.
 
 #include <crumple/core/types.hpp>
 
@@ -66,7 +77,9 @@ PointSegmentResult point_segment(const Vec3& p, const Vec3& a, const Vec3& b);
 SegmentSegmentResult segment_segment(const Vec3& p0, const Vec3& p1, const Vec3& q0,
                                      const Vec3& q1);
 
-/// Point to triangle (a,b,c), degenerate triangles included.
+/// Point to triangle (a,b,c), degenerate triangles included. `region` is exact with respect
+/// to the returned barycentrics: Vertex* iff two of them are 0 (then `closest` is that corner,
+/// bit for bit), Edge* iff exactly one is 0, Face iff none is.
 PointTriangleResult point_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
 
 }  // namespace crumple::geometry

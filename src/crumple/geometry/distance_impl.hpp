@@ -9,20 +9,22 @@
 ///    is lost, not the whole distance.
 ///  - The squared distance is |diff|^2 of the local difference vector at the returned
 ///    parameters, never the expanded quadratic form (which cancels catastrophically).
-///  - No heap, no exceptions, no division by a quantity that can vanish: every division is
-///    guarded by a sign test that keeps its quotient in [0, 1].
+///  - No heap, no exceptions. Every divisor is positive by a preceding test (or non-zero by a
+///    sign argument, noted at the division), and quotients that must lie in [0, 1] are
+///    clamped there, so rounding can never produce a parameter outside the domain.
 ///  - Inputs must be finite; NaN coordinates give unspecified (but finite-time) results.
 
 #include <crumple/geometry/distance.hpp>
 
 #include <algorithm>
+#include <limits>
 
 namespace crumple::geometry {
 
 namespace detail {
 
-/// Minimiser over [0,1] of the 1D convex quadratic whose derivative is num' = den*x - num:
-/// 0 if num <= 0, 1 if num >= den, else num/den (in [0,1] since 0 < num < den).
+/// Minimiser over [0,1] of a 1D convex quadratic with derivative proportional to den*x - num
+/// (den >= 0): 0 if num <= 0, 1 if num >= den, else num/den (then 0 < num < den).
 inline Scalar clamped_ratio(Scalar num, Scalar den) {
   if (num <= 0) return 0;
   if (num >= den) return 1;
@@ -31,13 +33,14 @@ inline Scalar clamped_ratio(Scalar num, Scalar den) {
 
 /// Root in [0,1] of the increasing linear function h(x) with h(0) = h0, h(1) = h1 and
 /// slope h1 - h0 = `slope` > 0, clamped to [0,1] (Eberly's GetClampedRoot): 0 if h0 >= 0,
-/// 1 if h1 <= 0, else -h0/slope. A quotient outside [0,1] can only come from rounding
-/// (h0 < 0 < h1 means |h0| < slope); it is then replaced by 0.5 as in GTE.
+/// 1 if h1 <= 0, else -h0/slope (> 0). When h0 and h1 were rounded separately the quotient
+/// can exceed 1 by a few ulps; it is clamped to 1 (GTE substitutes 0.5, half a segment away
+/// from the true root, which is then near 1).
 inline Scalar clamped_root(Scalar slope, Scalar h0, Scalar h1) {
   if (h0 >= 0) return 0;
   if (h1 <= 0) return 1;
   const Scalar r = -h0 / slope;
-  return (r >= 0 && r <= 1) ? r : Scalar(0.5);
+  return r < 1 ? r : Scalar(1);
 }
 
 /// Feature of the triangle from the zero pattern of its barycentric coordinates. The
@@ -96,13 +99,11 @@ inline PointTriangleResult point_triangle_by_sides(const Vec3& p, const Vec3& a,
   return r;
 }
 
-/// A triangle is handled as degenerate when det = |e0 x e1|^2 <= kDegenerateSin2 *
-/// |e0|^2 |e1|^2, i.e. sin^2 of its angle at a is below this (scale-free) threshold.
-/// Below it the normal equations of the face solve lose about eps/sin^2 of relative
-/// accuracy, while the error of replacing the face by its sides is at most the inradius
-/// (<= ~sin * longest side). 1e-20 (angle ~1e-10 rad) keeps the side error at the
-/// level of 1e-10 relative; tests/geometry/distance_test.cpp measures both sides of it.
-inline constexpr Scalar kDegenerateSin2 = 1e-20;
+/// A triangle is handled as degenerate (replaced by its sides) when its squared height over
+/// its longest side is at most kFlatRatio times that side's squared length, i.e. the
+/// height is below 8 eps times the longest side: collinear or coincident corners up to
+/// rounding. Scale-free.
+inline constexpr Scalar kFlatRatio = 64 * 0x1p-53 * 0x1p-53;
 
 }  // namespace detail
 
@@ -146,9 +147,16 @@ inline PointSegmentResult point_segment(const Vec3& p, const Vec3& a, const Vec3
 //     z = H0 / (H0 - H1).
 // Divisions: by a > 0, c > 0, by b when the F = 0 line crosses an edge s = const (which
 // implies b != 0 by sign), and by H0 - H1 > 0. Parallel segments (ac = b^2) need no special
-// case: H is then constant along E0E1 and an end is chosen, deterministically E0 (the end on
-// the lower edge t = 0 or on s = 0, in the order of the case analysis below).
+// case: H is then constant along E0E1 and an end is chosen deterministically (E0 if H >= 0,
+// else E1; E0 is the end on s = 0 or t = 0 in the case analysis below), then re-minimised
+// along its edge, so overlapping parallel segments always get the same one of their
+// infinitely many closest pairs.
 // Zero-length segments (a == 0 and/or c == 0) reduce to point-segment / point-point.
+//
+// Deviation from GTE (accuracy only, same decisions in exact arithmetic): H is evaluated from
+// vectors orthogonalised against u (see below), which keeps the distance error O(eps * L) for
+// near-parallel segments; GTE's scalar evaluation loses up to ~1e-8 * L there (measured by
+// tests/geometry/distance_test.cpp before the change).
 // ---------------------------------------------------------------------------------------------
 inline SegmentSegmentResult segment_segment(const Vec3& p0, const Vec3& p1, const Vec3& q0,
                                             const Vec3& q1) {
@@ -204,8 +212,17 @@ inline SegmentSegmentResult segment_segment(const Vec3& p0, const Vec3& p1, cons
           edge1 = 0, s_e1 = 0, t_e1 = t_on_s0();
         }
       }
+      // Along F = 0 the closest point of line P to Q(t) is taken, so the difference vector is
+      // w_perp - t v_perp (the parts of w and v orthogonal to u) and G = t |v_perp|^2 -
+      // v_perp . w_perp. Evaluating G this way instead of as -b s + c t - e avoids the
+      // cancellation (absolute error eps |v|^2 against a slope |v_perp|^2 = c sin^2(angle))
+      // that costs GTE's version up to ~sqrt(eps) * L of distance for near-parallel
+      // segments that (nearly) cross.
+      const Vec3 v_perp = v - (b / a) * u;
+      const Vec3 w_perp = w - (d / a) * u;
+      const Scalar g_slope = v_perp.squaredNorm(), g_offset = v_perp.dot(w_perp);
       const Scalar dt = t_e1 - t_e0;
-      const Scalar h0 = dt * (-b * s_e0 + c * t_e0 - e);
+      const Scalar h0 = dt * (g_slope * t_e0 - g_offset);
       const auto end_point = [&](int edge, Scalar se, Scalar te) {
         if (edge == 0) {
           s = 0;
@@ -221,7 +238,7 @@ inline SegmentSegmentResult segment_segment(const Vec3& p0, const Vec3& p1, cons
       if (h0 >= 0) {
         end_point(edge0, s_e0, t_e0);
       } else {
-        const Scalar h1 = dt * (-b * s_e1 + c * t_e1 - e);
+        const Scalar h1 = dt * (g_slope * t_e1 - g_offset);
         if (h1 <= 0) {
           end_point(edge1, s_e1, t_e1);
         } else {
@@ -251,115 +268,105 @@ inline SegmentSegmentResult segment_segment(const Vec3& p0, const Vec3& p1, cons
 
 // ---------------------------------------------------------------------------------------------
 // Point - triangle: Eberly's region classification (GTE DistPointTriangle.h; Schneider &
-// Eberly 2003 §10.3.2), re-derived, computed in the frame of corner a.
+// Eberly 2003 §10.3.2), with the projection computed by Gram-Schmidt (QR) instead of the
+// normal equations.
 //
-// T(s,t) = a + s e0 + t e1, e0 = b - a, e1 = c - a, d = a - p,
-// Q(s,t) = |T(s,t) - p|^2 = a00 s^2 + 2 a01 st + a11 t^2 + 2 b0 s + 2 b1 t + |d|^2,
-// a00 = e0.e0, a01 = e0.e1, a11 = e1.e1, b0 = e0.d, b1 = e1.d.
-// Unconstrained minimiser (s~, t~)/det with s~ = a01 b1 - a11 b0, t~ = a01 b0 - a00 b1,
-// det = a00 a11 - a01^2 = |e0 x e1|^2. Its position relative to the triangle
-// (s >= 0, t >= 0, s + t <= 1, tested on the unnormalised values) picks one of 7 regions:
+// The seven regions of the plane around the triangle are the sign patterns of the barycentric
+// coordinates (w0, w1, w2) of the orthogonal projection ("foot") of p onto the plane:
 //
-//          t
-//      \ 2 |
-//        \ |
-//          c      region 0: inside            -> (s~, t~)/det
-//          |\     regions 1, 3, 5: beyond one side -> clamp the 1D minimum on that side
-//        3 | \ 1  regions 2, 4, 6: beyond a corner -> the sign of the gradient along the two
-//          |0 \                               incident sides picks the side holding the minimum
-//      ----a---b---- s
-//        4 |  5 \ 6
+//            \ 2 /            region 0: all w >= 0      -> the foot itself (face)
+//              c               regions 1, 3, 5: one w < 0 -> the side opposite that corner
+//           3 / \ 1           regions 2, 4, 6: two w < 0 -> the best of the two sides opposite
+//            / 0 \                                         them (Eberly decides between them
+//      ---- a --- b ----                                    by a gradient sign; evaluating both
+//        4  |  5  |  6                                      is as cheap and cannot pick wrong)
 //
-// Side parameters use the direct projections (p - a).e0/|e0|^2, (p - a).e1/|e1|^2 and
-// (p - b).(c - b)/|c - b|^2 rather than the expanded quadratic form.
+// A side answer is point_segment on that side, clamped (a corner when clamped).
 //
-// Degenerate triangles: det <= kDegenerateSin2 * a00 * a11 (collinear or coincident corners,
-// slivers with an angle below ~1e-10 rad at a) -> best of the three sides (point_segment).
+// Frame. Eberly forms the normal equations [a00 a01; a01 a11] (s, t) = -(b0, b1), whose
+// determinant |e0 x e1|^2 cancels catastrophically for thin triangles: the foot is then off by
+// ~eps*L/sin^2(angle) and the region signs become noise near sin^2 ~ eps (measured: errors of
+// order L). Here the frame is local to the first corner of the *longest* side (P0 -> P1, third
+// corner P2; the longest side keeps |x_r| <= 1 below), and is orthogonalised explicitly:
+//   e = P1 - P0, r = P2 - P0, q = p - P0,
+//   x_r = r.e/|e|^2, x_q = q.e/|e|^2      (coordinates along the base side)
+//   r_perp = r - x_r e, q_perp = q - x_q e   (parts orthogonal to it; |r_perp| = height H)
+//   y = q_perp.r_perp / H^2               (coordinate of the foot along r_perp)
+//   foot = P0 + x_q e + y r_perp, so w2 = y, w1 = x_q - y x_r, w0 = 1 - w1 - w2,
+//   and in region 0 the squared distance is |q_perp - y r_perp|^2.
+// Every quantity has an absolute error of a few eps*L in the metric of the plane, so the
+// distance is within O(eps*L) of the exact one even for slivers (only the barycentrics of a
+// sliver are ill-conditioned, as they must be).
+//
+// Degenerate triangles: H^2 <= kFlatRatio * |e|^2 (collinear or coincident corners, within
+// rounding) -> best of the three sides (point_segment); the error of that replacement is at
+// most the inradius < H/2 <= 4 eps * |e|.
 // ---------------------------------------------------------------------------------------------
 inline PointTriangleResult point_triangle(const Vec3& p, const Vec3& a, const Vec3& b,
                                           const Vec3& c) {
-  using detail::clamped_ratio;
-  const Vec3 e0 = b - a;
-  const Vec3 e1 = c - a;
-  const Vec3 d = a - p;
-  const Scalar a00 = e0.dot(e0), a01 = e0.dot(e1), a11 = e1.dot(e1);
-  const Scalar b0 = e0.dot(d), b1 = e1.dot(d);
-  const Scalar det = a00 * a11 - a01 * a01;
-  if (!(det > detail::kDegenerateSin2 * a00 * a11)) {
-    return detail::point_triangle_by_sides(p, a, b, c);
-  }
-
-  // The three possible answers on a side; each sets (w, diff) where diff = closest - p.
-  PointTriangleResult r;
-  Vec3 diff;
-  const auto on_ab = [&] {  // t = 0
-    const Scalar s = clamped_ratio(-b0, a00);
-    r.barycentric = Vec3(1 - s, s, 0);
-    diff = d + s * e0;
-    r.closest = a + s * e0;
-  };
-  const auto on_ca = [&] {  // s = 0
-    const Scalar t = clamped_ratio(-b1, a11);
-    r.barycentric = Vec3(1 - t, 0, t);
-    diff = d + t * e1;
-    r.closest = a + t * e1;
-  };
-  const auto on_bc = [&] {  // s + t = 1, parameter x from b toward c
-    const Vec3 e2 = c - b;
-    const Vec3 pb = b - p;
-    const Scalar x = clamped_ratio(-pb.dot(e2), e2.squaredNorm());
-    r.barycentric = Vec3(0, 1 - x, x);
-    diff = pb + x * e2;
-    r.closest = b + x * e2;
-  };
-
-  const Scalar s_num = a01 * b1 - a11 * b0;
-  const Scalar t_num = a01 * b0 - a00 * b1;
-  if (s_num + t_num <= det) {
-    if (s_num < 0) {
-      if (t_num < 0) {
-        // Region 4 (beyond a): dQ/ds at a is b0; if negative the minimum is on ab.
-        if (b0 < 0) {
-          on_ab();
-        } else {
-          on_ca();
-        }
-      } else {
-        on_ca();  // region 3
-      }
-    } else if (t_num < 0) {
-      on_ab();  // region 5
-    } else {
-      // Region 0: interior.
-      const Scalar inv = 1 / det;
-      const Scalar s = s_num * inv, t = t_num * inv;
-      r.barycentric = Vec3(std::max(Scalar(0), 1 - s - t), s, t);
-      diff = d + s * e0 + t * e1;
-      r.closest = a + s * e0 + t * e1;
-    }
+  const Vec3 ab = b - a, bc = c - b, ca = a - c;
+  const Scalar lab = ab.squaredNorm(), lbc = bc.squaredNorm(), lca = ca.squaredNorm();
+  // Rotate the corners so that the base P0 -> P1 is the longest side; `rot` says how.
+  int rot;
+  const Vec3 *p0, *p1, *p2, *e;
+  Scalar l2;
+  if (lab >= lbc && lab >= lca) {
+    rot = 0, p0 = &a, p1 = &b, p2 = &c, e = &ab, l2 = lab;
+  } else if (lbc >= lca) {
+    rot = 1, p0 = &b, p1 = &c, p2 = &a, e = &bc, l2 = lbc;
   } else {
-    if (s_num < 0) {
-      // Region 2 (beyond c): at c, the derivative along c -> b is (p - c).(c - b)-like:
-      // minimum on bc iff moving from c toward b decreases Q, i.e. (c - p).(c - b) > 0.
-      const Vec3 cp = c - p;
-      if (cp.dot(c - b) > 0) {
-        on_bc();
-      } else {
-        on_ca();
-      }
-    } else if (t_num < 0) {
-      // Region 6 (beyond b): minimum on bc iff moving from b toward c decreases Q.
-      const Vec3 bp = b - p;
-      if (bp.dot(b - c) > 0) {
-        on_bc();
-      } else {
-        on_ab();
-      }
-    } else {
-      on_bc();  // region 1
-    }
+    rot = 2, p0 = &c, p1 = &a, p2 = &b, e = &ca, l2 = lca;
   }
-  r.sqr_distance = diff.squaredNorm();
+  // Barycentrics given for (P0, P1, P2) -> for (a, b, c).
+  const auto unrotate = [rot](Scalar w0, Scalar w1, Scalar w2) {
+    return rot == 0 ? Vec3(w0, w1, w2) : (rot == 1 ? Vec3(w2, w0, w1) : Vec3(w1, w2, w0));
+  };
+
+  PointTriangleResult r;
+  if (!(l2 > 0)) {  // all corners coincide (or non-finite input)
+    r.barycentric = Vec3(1, 0, 0);
+    r.closest = a;
+    r.sqr_distance = (a - p).squaredNorm();
+    r.region = TriangleRegion::VertexA;
+    return r;
+  }
+  const Vec3 rv = *p2 - *p0;
+  const Vec3 q = p - *p0;
+  const Scalar inv_l2 = 1 / l2;
+  const Scalar x_r = rv.dot(*e) * inv_l2;
+  const Vec3 r_perp = rv - x_r * *e;
+  const Scalar h2 = r_perp.squaredNorm();
+  if (!(h2 > detail::kFlatRatio * l2)) return detail::point_triangle_by_sides(p, a, b, c);
+
+  const Scalar x_q = q.dot(*e) * inv_l2;
+  const Vec3 q_perp = q - x_q * *e;
+  const Scalar y = q_perp.dot(r_perp) / h2;
+  const Scalar w2 = y, w1 = x_q - y * x_r, w0 = 1 - w1 - w2;
+
+  if (w0 >= 0 && w1 >= 0 && w2 >= 0) {  // region 0
+    const Vec3 offset = x_q * *e + y * r_perp;
+    r.closest = *p0 + offset;
+    r.sqr_distance = (q - offset).squaredNorm();
+    r.barycentric = unrotate(w0, w1, w2);
+  } else {
+    // The closest point lies on a side whose line separates the foot from the triangle
+    // (for a corner answer, at least one of its two sides does), i.e. opposite a negative w.
+    r.sqr_distance = std::numeric_limits<Scalar>::infinity();
+    const auto side = [&](const Vec3& from, const Vec3& to, int i_from, int i_to) {
+      const PointSegmentResult s = point_segment(p, from, to);
+      if (s.sqr_distance < r.sqr_distance) {
+        r.sqr_distance = s.sqr_distance;
+        r.closest = s.closest;
+        Scalar w[3] = {0, 0, 0};
+        w[i_from] = 1 - s.t;
+        w[i_to] = s.t;
+        r.barycentric = unrotate(w[0], w[1], w[2]);
+      }
+    };
+    if (w2 < 0) side(*p0, *p1, 0, 1);
+    if (w0 < 0) side(*p1, *p2, 1, 2);
+    if (w1 < 0) side(*p2, *p0, 2, 0);
+  }
   detail::finish_point_triangle(r, p, a, b, c);
   return r;
 }

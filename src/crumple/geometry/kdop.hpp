@@ -18,16 +18,24 @@
 /// sum with a ball of radius d (Blender grew unnormalised projections by d, i.e. only by
 /// d/sqrt(2) or d/sqrt(3) in distance).
 ///
-/// Rounding: projections are evaluated in double (x + y) * (1/sqrt 2) etc., so membership
-/// tests are exact up to ~1 ulp of the coordinates; `contains` and `overlaps` use the same
-/// projection code as `extend`, so a point that was added is always contained.
+/// Rounding: projections are evaluated in double, (x + y) * (1/sqrt 2) etc., by one formula
+/// (`along`) shared by every member, so a point that was added is always `contains`ed and
+/// k-DOPs sharing a point always overlap, bit for bit. `inflate` and `sweep` add in double
+/// without outward rounding: a point at distance exactly d from a contained point may fall
+/// outside `inflate(d)` by ~1 ulp of its coordinates. Where a rigorous broad phase matters
+/// at that level, inflate by d plus a few ulps of the scene size.
+///
+/// Layout: two arrays of K/2 doubles; every member is inline and unrolled at compile time.
+/// Measured (bench/kernels_bench.cpp) at a few ns for `overlaps` and ~10 ns for an 18-DOP
+/// `from_triangle`.
 
 #include <crumple/core/types.hpp>
 
-#include <algorithm>
 #include <array>
 #include <limits>
 #include <span>
+#include <type_traits>
+#include <utility>
 
 namespace crumple::geometry {
 
@@ -69,30 +77,49 @@ class Kdop {
   /// Direction a_j as a vector.
   static Vec3 axis(int j) { return Vec3(kAxisTable[j][0], kAxisTable[j][1], kAxisTable[j][2]); }
 
-  /// Projections a_j . p for all j (the same arithmetic as every member function).
+  /// a_J . (x, y, z) for a compile-time axis J, evaluated as (x + y) * (1/sqrt 2) etc. Every
+  /// member function projects through this one formula, so results are bitwise consistent
+  /// (a point added by `extend` is always `contains`ed).
+  template <int J>
+  static Scalar along(Scalar x, Scalar y, Scalar z) {
+    static_assert(J >= 0 && J < kAxes);
+    constexpr Scalar r3 = 0.57735026918962576451;  // 1/sqrt(3)
+    constexpr Scalar r2 = 0.70710678118654752440;  // 1/sqrt(2)
+    constexpr int kCube = (K == 14 || K == 26) ? 4 : 0;  // cube diagonals follow the axes
+    if constexpr (J == 0) return x;
+    else if constexpr (J == 1) return y;
+    else if constexpr (J == 2) return z;
+    else if constexpr (J - 3 < kCube) {
+      if constexpr (J == 3) return (x + y + z) * r3;
+      else if constexpr (J == 4) return (x + y - z) * r3;
+      else if constexpr (J == 5) return (x - y + z) * r3;
+      else return (x - y - z) * r3;
+    } else {
+      constexpr int e = J - 3 - kCube;  // edge diagonals
+      if constexpr (e == 0) return (x + y) * r2;
+      else if constexpr (e == 1) return (x - y) * r2;
+      else if constexpr (e == 2) return (x + z) * r2;
+      else if constexpr (e == 3) return (x - z) * r2;
+      else if constexpr (e == 4) return (y + z) * r2;
+      else return (y - z) * r2;
+    }
+  }
+
+  /// Calls f(std::integral_constant<int, J>) for J = 0 .. kAxes-1 (unrolled at compile time,
+  /// which keeps the projections in registers: with arrays of projections GCC's vectoriser
+  /// reloaded pairs of scalar stores as vectors, a store-forwarding stall costing ~10x).
+  template <class F>
+  static void for_each_axis(F&& f) {
+    [&]<int... J>(std::integer_sequence<int, J...>) {
+      (f(std::integral_constant<int, J>{}), ...);
+    }(std::make_integer_sequence<int, kAxes>{});
+  }
+
+  /// Projections a_j . p for all j.
   static Slabs project(const Vec3& p) {
-    constexpr Scalar r3 = 0.57735026918962576451;
-    constexpr Scalar r2 = 0.70710678118654752440;
-    const Scalar x = p.x(), y = p.y(), z = p.z();
     Slabs out;
-    int j = 0;
-    out[j++] = x;
-    out[j++] = y;
-    out[j++] = z;
-    if constexpr (K == 14 || K == 26) {
-      out[j++] = (x + y + z) * r3;
-      out[j++] = (x + y - z) * r3;
-      out[j++] = (x - y + z) * r3;
-      out[j++] = (x - y - z) * r3;
-    }
-    if constexpr (K == 18 || K == 26) {
-      out[j++] = (x + y) * r2;
-      out[j++] = (x - y) * r2;
-      out[j++] = (x + z) * r2;
-      out[j++] = (x - z) * r2;
-      out[j++] = (y + z) * r2;
-      out[j++] = (y - z) * r2;
-    }
+    const Scalar x = p.x(), y = p.y(), z = p.z();
+    for_each_axis([&](auto j) { out[j] = along<j>(x, y, z); });
     return out;
   }
 
@@ -112,12 +139,14 @@ class Kdop {
 
   /// Smallest k-DOP holding the triangle (a,b,c) (a convex hull: its corners suffice).
   static Kdop from_triangle(const Vec3& a, const Vec3& b, const Vec3& c) {
-    const Slabs pa = project(a), pb = project(b), pc = project(c);
-    Kdop k;
-    for (int j = 0; j < kAxes; ++j) {
-      k.min_[j] = std::min(pa[j], std::min(pb[j], pc[j]));
-      k.max_[j] = std::max(pa[j], std::max(pb[j], pc[j]));
-    }
+    Kdop k{Uninitialized{}};
+    for_each_axis([&](auto j) {
+      const Scalar u = along<j>(a.x(), a.y(), a.z());
+      const Scalar v = along<j>(b.x(), b.y(), b.z());
+      const Scalar w = along<j>(c.x(), c.y(), c.z());
+      k.min_[j] = lo(u, lo(v, w));
+      k.max_[j] = hi(u, hi(v, w));
+    });
     return k;
   }
 
@@ -131,18 +160,19 @@ class Kdop {
 
   /// Grows the slabs to hold point p.
   void extend(const Vec3& p) {
-    const Slabs q = project(p);
-    for (int j = 0; j < kAxes; ++j) {
-      min_[j] = std::min(min_[j], q[j]);
-      max_[j] = std::max(max_[j], q[j]);
-    }
+    const Scalar x = p.x(), y = p.y(), z = p.z();
+    for_each_axis([&](auto j) {
+      const Scalar q = along<j>(x, y, z);
+      min_[j] = lo(min_[j], q);
+      max_[j] = hi(max_[j], q);
+    });
   }
 
   /// Union (smallest k-DOP holding both).
   void merge(const Kdop& o) {
     for (int j = 0; j < kAxes; ++j) {
-      min_[j] = std::min(min_[j], o.min_[j]);
-      max_[j] = std::max(max_[j], o.max_[j]);
+      min_[j] = lo(min_[j], o.min_[j]);
+      max_[j] = hi(max_[j], o.max_[j]);
     }
   }
 
@@ -160,43 +190,58 @@ class Kdop {
   /// A point moving linearly from x to x + displacement has a_j . x(t) linear in t, so the
   /// swept k-DOP bounds the whole trajectory; tighter than inflating by |displacement|.
   void sweep(const Vec3& displacement) {
-    const Slabs q = project(displacement);
-    for (int j = 0; j < kAxes; ++j) {
-      if (q[j] > 0) {
-        max_[j] += q[j];
-      } else {
-        min_[j] += q[j];
-      }
-    }
+    const Scalar x = displacement.x(), y = displacement.y(), z = displacement.z();
+    for_each_axis([&](auto j) {
+      const Scalar q = along<j>(x, y, z);
+      // Branch-free: adds q to exactly one side (the other gets +0).
+      max_[j] += hi(q, 0);
+      min_[j] += lo(q, 0);
+    });
   }
 
   /// True when every slab pair intersects (closed: touching slabs overlap). Conservative:
   /// may report overlap for disjoint sets, never the reverse. False if either is empty.
-  /// Branch-free over the slabs (vectorisable).
+  /// Early exit on the first separating slab, coordinate axes first: measured faster than a
+  /// branch-free loop over all slabs both for disjoint and for overlapping pairs
+  /// (bench/kernels_bench.cpp).
   bool overlaps(const Kdop& o) const {
-    bool ok = true;
-    for (int j = 0; j < kAxes; ++j) ok &= (min_[j] <= o.max_[j]) & (o.min_[j] <= max_[j]);
-    return ok;
+    for (int j = 0; j < kAxes; ++j) {
+      if (min_[j] > o.max_[j] || o.min_[j] > max_[j]) return false;
+    }
+    return true;
   }
 
   /// True when min_j <= a_j . p <= max_j for every j.
   bool contains(const Vec3& p) const {
-    const Slabs q = project(p);
-    bool ok = true;
-    for (int j = 0; j < kAxes; ++j) ok &= (min_[j] <= q[j]) & (q[j] <= max_[j]);
-    return ok;
+    const Scalar x = p.x(), y = p.y(), z = p.z();
+    return [&]<int... J>(std::integer_sequence<int, J...>) {
+      const auto inside = [&](auto j) {
+        const Scalar q = along<j>(x, y, z);
+        return min_[j] <= q && q <= max_[j];
+      };
+      return (inside(std::integral_constant<int, J>{}) && ...);  // stops at the first miss
+    }(std::make_integer_sequence<int, kAxes>{});
   }
 
   /// True when every slab of `o` lies inside the matching slab of this one (an empty `o` is
   /// contained in anything).
   bool contains(const Kdop& o) const {
     if (o.empty()) return true;
-    bool ok = true;
-    for (int j = 0; j < kAxes; ++j) ok &= (min_[j] <= o.min_[j]) & (o.max_[j] <= max_[j]);
-    return ok;
+    for (int j = 0; j < kAxes; ++j) {
+      if (!(min_[j] <= o.min_[j] && o.max_[j] <= max_[j])) return false;
+    }
+    return true;
   }
 
  private:
+  // By value (std::min on references compiles to address selects and data-dependent
+  // branches here); these become minsd/maxsd.
+  static Scalar lo(Scalar x, Scalar y) { return y < x ? y : x; }
+  static Scalar hi(Scalar x, Scalar y) { return x < y ? y : x; }
+
+  struct Uninitialized {};
+  explicit Kdop(Uninitialized) {}
+
   Slabs min_;
   Slabs max_;
 };

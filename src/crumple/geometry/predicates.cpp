@@ -25,7 +25,15 @@ inline void two_sum(double a, double b, double& x, double& y) {
   y = (a - a_virtual) + (b - b_virtual);
 }
 
-/// Same, valid only when |a| >= |b| (or a == 0): Dekker's fast two-sum.
+/// x + y == a - b exactly, x = fl(a - b).
+inline void two_diff(double a, double b, double& x, double& y) {
+  x = a - b;
+  const double b_virtual = a - x;
+  const double a_virtual = x + b_virtual;
+  y = (a - a_virtual) + (b_virtual - b);
+}
+
+/// x + y == a + b exactly, valid only when |a| >= |b| (or a == 0): Dekker's fast two-sum.
 inline void fast_two_sum(double a, double b, double& x, double& y) {
   x = a + b;
   y = b - (x - a);
@@ -55,41 +63,34 @@ inline void two_product(double a, double b, double& x, double& y) {
 /// A fixed-capacity expansion. `n` components are valid, increasing magnitude, non-zero.
 template <std::size_t N>
 struct Expansion {
-  std::array<double, N> c{};
+  std::array<double, N> c;  // only the first n are meaningful
   std::size_t n = 0;
 
   int sign() const { return n == 0 ? 0 : (c[n - 1] > 0 ? 1 : -1); }
 };
 
-/// Exact e + f (Shewchuk's fast expansion sum with zero elimination): merge by magnitude,
-/// then one sweep of two-sums. Needs round-to-nearest-even and non-overlapping inputs.
+/// Exact e + f (Shewchuk's fast expansion sum with zero elimination): the components of both
+/// are taken in order of increasing magnitude (merged on the fly) and swept with two-sums.
+/// Needs round-to-nearest-even and non-overlapping, zero-free inputs.
 template <std::size_t M, std::size_t N>
 Expansion<M + N> sum(const Expansion<M>& e, const Expansion<N>& f) {
   Expansion<M + N> out;
-  if (e.n == 0) {
-    for (std::size_t i = 0; i < f.n; ++i) out.c[i] = f.c[i];
-    out.n = f.n;
-    return out;
-  }
-  if (f.n == 0) {
-    for (std::size_t i = 0; i < e.n; ++i) out.c[i] = e.c[i];
-    out.n = e.n;
-    return out;
-  }
-  std::array<double, M + N> g{};
-  std::size_t i = 0, j = 0, k = 0;
-  while (i < e.n && j < f.n) g[k++] = (std::abs(e.c[i]) < std::abs(f.c[j])) ? e.c[i++] : f.c[j++];
-  while (i < e.n) g[k++] = e.c[i++];
-  while (j < f.n) g[k++] = f.c[j++];
-  double q = g[0];
-  double h;
-  if (k >= 2) {
-    fast_two_sum(g[1], g[0], q, h);
+  std::size_t i = 0, j = 0;
+  const auto next = [&]() -> double {
+    if (j >= f.n || (i < e.n && std::abs(e.c[i]) < std::abs(f.c[j]))) return e.c[i++];
+    return f.c[j++];
+  };
+  const std::size_t total = e.n + f.n;
+  if (total == 0) return out;
+  double q = next();
+  if (total >= 2) {
+    double h;
+    const double second = next();
+    fast_two_sum(second, q, q, h);  // |second| >= |first|
     if (h != 0) out.c[out.n++] = h;
-    for (std::size_t m = 2; m < k; ++m) {
-      double qn;
-      two_sum(q, g[m], qn, h);
-      q = qn;
+    for (std::size_t m = 2; m < total; ++m) {
+      const double g = next();
+      two_sum(q, g, q, h);
       if (h != 0) out.c[out.n++] = h;
     }
   }
@@ -149,8 +150,35 @@ Expansion<24> det3(double pz, double qz, double rz, const Expansion<4>& m_qr,
 }  // namespace
 
 int orient3d_exact(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
-  // det[b-a; c-a; d-a] = -det4 where det4 is the 4x4 determinant with rows (p, 1) for
-  // p = a, b, c, d. Expanding det4 along the column of ones:
+  // A repeated point makes the determinant exactly zero (common: mesh neighbours share
+  // corners), and needs no arithmetic.
+  if (a == b || a == c || a == d || b == c || b == d || c == d) return 0;
+
+  // Stage 1: when the nine differences b-a, c-a, d-a are exact in double (always true for
+  // nearby points, by Sterbenz's lemma), det[u; v; w] is expanded from them directly:
+  // 3 x (2x2 minor: 4 components, scaled: 8) -> at most 24 components.
+  std::array<double, 9> diff, tail;
+  const Vec3* const others[3] = {&b, &c, &d};
+  bool exact_differences = true;
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k) {
+      two_diff((*others[r])[k], a[k], diff[3 * r + k], tail[3 * r + k]);
+      exact_differences = exact_differences && tail[3 * r + k] == 0;
+    }
+  }
+  if (exact_differences) {
+    const double ux = diff[0], uy = diff[1], uz = diff[2];
+    const double vx = diff[3], vy = diff[4], vz = diff[5];
+    const double wx = diff[6], wy = diff[7], wz = diff[8];
+    // det = ux (vy wz - vz wy) + uy (vz wx - vx wz) + uz (vx wy - vy wx)
+    const Expansion<8> t1 = scale(product_difference(vy, wz, vz, wy), ux);
+    const Expansion<8> t2 = scale(product_difference(vz, wx, vx, wz), uy);
+    const Expansion<8> t3 = scale(product_difference(vx, wy, vy, wx), uz);
+    return sum(sum(t1, t2), t3).sign();
+  }
+
+  // Stage 2 (general): det[b-a; c-a; d-a] = -det4 where det4 is the 4x4 determinant with
+  // rows (p, 1) for p = a, b, c, d. Expanding det4 along the column of ones:
   //   det4 = D(a,b,c) - D(a,b,d) + D(a,c,d) - D(b,c,d),  D = 3x3 determinant of coordinates.
   // Working on the original coordinates avoids the rounding of the differences.
   const Expansion<4> m_ab = product_difference(a.x(), b.y(), b.x(), a.y());
@@ -169,6 +197,16 @@ int orient3d_exact(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
 }
 
 int orient2d_exact(Scalar ax, Scalar ay, Scalar bx, Scalar by, Scalar cx, Scalar cy) {
+  if ((ax == bx && ay == by) || (ax == cx && ay == cy) || (bx == cx && by == cy)) return 0;
+  double acx, acx_t, bcx, bcx_t, acy, acy_t, bcy, bcy_t;
+  two_diff(ax, cx, acx, acx_t);
+  two_diff(bx, cx, bcx, bcx_t);
+  two_diff(ay, cy, acy, acy_t);
+  two_diff(by, cy, bcy, bcy_t);
+  if (acx_t == 0 && bcx_t == 0 && acy_t == 0 && bcy_t == 0) {
+    // Exact differences: (a-c) x (b-c) as one product difference.
+    return product_difference(acx, bcy, acy, bcx).sign();
+  }
   // (a-c) x (b-c) = m_ab - m_ac + m_bc with m_pq = px qy - qx py (the cx*cy terms cancel).
   const Expansion<4> m_ab = product_difference(ax, by, bx, ay);
   const Expansion<4> m_ac = product_difference(ax, cy, cx, ay);

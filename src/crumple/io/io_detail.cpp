@@ -22,11 +22,13 @@ std::string read_whole_file(const std::filesystem::path& path) {
   if (!file) {
     fail_in_file(path, "cannot open the file for reading: " + system_reason(errno));
   }
+  // Read in chunks until the end (the size on disk is only a hint: the file may change, or be
+  // a pipe); reserving size + one chunk makes a regular file one allocation.
+  constexpr std::size_t chunk = std::size_t{1} << 20;
   std::string bytes;
   std::error_code size_ec;
   const auto size = std::filesystem::file_size(path, size_ec);
-  if (!size_ec && size < (std::uintmax_t{1} << 40)) bytes.reserve(static_cast<std::size_t>(size));
-  constexpr std::size_t chunk = std::size_t{1} << 20;
+  if (!size_ec && size < (std::uintmax_t{1} << 40)) bytes.reserve(static_cast<std::size_t>(size) + chunk);
   std::size_t used = 0;
   for (;;) {
     bytes.resize(used + chunk);

@@ -56,9 +56,11 @@ MeshData read_obj(const std::filesystem::path& path);
 /// the size the header implies; counts that cannot fit in the file are rejected before any
 /// allocation. Binary errors name the byte offset, ascii and header errors the line.
 MeshData read_ply(const std::filesystem::path& path);
-/// Geomview OFF (text). The header keyword may be OFF, COFF, NOFF, CNOFF or STOFF (values after
-/// x y z on a vertex line, and a colour after a face's ids, are ignored) or be omitted; the counts
-/// may follow it on the same line; '#' starts a comment. 4OFF, nOFF and binary OFF are rejected.
+/// Geomview OFF (text), one vertex or face per line. The header keyword may be OFF, COFF, NOFF,
+/// CNOFF or STOFF (values after x y z on a vertex line, and a colour after a face's ids, are
+/// ignored) or be omitted; the counts may follow it on the same line; '#' starts a comment;
+/// nothing but blanks and comments may follow the last face. 4OFF, nOFF and binary OFF are
+/// rejected.
 MeshData read_off(const std::filesystem::path& path);
 /// X3D (XML encoding): the first `IndexedFaceSet`, `IndexedTriangleSet` or `MassSpring` node of
 /// the document, in document order. Face sets take positions from a `Coordinate` (or

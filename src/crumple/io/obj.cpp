@@ -6,7 +6,7 @@
 
 #include <algorithm>
 #include <array>
-#include <cmath>
+#include <iterator>
 #include <limits>
 #include <ostream>
 
@@ -19,11 +19,17 @@ using detail::quote;
 
 // Statements that are valid OBJ but carry nothing a triangle mesh needs.
 constexpr std::string_view ignored_keywords[] = {
-    "vt",     "vn",       "vp",      "o",          "g",         "s",          "usemtl", "mtllib",
-    "l",      "p",        "cstype",  "deg",        "bmat",      "step",       "curv",   "curv2",
-    "surf",   "parm",     "trim",    "hole",       "scrv",      "sp",         "end",    "con",
-    "mg",     "lod",      "usemap",  "maplib",     "c_interp",  "d_interp",   "shadow_obj",
-    "trace_obj", "ctech", "stech",   "bevel",      "call",      "csh",        "res"};
+    // texture and normal data, grouping, smoothing, materials
+    "vt", "vn", "vp", "o", "g", "s", "mg", "usemtl", "mtllib", "usemap", "maplib",
+    // line and point elements
+    "l", "p",
+    // free-form curves and surfaces
+    "cstype", "deg", "bmat", "step", "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp",
+    "end", "con", "res",
+    // display and rendering attributes
+    "lod", "c_interp", "d_interp", "shadow_obj", "trace_obj", "ctech", "stech", "bevel",
+    // general statements
+    "call", "csh"};
 
 bool is_ignored_keyword(std::string_view keyword) {
   return std::ranges::find(ignored_keywords, keyword) != std::end(ignored_keywords);
@@ -49,11 +55,14 @@ class ObjParser {
              " (expected v, f or another OBJ keyword such as vt, vn, o, g, s, usemtl)");
       }
     }
-    if (max_index_ >= 0 && max_index_ >= static_cast<std::int64_t>(data_.positions.size())) {
-      fail_at_line(path_, max_index_line_,
-                   "vertex index " + std::to_string(max_index_ + 1) +
-                       " is out of range: the file has " +
-                       std::to_string(data_.positions.size()) + " vertices");
+    // Forward references, now that every vertex is known: report the first one out of range.
+    const auto count = static_cast<std::int64_t>(data_.positions.size());
+    for (const ForwardReference& ref : forward_) {
+      if (ref.id >= count) {
+        fail_at_line(path_, ref.line,
+                     "vertex index " + std::to_string(ref.id + 1) +
+                         " is out of range: the file has " + std::to_string(count) + " vertices");
+      }
     }
     return std::move(data_);
   }
@@ -121,10 +130,14 @@ class ObjParser {
     if (id >= std::numeric_limits<Index>::max()) {
       fail("vertex index " + std::to_string(*index) + " is out of range");
     }
-    // Forward references are checked once all vertices are known.
-    if (id >= count && id > max_index_) {
-      max_index_ = id;
-      max_index_line_ = lines_.line_number();
+    // Forward references are checked once all vertices are known (one entry per line suffices:
+    // the largest id of the line).
+    if (id >= count) {
+      if (!forward_.empty() && forward_.back().line == lines_.line_number()) {
+        forward_.back().id = std::max(forward_.back().id, id);
+      } else {
+        forward_.push_back({lines_.line_number(), id});
+      }
     }
     return static_cast<Index>(id);
   }
@@ -154,8 +167,11 @@ class ObjParser {
   const std::filesystem::path& path_;
   detail::LineReader lines_;
   MeshData data_;
-  std::int64_t max_index_ = -1;  // largest forward (not yet defined) 0-based id
-  std::int64_t max_index_line_ = 0;
+  struct ForwardReference {
+    std::int64_t line;
+    std::int64_t id;  // 0-based, not yet defined when read
+  };
+  std::vector<ForwardReference> forward_;
 };
 
 }  // namespace

@@ -1,9 +1,10 @@
 // Stanford PLY: ascii, binary_little_endian and binary_big_endian.
 //
-// The file is read into memory in one call and decoded from the buffer. Binary bodies are
+// The file is read into memory in one call and decoded from the buffer. Element counts are
 // checked against the file size before anything is allocated: every element has a minimum
-// encoded size (fixed properties, list counts, and 3 indices for a face), so a header whose
-// counts cannot fit in the bytes that follow it is rejected up front.
+// encoded size (its fixed properties and list counts; one token per property in ascii), so a
+// header whose counts cannot fit in the bytes that follow it is rejected up front, and every
+// allocation stays within a small multiple of the file size.
 
 #include <crumple/core/atomic_file.hpp>
 #include <crumple/io/io_detail.hpp>
@@ -75,9 +76,10 @@ struct PlyElement {
   Role role = Role::Skip;
   // Vertex: property index of x, y, z. Face: property index of the index list (in xyz[0]).
   std::array<int, 3> xyz{-1, -1, -1};
-  // Smallest possible encoded size of one element in binary (a face needs 3 indices).
+  // Smallest possible encoded size of one element in binary (every list empty). Only used to
+  // reject impossible counts before allocating; a short face list gets its own, clearer error.
   std::uint64_t min_binary_size = 0;
-  // Smallest number of ascii tokens of one element.
+  // Smallest number of ascii tokens of one element (every list empty).
   std::uint64_t min_tokens = 0;
 };
 
@@ -253,16 +255,9 @@ class HeaderParser {
         fail_at_line(path_, e.header_line,
                      "element " + quote(e.name) + " is not supported (only 'face' lists)");
       }
-      for (std::size_t p = 0; p < e.properties.size(); ++p) {
-        const PlyProperty& prop = e.properties[p];
-        const bool index_list = e.role == Role::Face && static_cast<int>(p) == e.xyz[0];
-        if (prop.is_list) {
-          e.min_binary_size += size_of(prop.count_type) + (index_list ? 3 * size_of(prop.type) : 0);
-          e.min_tokens += 1 + (index_list ? 3 : 0);
-        } else {
-          e.min_binary_size += size_of(prop.type);
-          e.min_tokens += 1;
-        }
+      for (const PlyProperty& prop : e.properties) {
+        e.min_binary_size += size_of(prop.is_list ? prop.count_type : prop.type);
+        e.min_tokens += 1;
       }
     }
     if (header_.vertex_element < 0) {
@@ -398,7 +393,8 @@ class BinaryBody {
         fail_at_line(path_, e.header_line,
                      "the header declares " + std::to_string(e.count) + " " + quote(e.name) +
                          " elements of at least " + std::to_string(e.min_binary_size) +
-                         " bytes each, which cannot fit in the " + std::to_string(body) +
+                         (e.min_binary_size == 1 ? " byte" : " bytes") +
+                         " each, which cannot fit in the " + std::to_string(body) +
                          " bytes after the header (file truncated or header corrupt)");
       }
       needed += e.count * e.min_binary_size;
@@ -530,7 +526,9 @@ class BinaryBody {
     const auto list_index = static_cast<std::size_t>(e.xyz[0]);
     const PlyProperty& list = e.properties[list_index];
     const std::size_t item = size_of(list.type);
-    faces.reserve(faces.size() + e.count);  // checked against the file size by check_sizes
+    // Reserve no more triangles than the remaining bytes can hold, whatever the header says.
+    const std::uint64_t fit = (size_ - pos_) / (size_of(list.count_type) + 3 * item);
+    faces.reserve(faces.size() + static_cast<std::size_t>(std::min<std::uint64_t>(e.count, fit)));
     for (std::uint64_t i = 0; i < e.count; ++i) {
       skip_properties_before(e, i, list_index);
       const std::size_t count_at = pos_;
@@ -626,7 +624,8 @@ class AsciiBody {
         fail_at_line(path_, e.header_line,
                      "the header declares " + std::to_string(e.count) + " " + quote(e.name) +
                          " elements of at least " + std::to_string(e.min_tokens) +
-                         " values each, which cannot fit in the " + std::to_string(body) +
+                         (e.min_tokens == 1 ? " value" : " values") +
+                         " each, which cannot fit in the " + std::to_string(body) +
                          " bytes after the header (file truncated or header corrupt)");
       }
       needed += e.count * 2 * e.min_tokens;
@@ -724,7 +723,9 @@ class AsciiBody {
   void read_faces(const PlyElement& e, std::vector<Face>& faces) {
     const auto nv = static_cast<std::int64_t>(
         header_.elements[static_cast<std::size_t>(header_.vertex_element)].count);
-    faces.reserve(faces.size() + e.count);  // checked against the file size by check_sizes
+    // Reserve no more triangles than the remaining text can hold ("3 0 1 2\n" per face).
+    const std::uint64_t fit = (text_.size() - pos_) / 8;
+    faces.reserve(faces.size() + static_cast<std::size_t>(std::min<std::uint64_t>(e.count, fit)));
     for (std::uint64_t i = 0; i < e.count; ++i) {
       for (std::size_t p = 0; p < e.properties.size(); ++p) {
         const PlyProperty& prop = e.properties[p];

@@ -1,0 +1,311 @@
+// Benchmark of the exact detectors (kdop, hash, sap) on the five real scenes, and generator of
+// the cached naive reference contact sets used by tests/detect/exact_detectors_test.cpp.
+//
+// Timing (docs/benchmarks/exact.md):
+//   build-exact/bench/exact_bench --json docs/benchmarks/exact.json --md docs/benchmarks/exact.md
+// For each scene: the second frame with motion from the first, h = 1e-3 x the first frame's
+// bounding-box diagonal, VF + EE (and, with --tt, the intersection-only query), 1 and 2
+// threads. Each repetition runs an untimed update on the first frame (so persistent state —
+// tree, sort order — is that of the previous step), then the timed update(first, second).
+// The median wall time is reported with the stats of that run (refit / traversal / narrow ms,
+// candidates).
+//
+// References (tests/data/reference/real_meshes.txt), appended to FILE, one scene at a time:
+//   B=build-exact/bench/exact_bench; R=tests/data/reference/real_meshes.txt; rm -f $R
+//   $B --reference $R --scenes 'cloth-funnel;armadillo-rollers'
+//   $B --reference $R --scenes 'rod-twist;cloth-ball;n-body' --small-only
+// Without --small-only, `naive` runs on every frame at h = 1e-2 x diagonal (millions of
+// contacts) and the 1e-3 set is derived by filtering (the kernels do not depend on h; if a
+// distance lies within 1e-12 relative of the smaller h, naive is rerun at that h). With
+// --small-only, naive runs at 1e-3 only (the 1e-2 sets of the big scenes hold tens of
+// millions of contacts). Each line: scene, frame file, relative thickness (of the first
+// frame's diagonal), VF and EE counts, and the FNV-1a 64 hash of the `write_contacts` text
+// (pairs and 17-digit distances: equal hashes mean identical pairs and bit-identical
+// distances). Regenerate whenever the distance kernels change.
+#include <crumple/core/json.hpp>
+#include <crumple/detect/detector.hpp>
+#include <crumple/io/mesh_io.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <time.h>
+
+namespace {
+
+/// CPU time of the whole process (all threads), in ms: robust to other load on the machine.
+double cpu_ms() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return 1e3 * static_cast<double>(t.tv_sec) + 1e-6 * static_cast<double>(t.tv_nsec);
+}
+
+using namespace crumple;
+
+struct Scene {
+  const char* name;
+  const char* frame0;
+  const char* frame1;
+};
+
+constexpr Scene kScenes[] = {
+    {"cloth-ball", "sample-scalable-ccd/cloth-ball/frames/cloth_ball92.ply",
+     "sample-scalable-ccd/cloth-ball/frames/cloth_ball93.ply"},
+    {"cloth-funnel", "sample-scalable-ccd/cloth-funnel/frames/227.ply",
+     "sample-scalable-ccd/cloth-funnel/frames/228.ply"},
+    {"rod-twist", "sample-scalable-ccd/rod-twist/frames/3036.ply",
+     "sample-scalable-ccd/rod-twist/frames/3037.ply"},
+    {"armadillo-rollers", "sample-scalable-ccd/armadillo-rollers/frames/326.ply",
+     "sample-scalable-ccd/armadillo-rollers/frames/327.ply"},
+    {"n-body", "sample-scalable-ccd/n-body-simulation/frames/balls16_18.ply",
+     "sample-scalable-ccd/n-body-simulation/frames/balls16_19.ply"},
+};
+
+std::uint64_t fnv1a(const std::string& text) {
+  std::uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : text) {
+    h ^= c;
+    h *= 1099511628211ull;
+  }
+  return h;
+}
+
+std::string contacts_text(const ContactSet& set) {
+  std::ostringstream out;
+  write_contacts(out, set);
+  return out.str();
+}
+
+std::string base_name(const std::string& path) { return path.substr(path.find_last_of('/') + 1); }
+
+ContactSet run_once(const std::string& spec, const TriMesh& mesh, PositionsView previous, PositionsView x,
+                    Scalar h, int threads, ContactKinds kinds = {}) {
+  auto d = make_detector(MethodSpec::parse(spec), {.thickness = h, .kinds = kinds, .threads = threads});
+  d->set_topology(mesh.topology_ptr());
+  ContactSet out;
+  d->update(previous, x, out);
+  return out;
+}
+
+int reference(const std::string& data, const std::string& out_path, int threads,
+              const std::vector<std::string>& only, bool with_large) {
+  std::ofstream out(out_path, std::ios::app);
+  if (!out) {
+    std::cerr << "cannot write " << out_path << "\n";
+    return 1;
+  }
+  for (const Scene& s : kScenes) {
+    if (!only.empty() && std::find(only.begin(), only.end(), s.name) == only.end()) continue;
+    const TriMesh m0 = io::read_mesh(data + "/" + s.frame0);
+    const Scalar diag = compute_bounds(m0.positions()).diagonal();
+    for (const char* file : {s.frame0, s.frame1}) {
+      const TriMesh m = io::read_mesh(data + "/" + file);
+      const auto start = std::chrono::steady_clock::now();
+      const Scalar h = 1e-3 * diag;
+      if (!with_large) {  // the smaller thickness only, directly
+        const ContactSet small = run_once("naive", m0, {}, m.positions(), h, threads);
+        char hash[32];
+        std::snprintf(hash, sizeof hash, "%016llx",
+                      static_cast<unsigned long long>(fnv1a(contacts_text(small))));
+        out << s.name << " " << base_name(file) << " 0.001 " << small.vf.size() << " "
+            << small.ee.size() << " " << hash << "\n";
+        out.flush();
+        std::cerr << s.name << " " << base_name(file) << " done\n";
+        continue;
+      }
+      const ContactSet big = run_once("naive", m0, {}, m.positions(), 1e-2 * diag, threads);
+      ContactSet small;
+      bool ambiguous = false;
+      for (const auto& c : big.vf) {
+        ambiguous |= std::abs(c.distance - h) <= 1e-12 * h;
+        if (c.distance < h) small.vf.push_back(c);
+      }
+      for (const auto& c : big.ee) {
+        ambiguous |= std::abs(c.distance - h) <= 1e-12 * h;
+        if (c.distance < h) small.ee.push_back(c);
+      }
+      if (ambiguous) small = run_once("naive", m0, {}, m.positions(), h, threads);
+      const double s_taken =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      for (const auto& [rel, set] : {std::pair<const char*, const ContactSet*>{"0.001", &small},
+                                     std::pair<const char*, const ContactSet*>{"0.01", &big}}) {
+        char hash[32];
+        std::snprintf(hash, sizeof hash, "%016llx",
+                      static_cast<unsigned long long>(fnv1a(contacts_text(*set))));
+        out << s.name << " " << base_name(file) << " " << rel << " " << set->vf.size() << " "
+            << set->ee.size() << " " << hash << "\n";
+      }
+      out.flush();
+      std::cerr << s.name << " " << base_name(file) << ": " << s_taken << " s\n";
+    }
+  }
+  return 0;
+}
+
+struct Row {
+  std::string scene, method, query;
+  int threads = 0;
+  double ms = 0, cpu_ms = 0, refit_ms = 0, traversal_ms = 0, narrow_ms = 0, candidates = 0;
+  std::size_t vf = 0, ee = 0, tt = 0;
+};
+
+int bench(const std::string& data, const std::vector<std::string>& methods, const std::vector<int>& thread_counts, int repeat, bool tt,
+          const std::string& json_path, const std::string& md_path, const std::vector<std::string>& only) {
+  std::vector<Row> rows;
+  for (const Scene& s : kScenes) {
+    if (!only.empty() && std::find(only.begin(), only.end(), s.name) == only.end()) continue;
+    const TriMesh m0 = io::read_mesh(data + "/" + s.frame0);
+    const Positions x1 = io::read_mesh(data + "/" + s.frame1).positions();
+    const Positions& x0 = m0.positions();
+    const Scalar h = 1e-3 * compute_bounds(x0).diagonal();
+    std::vector<std::pair<std::string, ContactKinds>> queries{{"vf,ee", ContactKinds::parse("vf,ee")}};
+    if (tt) queries.push_back({"tt", ContactKinds::parse("tt")});
+    for (const auto& [qname, kinds] : queries) {
+      for (const std::string& method : methods) {
+        for (int threads : thread_counts) {
+          auto d = make_detector(MethodSpec::parse(method), {.thickness = h, .kinds = kinds, .threads = threads});
+          d->set_topology(m0.topology_ptr());
+          ContactSet out;
+          std::vector<std::pair<double, Row>> runs;
+          for (int r = 0; r < repeat; ++r) {
+            d->update(x0, out);
+            const double cpu_start = cpu_ms();
+            const auto start = std::chrono::steady_clock::now();
+            d->update(x0, x1, out);
+            Row row;
+            row.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+            row.cpu_ms = cpu_ms() - cpu_start;
+            row.scene = s.name;
+            row.method = method;
+            row.query = qname;
+            row.threads = threads;
+            row.refit_ms = d->stats().get("refit_ms");
+            row.traversal_ms = d->stats().get("traversal_ms");
+            row.narrow_ms = d->stats().get("narrow_ms");
+            row.candidates = d->stats().get("candidates");
+            row.vf = out.vf.size();
+            row.ee = out.ee.size();
+            row.tt = out.tt.size();
+            runs.emplace_back(row.ms, row);
+          }
+          std::sort(runs.begin(), runs.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+          const Row& med = runs[runs.size() / 2].second;
+          std::fprintf(stderr, "%-18s %-6s %-24s %d thr  %9.2f ms  cpu %9.2f ms  (refit %.2f, traversal %.2f, narrow %.2f; %.0f candidates; vf %zu ee %zu tt %zu)\n",
+                       s.name, qname.c_str(), method.c_str(), threads, med.ms, med.cpu_ms, med.refit_ms,
+                       med.traversal_ms, med.narrow_ms, med.candidates, med.vf, med.ee, med.tt);
+          rows.push_back(med);
+        }
+      }
+    }
+  }
+  if (!json_path.empty()) {
+    std::ofstream out(json_path);
+    out << "[\n";
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      const Row& r = rows[i];
+      out << "  "
+          << JsonObject()
+                 .add("scene", r.scene)
+                 .add("query", r.query)
+                 .add("method", r.method)
+                 .add("threads", r.threads)
+                 .add("ms", r.ms)
+                 .add("cpu_ms", r.cpu_ms)
+                 .add("refit_ms", r.refit_ms)
+                 .add("traversal_ms", r.traversal_ms)
+                 .add("narrow_ms", r.narrow_ms)
+                 .add("candidates", r.candidates)
+                 .add("vf", r.vf)
+                 .add("ee", r.ee)
+                 .add("tt", r.tt)
+                 .str()
+          << (i + 1 < rows.size() ? ",\n" : "\n");
+    }
+    out << "]\n";
+  }
+  if (!md_path.empty()) {
+    std::ofstream out(md_path);
+    out << "| scene | query | method | threads | total ms | CPU ms | refit ms | traversal ms | narrow ms | candidates | VF | EE | TT |\n";
+    out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    for (const Row& r : rows) {
+      char line[512];
+      std::snprintf(line, sizeof line, "| %s | %s | `%s` | %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.0f | %zu | %zu | %zu |\n",
+                    r.scene.c_str(), r.query.c_str(), r.method.c_str(), r.threads, r.ms, r.cpu_ms, r.refit_ms,
+                    r.traversal_ms, r.narrow_ms, r.candidates, r.vf, r.ee, r.tt);
+      out << line;
+    }
+  }
+  return 0;
+}
+
+std::vector<std::string> split(const std::string& list) {
+  std::vector<std::string> out;
+  std::size_t start = 0;
+  while (start <= list.size()) {
+    const std::size_t end = std::min(list.find(';', start), list.size());
+    if (end > start) out.push_back(list.substr(start, end - start));
+    start = end + 1;
+  }
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // The shared real meshes live beside the checkout (../shared/data), as for the tests.
+  std::string data =
+      (std::filesystem::path(__FILE__).parent_path() / ".." / ".." / "shared" / "data").lexically_normal().string();
+  std::string ref, json, md;
+  std::string methods = "kdop;hash;sap";
+  std::string scenes;
+  int repeat = 5, threads = 0;
+  bool tt = false, small_only = false;
+  std::vector<int> thread_counts{1, 2};
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::cerr << a << " needs a value\n";
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--data") data = next();
+    else if (a == "--reference") ref = next();
+    else if (a == "--json") json = next();
+    else if (a == "--md") md = next();
+    else if (a == "--methods") methods = next();
+    else if (a == "--scenes") scenes = next();
+    else if (a == "--repeat") repeat = std::max(1, std::stoi(next()));
+    else if (a == "--threads") threads = std::stoi(next());
+    else if (a == "--tt") tt = true;
+    else if (a == "--small-only") small_only = true;
+    else if (a == "--thread-counts") {
+      thread_counts.clear();
+      for (const std::string& t : split(next())) thread_counts.push_back(std::stoi(t));
+    }
+    else {
+      std::cerr << "usage: exact_bench [--data DIR] [--methods 'kdop;hash;sap'] [--scenes 'a;b'] "
+                   "[--repeat N] [--thread-counts '1;2'] [--tt] [--json FILE] [--md FILE]\n"
+                   "       exact_bench --reference FILE [--threads N] [--scenes 'a;b'] [--small-only]\n";
+      return 2;
+    }
+  }
+  try {
+    if (!ref.empty()) return reference(data, ref, threads, split(scenes), !small_only);
+    return bench(data, split(methods), thread_counts, repeat, tt, json, md, split(scenes));
+  } catch (const std::exception& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return 1;
+  }
+}

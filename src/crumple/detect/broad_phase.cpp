@@ -1,0 +1,340 @@
+#include <crumple/core/parallel.hpp>
+#include <crumple/detect/broad_phase.hpp>
+#include <crumple/detect/narrow_phase.hpp>
+#include <crumple/geometry/triangle_intersection.hpp>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+namespace crumple {
+
+namespace {
+
+double ms_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+Box point_box(const Vec3& p) { return {{p.x(), p.y(), p.z()}, {p.x(), p.y(), p.z()}}; }
+
+void grow(Box& b, const Vec3& p) {
+  for (int i = 0; i < 3; ++i) {
+    b.lo[i] = std::min(b.lo[i], p[i]);
+    b.hi[i] = std::max(b.hi[i], p[i]);
+  }
+}
+
+void inflate(Box& b, Scalar r) {
+  for (int i = 0; i < 3; ++i) {
+    b.lo[i] -= r;
+    b.hi[i] += r;
+  }
+}
+
+/// Contacts found by one chunk of work, merged into the frame's set under a lock.
+struct LocalContacts {
+  ContactSet set;
+  std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
+};
+
+}  // namespace
+
+ExactParams ExactParams::from_spec(const MethodSpec& spec) {
+  ExactParams p;
+  const long long cap = spec.get_int("max_contacts", 0);
+  if (cap < 0) throw InputError("method " + spec.to_string() + ": max_contacts must be >= 0");
+  p.max_contacts = static_cast<std::size_t>(cap);
+  static constexpr std::array<std::string_view, 2> kOverflow{"error", "truncate"};
+  p.overflow_error = spec.get_choice("overflow", "error", kOverflow) == "error";
+  return p;
+}
+
+ExactDetector::ExactDetector(DetectorOptions options, ExactParams params)
+    : Detector(options), params_(params) {}
+
+void ExactDetector::on_topology() {
+  const Topology& topo = topology();
+  const Index nf = topo.num_faces();
+  const Index nv = topo.num_vertices();
+  vertex_mask_.assign(static_cast<std::size_t>(nf), 0);
+  edge_mask_.assign(static_cast<std::size_t>(nf), 0);
+  isolated_.clear();
+  for (Index v = 0; v < nv; ++v) {
+    const auto faces = topo.vertex_faces()[v];
+    if (faces.empty()) {
+      isolated_.push_back(v);
+      continue;
+    }
+    const Index f = faces[0];
+    const Face& t = topo.face(f);
+    for (int k = 0; k < 3; ++k) {
+      if (t[k] == v) vertex_mask_[static_cast<std::size_t>(f)] |= static_cast<std::uint8_t>(1u << k);
+    }
+  }
+  for (Index e = 0; e < topo.num_edges(); ++e) {
+    const Index f = topo.edge_faces()[e][0];
+    const auto& fe = topo.face_edges(f);
+    for (int k = 0; k < 3; ++k) {
+      if (fe[k] == e) edge_mask_[static_cast<std::size_t>(f)] |= static_cast<std::uint8_t>(1u << k);
+    }
+  }
+  // Orphan sub-pairs: owned features of face pairs that share a vertex, not excluded.
+  orphan_vf_.clear();
+  orphan_ee_.clear();
+  for (Index f = 0; f < nf; ++f) {
+    const Face& a = topo.face(f);
+    const auto& fa = topo.face_edges(f);
+    for (Index g : topo.face_faces()[f]) {
+      if (g <= f) continue;
+      const Face& b = topo.face(g);
+      const auto& fb = topo.face_edges(g);
+      for (int k = 0; k < 3; ++k) {
+        if ((vertex_mask_[static_cast<std::size_t>(f)] >> k & 1u) && !topo.face_has_vertex(g, a[k]))
+          orphan_vf_.push_back({a[k], g});
+        if ((vertex_mask_[static_cast<std::size_t>(g)] >> k & 1u) && !topo.face_has_vertex(f, b[k]))
+          orphan_vf_.push_back({b[k], f});
+      }
+      for (int i = 0; i < 3; ++i) {
+        if (!(edge_mask_[static_cast<std::size_t>(f)] >> i & 1u)) continue;
+        for (int j = 0; j < 3; ++j) {
+          if (!(edge_mask_[static_cast<std::size_t>(g)] >> j & 1u)) continue;
+          if (topo.edges_adjacent(fa[i], fb[j])) continue;
+          orphan_ee_.push_back({std::min(fa[i], fb[j]), std::max(fa[i], fb[j])});
+        }
+      }
+    }
+  }
+  on_exact_topology();
+}
+
+void ExactDetector::face_boxes(const FrameInput& in, bool sweep, std::vector<Box>& out) const {
+  const Topology& topo = topology();
+  const std::size_t nf = static_cast<std::size_t>(topo.num_faces());
+  out.resize(nf);
+  const bool swept = sweep && !in.previous.empty();
+  parallel_for_chunks(nf, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) {
+      const Face& t = topo.face(static_cast<Index>(f));
+      Box b = point_box(narrow::at(in.positions, t[0]));
+      grow(b, narrow::at(in.positions, t[1]));
+      grow(b, narrow::at(in.positions, t[2]));
+      if (swept) {
+        for (Index v : t) grow(b, narrow::at(in.previous, v));
+      }
+      inflate(b, in.radius);
+      out[f] = b;
+    }
+  });
+}
+
+void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& out) {
+  const int threads = options().threads;
+  overflowed_ = false;
+  candidates_.clear();
+
+  // Padded thickness (see the file comment of broad_phase.hpp).
+  const auto t0 = std::chrono::steady_clock::now();
+  Scalar magnitude = 0;
+  for (const Vec3& p : x) magnitude = std::max(magnitude, p.cwiseAbs().maxCoeff());
+  for (const Vec3& p : previous) magnitude = std::max(magnitude, p.cwiseAbs().maxCoeff());
+  const Scalar h = options().thickness;
+  // Intersection only: the thickness plays no part, the boxes only need the rounding margin.
+  const bool proximity = options().kinds.vf || options().kinds.ee;
+  const Scalar pad = (proximity ? h * (1 + 1e-6) : 0) + 1e-9 * magnitude;
+
+  FrameInput in{previous, x, pad / 2, threads};
+  broad_phase(in, candidates_);
+  stats_.set("candidates", static_cast<double>(candidates_.total()));
+  stats_.set("broad_ms", ms_since(t0));
+
+  const auto t1 = std::chrono::steady_clock::now();
+  narrow_phase(x, pad, candidates_, out);
+  stats_.set("narrow_ms", ms_since(t1));
+  candidates_.clear();
+
+  const std::size_t total = out.size();
+  stats_.set("contacts", static_cast<double>(total));
+  if (params_.max_contacts > 0 && total > params_.max_contacts) {
+    overflowed_ = true;
+    stats_.set("overflow", 1);
+    stats_.set("contacts_dropped", static_cast<double>(total - params_.max_contacts));
+    if (params_.overflow_error) {
+      throw ContactOverflowError("exact detector: " + std::to_string(total) +
+                                 " contacts exceed max_contacts=" +
+                                 std::to_string(params_.max_contacts));
+    }
+    // Keep the first max_contacts in canonical order (VF, then EE, then TT): deterministic.
+    out.sort();
+    std::size_t keep = params_.max_contacts;
+    const auto cut = [&keep](auto& v) {
+      if (v.size() > keep) v.resize(keep);
+      keep -= v.size();
+    };
+    cut(out.vf);
+    cut(out.ee);
+    cut(out.tt);
+  } else {
+    stats_.set("overflow", 0);
+  }
+}
+
+void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuffer& candidates,
+                                 ContactSet& out) {
+  const Topology& topo = topology();
+  const int threads = options().threads;
+  const Scalar h = options().thickness;
+  const Scalar h2 = h * h;
+  const ContactKinds kinds = options().kinds;
+  const std::size_t nf = static_cast<std::size_t>(topo.num_faces());
+  const std::size_t ne = static_cast<std::size_t>(topo.num_edges());
+
+  // Cheap-rejection boxes at the current positions.
+  face_pad_.resize(nf);
+  edge_half_.resize(ne);
+  parallel_for_chunks(nf, threads, 4096, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) {
+      const Face& t = topo.face(static_cast<Index>(f));
+      Box b = point_box(narrow::at(x, t[0]));
+      grow(b, narrow::at(x, t[1]));
+      grow(b, narrow::at(x, t[2]));
+      inflate(b, pad);
+      face_pad_[f] = b;
+    }
+  });
+  parallel_for_chunks(ne, threads, 4096, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t e = begin; e < end; ++e) {
+      const Edge& ed = topo.edge(static_cast<Index>(e));
+      Box b = point_box(narrow::at(x, ed[0]));
+      grow(b, narrow::at(x, ed[1]));
+      inflate(b, pad / 2);
+      edge_half_[e] = b;
+    }
+  });
+
+  std::mutex mutex;
+  std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
+  const auto merge = [&](LocalContacts& local) {
+    const std::lock_guard lock(mutex);
+    out.vf.insert(out.vf.end(), local.set.vf.begin(), local.set.vf.end());
+    out.ee.insert(out.ee.end(), local.set.ee.begin(), local.set.ee.end());
+    out.tt.insert(out.tt.end(), local.set.tt.begin(), local.set.tt.end());
+    vf_tests += local.vf_tests;
+    ee_tests += local.ee_tests;
+    tt_tests += local.tt_tests;
+  };
+  const auto test_vf = [&](Index v, Index g, LocalContacts& local) {
+    const Vec3& p = narrow::at(x, v);
+    if (!face_pad_[static_cast<std::size_t>(g)].contains(p)) return;
+    // Plane rejection: dist(p, triangle) >= dist(p, plane) = |(p - a) . n| / |n|. Rejected only
+    // beyond pad plus a bound on the rounding of the dot product (degenerate n: never).
+    const Face& t = topo.face(g);
+    const Vec3& a = narrow::at(x, t[0]);
+    const Vec3 e1 = narrow::at(x, t[1]) - a, e2 = narrow::at(x, t[2]) - a, w = p - a;
+    const Vec3 n = e1.cross(e2);
+    const Scalar wn = std::abs(w.dot(n));
+    if (wn > pad * n.norm() + 1e-13 * std::sqrt(w.squaredNorm() * e1.squaredNorm() * e2.squaredNorm())) return;
+    ++local.vf_tests;
+    if (auto c = narrow::vertex_face(x, topo, v, g, h2)) local.set.vf.push_back(*c);
+  };
+  const auto test_ee = [&](Index e0, Index e1, LocalContacts& local) {  // e0 < e1
+    if (!edge_half_[static_cast<std::size_t>(e0)].overlaps(edge_half_[static_cast<std::size_t>(e1)])) return;
+    // Line rejection: dist(segments) >= dist(lines) = |w . (d0 x d1)| / |d0 x d1|, with the
+    // same rounding guard (parallel edges: never rejected here).
+    const Edge& ea = topo.edge(e0);
+    const Edge& eb = topo.edge(e1);
+    const Vec3& p0 = narrow::at(x, ea[0]);
+    const Vec3 d0 = narrow::at(x, ea[1]) - p0, d1 = narrow::at(x, eb[1]) - narrow::at(x, eb[0]);
+    const Vec3 w = narrow::at(x, eb[0]) - p0;
+    const Vec3 n = d0.cross(d1);
+    const Scalar wn = std::abs(w.dot(n));
+    if (wn > pad * n.norm() + 1e-13 * std::sqrt(w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm())) return;
+    ++local.ee_tests;
+    if (auto c = narrow::edge_edge(x, topo, e0, e1, h2)) local.set.ee.push_back(*c);
+  };
+
+  // 1. Broad-phase candidates (faces sharing no vertex).
+  const auto& chunks = candidates.chunks();
+  std::vector<std::size_t> offsets(chunks.size() + 1, 0);
+  for (std::size_t i = 0; i < chunks.size(); ++i) offsets[i + 1] = offsets[i] + chunks[i].size();
+  const std::size_t total = offsets.back();
+  parallel_for_chunks(total, threads, 2048, [&](std::size_t begin, std::size_t end) {
+    LocalContacts local;
+    std::size_t c = static_cast<std::size_t>(
+        std::upper_bound(offsets.begin(), offsets.end(), begin) - offsets.begin() - 1);
+    for (std::size_t i = begin; i < end; ++i) {
+      while (i >= offsets[c + 1]) ++c;
+      const FacePair& p = chunks[c][i - offsets[c]];
+      const Index f = p[0], g = p[1];
+      const Face& a = topo.face(f);
+      const Face& b = topo.face(g);
+      if (kinds.vf) {
+        const unsigned mf = vertex_mask_[static_cast<std::size_t>(f)];
+        const unsigned mg = vertex_mask_[static_cast<std::size_t>(g)];
+        for (int k = 0; k < 3; ++k) {
+          if (mf >> k & 1u) test_vf(a[k], g, local);
+          if (mg >> k & 1u) test_vf(b[k], f, local);
+        }
+      }
+      if (kinds.ee) {
+        const unsigned mf = edge_mask_[static_cast<std::size_t>(f)];
+        const unsigned mg = edge_mask_[static_cast<std::size_t>(g)];
+        if (mf != 0 && mg != 0) {
+          const auto& ea = topo.face_edges(f);
+          const auto& eb = topo.face_edges(g);
+          for (int i2 = 0; i2 < 3; ++i2) {
+            if (!(mf >> i2 & 1u)) continue;
+            for (int j = 0; j < 3; ++j) {
+              if (!(mg >> j & 1u)) continue;
+              test_ee(std::min(ea[i2], eb[j]), std::max(ea[i2], eb[j]), local);
+            }
+          }
+        }
+      }
+      if (kinds.tt && face_pad_[static_cast<std::size_t>(f)].overlaps(face_pad_[static_cast<std::size_t>(g)])) {
+        ++local.tt_tests;
+        const Index f0 = std::min(f, g), f1 = std::max(f, g);
+        const Face& s = topo.face(f0);
+        const Face& t = topo.face(f1);
+        if (geometry::triangles_intersect(narrow::at(x, s[0]), narrow::at(x, s[1]), narrow::at(x, s[2]),
+                                          narrow::at(x, t[0]), narrow::at(x, t[1]), narrow::at(x, t[2]))) {
+          local.set.tt.push_back({f0, f1});
+        }
+      }
+    }
+    merge(local);
+  });
+
+  // 2. Orphan sub-pairs of faces that share a vertex.
+  if (kinds.vf) {
+    parallel_for_chunks(orphan_vf_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+      LocalContacts local;
+      for (std::size_t i = begin; i < end; ++i) test_vf(orphan_vf_[i][0], orphan_vf_[i][1], local);
+      merge(local);
+    });
+    // 3. Isolated vertices against every face.
+    parallel_for_chunks(isolated_.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
+      LocalContacts local;
+      for (std::size_t i = begin; i < end; ++i) {
+        for (Index g = 0; g < static_cast<Index>(nf); ++g) test_vf(isolated_[i], g, local);
+      }
+      merge(local);
+    });
+  }
+  if (kinds.ee) {
+    parallel_for_chunks(orphan_ee_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+      LocalContacts local;
+      for (std::size_t i = begin; i < end; ++i) test_ee(orphan_ee_[i][0], orphan_ee_[i][1], local);
+      merge(local);
+    });
+  }
+  stats_.set("orphan_vf", static_cast<double>(orphan_vf_.size()));
+  stats_.set("orphan_ee", static_cast<double>(orphan_ee_.size()));
+  stats_.set("isolated_vertices", static_cast<double>(isolated_.size()));
+  stats_.set("vf_tests", static_cast<double>(vf_tests));
+  stats_.set("ee_tests", static_cast<double>(ee_tests));
+  if (kinds.tt) stats_.set("tt_tests", static_cast<double>(tt_tests));
+}
+
+}  // namespace crumple

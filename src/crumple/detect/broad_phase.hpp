@@ -1,0 +1,145 @@
+#pragma once
+/// \file
+/// The exact pipeline shared by the `kdop`, `hash` and `sap` detectors (docs/exact-detectors.md):
+///
+///  1. broad phase (per method): every unordered pair of faces that share no vertex and whose
+///     boxes, inflated by `FrameInput::radius` (half the padded thickness) on every side,
+///     overlap — emitted exactly once;
+///  2. orphans: pairs of faces that share a vertex are never emitted by a broad phase; their
+///     vertex–face and edge–edge sub-pairs that are *not* excluded (the vertex opposite a
+///     shared edge, edges around a shared vertex) are listed once per topology and tested
+///     every frame (Tang et al.'s orphan sets);
+///  3. narrow phase: each sub-pair is tested in exactly one place thanks to feature ownership
+///     ("representative triangles", Curtis, Tamstorf & Manocha 2008): every vertex and every
+///     edge is owned by its incident face of smallest id; VF (v, g) is tested only in the pair
+///     {owner(v), g}, EE (e1, e2) only in {owner(e1), owner(e2)}. This is exact: a face's
+///     inflated box holds its features inflated by the same radius, so a sub-pair closer than
+///     h always lies in an overlapping owner pair. Cheap rejections (vertex against face box,
+///     edge box against edge box) run before the exact kernels of narrow_phase.hpp, which are
+///     the ones `naive` calls with the same argument order, so distances are bit-identical;
+///  4. isolated vertices (used by no face) are tested against every face box.
+///
+/// Rounding: all boxes are padded by `h (1 + 1e-6) + 1e-9 M` (M = largest coordinate
+/// magnitude of the frame) rather than h, so a pair the kernels place just under h is never
+/// rejected by a box test evaluated in different arithmetic. When only TT is asked, the
+/// thickness plays no part and the pad is the rounding margin alone.
+
+#include <crumple/core/error.hpp>
+#include <crumple/detect/detector.hpp>
+
+#include <array>
+#include <cstddef>
+#include <mutex>
+#include <vector>
+
+namespace crumple {
+
+/// A broad-phase candidate: two faces sharing no vertex, `[0] < [1]`.
+using FacePair = std::array<Index, 2>;
+
+/// Thrown by an exact detector when the contacts of a frame exceed `max_contacts` and
+/// `overflow=error` (the default).
+class ContactOverflowError : public Error {
+ public:
+  using Error::Error;
+};
+
+/// Keys common to the exact detectors (`max_contacts`, `overflow`).
+struct ExactParams {
+  std::size_t max_contacts = 0;  ///< cap on the contacts of one frame; 0 = no cap
+  bool overflow_error = true;    ///< over the cap: throw (true) or keep the first contacts
+  static ExactParams from_spec(const MethodSpec& spec);
+};
+
+/// Per-frame input of a broad phase.
+struct FrameInput {
+  PositionsView previous;  ///< empty when no motion is given
+  PositionsView positions;
+  Scalar radius = 0;  ///< inflate every face box by this on each side (pad / 2)
+  int threads = 0;
+};
+
+/// Thread-safe sink of candidate chunks (each task appends its own vector once).
+class CandidateBuffer {
+ public:
+  void add(std::vector<FacePair>&& chunk) {
+    if (chunk.empty()) return;
+    const std::lock_guard lock(mutex_);
+    total_ += chunk.size();
+    chunks_.push_back(std::move(chunk));
+  }
+  std::size_t total() const { return total_; }
+  const std::vector<std::vector<FacePair>>& chunks() const { return chunks_; }
+  void clear() {
+    chunks_.clear();
+    total_ = 0;
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::vector<FacePair>> chunks_;
+  std::size_t total_ = 0;
+};
+
+/// Axis-aligned box as two corners (plain arrays: the hot loops compare them directly).
+struct Box {
+  std::array<Scalar, 3> lo;
+  std::array<Scalar, 3> hi;
+  bool overlaps(const Box& o) const {
+    return (lo[0] <= o.hi[0]) & (o.lo[0] <= hi[0]) & (lo[1] <= o.hi[1]) & (o.lo[1] <= hi[1]) &
+           (lo[2] <= o.hi[2]) & (o.lo[2] <= hi[2]);
+  }
+  bool contains(const Vec3& p) const {
+    return (lo[0] <= p.x()) & (p.x() <= hi[0]) & (lo[1] <= p.y()) & (p.y() <= hi[1]) &
+           (lo[2] <= p.z()) & (p.z() <= hi[2]);
+  }
+};
+
+/// True when the faces share a vertex (9 comparisons).
+inline bool faces_share_vertex(const Face& a, const Face& b) {
+  bool s = false;
+  for (Index v : a) s |= (v == b[0]) | (v == b[1]) | (v == b[2]);
+  return s;
+}
+
+/// Base of the exact detectors: owns the shared pipeline; subclasses supply the broad phase.
+class ExactDetector : public Detector {
+ public:
+  /// True when the last frame had more contacts than `max_contacts` (also in stats:
+  /// `overflow` = 1, `contacts_dropped`).
+  bool overflowed() const { return overflowed_; }
+
+ protected:
+  ExactDetector(DetectorOptions options, ExactParams params);
+
+  /// Per-topology set-up of the broad phase (positions not known yet).
+  virtual void on_exact_topology() {}
+  /// Adds every candidate (see the file comment) to `out`, each unordered pair once. Sets its
+  /// own timing stats (`refit_ms`, `traversal_ms`).
+  virtual void broad_phase(const FrameInput& in, CandidateBuffer& out) = 0;
+
+  /// Face boxes (current positions, and previous ones when `sweep` and given), inflated by
+  /// `in.radius`; computed in parallel.
+  void face_boxes(const FrameInput& in, bool sweep, std::vector<Box>& out) const;
+
+ private:
+  void on_topology() final;
+  void detect(PositionsView previous, PositionsView positions, ContactSet& out) final;
+  void narrow_phase(PositionsView x, Scalar pad, const CandidateBuffer& candidates,
+                    ContactSet& out);
+
+  ExactParams params_;
+  bool overflowed_ = false;
+  CandidateBuffer candidates_;
+  // Ownership: bit k of vertex_mask_[f] set when f owns its corner k; edge_mask_[f] likewise
+  // for its side k.
+  std::vector<std::uint8_t> vertex_mask_, edge_mask_;
+  std::vector<std::array<Index, 2>> orphan_vf_;  ///< (vertex, face) sub-pairs of adjacent faces
+  std::vector<std::array<Index, 2>> orphan_ee_;  ///< (edge, edge), first < second
+  std::vector<Index> isolated_;                  ///< vertices used by no face
+  // Per-frame scratch: face boxes padded by `pad` (current positions), edge boxes padded by
+  // pad / 2.
+  std::vector<Box> face_pad_, edge_half_;
+};
+
+}  // namespace crumple

@@ -1,0 +1,177 @@
+#include <crumple/core/parallel.hpp>
+#include <crumple/detect/hash_grid.hpp>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+namespace crumple {
+
+namespace {
+
+double ms_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+std::uint64_t next_prime(std::uint64_t n) {
+  if (n <= 2) return 2;
+  for (std::uint64_t p = n | 1u;; p += 2) {
+    bool prime = true;
+    for (std::uint64_t d = 3; d * d <= p; d += 2) {
+      if (p % d == 0) {
+        prime = false;
+        break;
+      }
+    }
+    if (prime) return p;
+  }
+}
+
+/// Teschner et al.'s hash of cell (i, j, k), unsigned 64-bit wraparound then mod n.
+inline std::uint32_t hash_cell(std::int32_t i, std::int32_t j, std::int32_t k, std::uint64_t n) {
+  const std::uint64_t h = (static_cast<std::uint64_t>(static_cast<std::int64_t>(i)) * 73856093ull) ^
+                          (static_cast<std::uint64_t>(static_cast<std::int64_t>(j)) * 19349663ull) ^
+                          (static_cast<std::uint64_t>(static_cast<std::int64_t>(k)) * 83492791ull);
+  return static_cast<std::uint32_t>(h % n);
+}
+
+}  // namespace
+
+HashParams HashParams::from_spec(const MethodSpec& spec) {
+  HashParams p;
+  p.cell = spec.get_double("cell", 0);
+  if (!(std::isfinite(p.cell) && p.cell >= 0)) {
+    throw InputError("method " + spec.to_string() + ": cell must be a number >= 0");
+  }
+  const long long table = spec.get_int("table", 0);
+  if (table < 0 || table > (1ll << 31)) {
+    throw InputError("method " + spec.to_string() + ": table must be in 0..2^31");
+  }
+  p.table = static_cast<std::uint64_t>(table);
+  p.exact = ExactParams::from_spec(spec);
+  return p;
+}
+
+HashDetector::HashDetector(DetectorOptions options, HashParams params)
+    : ExactDetector(options, params.exact), params_(params) {}
+
+void HashDetector::on_exact_topology() {
+  cell_size_ = 0;
+  table_size_ = 0;
+}
+
+void HashDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
+  const Topology& topo = topology();
+  const std::size_t nf = static_cast<std::size_t>(topo.num_faces());
+  if (nf == 0) return;
+  const auto t0 = std::chrono::steady_clock::now();
+  face_boxes(in, false, boxes_);
+  if (cell_size_ == 0) {
+    const Scalar mean = edge_length_stats(topo, in.positions).mean;
+    cell_size_ = params_.cell > 0 ? params_.cell * mean : std::max(mean, 4 * in.radius);
+    if (!(cell_size_ > 0)) cell_size_ = 1;
+  }
+  const Scalar inv = 1 / cell_size_;
+  ranges_.resize(nf);
+  entry_offset_.resize(nf + 1);
+  std::atomic<bool> too_fine{false};
+  parallel_for_chunks(nf, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
+    bool bad = false;
+    for (std::size_t f = begin; f < end; ++f) {
+      std::array<std::int32_t, 6> r{};
+      for (int a = 0; a < 3; ++a) {
+        const Scalar lo = std::floor(boxes_[f].lo[a] * inv);
+        const Scalar hi = std::floor(boxes_[f].hi[a] * inv);
+        bad |= !(std::fabs(lo) < 1e9 && std::fabs(hi) < 1e9 && hi - lo < 1e6);
+        r[static_cast<std::size_t>(a)] = static_cast<std::int32_t>(std::clamp(lo, -1e9, 1e9));
+        r[static_cast<std::size_t>(a) + 3] = static_cast<std::int32_t>(std::clamp(hi, -1e9, 1e9));
+      }
+      ranges_[f] = r;
+      std::size_t cells = 1;
+      for (std::size_t a = 0; a < 3; ++a) {
+        cells *= static_cast<std::size_t>(std::max<std::int64_t>(0, std::int64_t{r[a + 3]} - r[a] + 1));
+      }
+      entry_offset_[f + 1] = bad ? 0 : cells;
+    }
+    if (bad) too_fine.store(true, std::memory_order_relaxed);
+  });
+  if (too_fine) {
+    throw InputError("hash: cell size " + std::to_string(cell_size_) +
+                     " is too small for the coordinates or the face boxes of this mesh");
+  }
+  entry_offset_[0] = 0;
+  for (std::size_t f = 0; f < nf; ++f) entry_offset_[f + 1] += entry_offset_[f];
+  const std::size_t entries = entry_offset_[nf];
+  if (entries >= (std::size_t{1} << 32)) {
+    throw InputError("hash: " + std::to_string(entries) + " cell entries (over 2^32): cell size too small");
+  }
+  if (table_size_ == 0) {
+    table_size_ = params_.table > 0 ? params_.table : next_prime(2 * static_cast<std::uint64_t>(entries));
+  }
+  const std::uint64_t n = table_size_;
+  entry_bucket_.resize(entries);
+  parallel_for_chunks(nf, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) {
+      const auto& r = ranges_[f];
+      std::size_t e = entry_offset_[f];
+      for (std::int32_t i = r[0]; i <= r[3]; ++i)
+        for (std::int32_t j = r[1]; j <= r[4]; ++j)
+          for (std::int32_t k = r[2]; k <= r[5]; ++k) entry_bucket_[e++] = hash_cell(i, j, k, n);
+    }
+  });
+  // Counting sort of the entries by bucket.
+  bucket_start_.assign(n + 1, 0);
+  for (std::size_t e = 0; e < entries; ++e) ++bucket_start_[entry_bucket_[e] + 1];
+  for (std::uint64_t b = 0; b < n; ++b) bucket_start_[b + 1] += bucket_start_[b];
+  sorted_.resize(entries);
+  {
+    std::vector<std::uint32_t> cursor(bucket_start_.begin(), bucket_start_.end() - 1);
+    for (std::size_t f = 0; f < nf; ++f) {
+      const auto& r = ranges_[f];
+      std::size_t e = entry_offset_[f];
+      for (std::int32_t i = r[0]; i <= r[3]; ++i)
+        for (std::int32_t j = r[1]; j <= r[4]; ++j)
+          for (std::int32_t k = r[2]; k <= r[5]; ++k) {
+            sorted_[cursor[entry_bucket_[e++]]++] = Entry{static_cast<Index>(f), {i, j, k}};
+          }
+    }
+  }
+  stats_.set("refit_ms", ms_since(t0));
+  stats_.set("cell_size", cell_size_);
+  stats_.set("table_size", static_cast<double>(n));
+  stats_.set("entries", static_cast<double>(entries));
+
+  const auto t1 = std::chrono::steady_clock::now();
+  // Bucket-major: pairs of entries of one bucket that are the same cell (sequential access).
+  parallel_for_chunks(n, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
+    std::vector<FacePair> local;
+    for (std::size_t b = begin; b < end; ++b) {
+      const std::uint32_t s0 = bucket_start_[b], s1 = bucket_start_[b + 1];
+      if (s1 - s0 < 2) continue;
+      for (std::uint32_t s = s0; s < s1; ++s) {
+        const Entry& ea = sorted_[s];
+        const std::size_t f = static_cast<std::size_t>(ea.face);
+        const auto& r = ranges_[f];
+        for (std::uint32_t t = s + 1; t < s1; ++t) {
+          const Entry& eb = sorted_[t];
+          if (ea.cell[0] != eb.cell[0] || ea.cell[1] != eb.cell[1] || ea.cell[2] != eb.cell[2]) continue;
+          const std::size_t g = static_cast<std::size_t>(eb.face);
+          const auto& rg = ranges_[g];
+          // Report from the cell of the lower corner of the boxes' intersection only.
+          if (std::max(r[0], rg[0]) != ea.cell[0] || std::max(r[1], rg[1]) != ea.cell[1] ||
+              std::max(r[2], rg[2]) != ea.cell[2])
+            continue;
+          if (!boxes_[f].overlaps(boxes_[g])) continue;
+          if (faces_share_vertex(topo.face(ea.face), topo.face(eb.face))) continue;
+          local.push_back({std::min(ea.face, eb.face), std::max(ea.face, eb.face)});
+        }
+      }
+    }
+    out.add(std::move(local));
+  });
+  stats_.set("traversal_ms", ms_since(t1));
+}
+
+}  // namespace crumple

@@ -1,0 +1,58 @@
+#pragma once
+/// \file
+/// `hash`: optimised spatial hashing (Teschner, Heidelberger, Müller, Pomeranets & Gross,
+/// VMV 2003; ALGORITHMS.md §4) adapted to vertex–face and edge–edge proximity, exact through
+/// the shared pipeline of broad_phase.hpp.
+///
+/// Every frame, each face's box (current positions, inflated by half the padded thickness) is
+/// entered into every grid cell it overlaps; cell (i, j, k) goes to bucket
+/// ((i p1) xor (j p2) xor (k p3)) mod n with the paper's primes, in unsigned 64-bit arithmetic.
+/// Buckets are filled by a counting sort, so no table clearing and no per-bucket allocation.
+/// Then, bucket by bucket (sequential memory access, in parallel over buckets), two entries
+/// give a candidate when they are the same cell c (hash collisions only cost time), c is the
+/// cell of the lower corner of the two boxes' intersection (so every pair is reported from
+/// exactly one cell), the boxes overlap and the faces share no vertex. The result never depends on the cell size or table size.
+/// Spec: `hash:cell=C,table=N` — C is the cell size as a multiple of the mean edge length of
+/// the first frame (0 = automatic: max(mean edge, 2 h)); N the bucket count (0 = the smallest
+/// prime >= 2 x the entries of the first frame); plus `max_contacts`, `overflow`.
+
+#include <crumple/detect/broad_phase.hpp>
+
+#include <cstdint>
+#include <vector>
+
+namespace crumple {
+
+struct HashParams {
+  double cell = 0;         ///< cell size / mean edge length; 0 = automatic
+  std::uint64_t table = 0;  ///< number of buckets; 0 = automatic
+  ExactParams exact;
+  static HashParams from_spec(const MethodSpec& spec);
+};
+
+class HashDetector final : public ExactDetector {
+ public:
+  HashDetector(DetectorOptions options, HashParams params);
+  Method method() const override { return Method::Hash; }
+
+ protected:
+  void on_exact_topology() override;
+  void broad_phase(const FrameInput& in, CandidateBuffer& out) override;
+
+ private:
+  struct Entry {
+    Index face;
+    std::int32_t cell[3];
+  };
+  HashParams params_;
+  Scalar cell_size_ = 0;  ///< fixed at the first frame
+  std::uint64_t table_size_ = 0;
+  std::vector<Box> boxes_;
+  std::vector<std::array<std::int32_t, 6>> ranges_;  ///< cell range of each face box
+  std::vector<std::size_t> entry_offset_;            ///< per face: first entry
+  std::vector<std::uint32_t> entry_bucket_;          ///< per entry (face-major order)
+  std::vector<std::uint32_t> bucket_start_;          ///< table_size_ + 1
+  std::vector<Entry> sorted_;                        ///< entries grouped by bucket
+};
+
+}  // namespace crumple

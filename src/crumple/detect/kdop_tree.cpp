@@ -1,0 +1,361 @@
+#include <crumple/core/parallel.hpp>
+#include <crumple/detect/kdop_tree.hpp>
+#include <crumple/detect/narrow_phase.hpp>
+#include <crumple/geometry/kdop.hpp>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <numeric>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace crumple {
+
+namespace {
+
+double ms_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+KdopParams KdopParams::from_spec(const MethodSpec& spec) {
+  KdopParams p;
+  static constexpr std::array<std::string_view, 4> kK{"6", "14", "18", "26"};
+  static constexpr std::array<std::string_view, 3> kArity{"2", "4", "8"};
+  p.k = std::stoi(spec.get_choice("k", "18", kK));
+  p.arity = std::stoi(spec.get_choice("arity", "4", kArity));
+  const long long leaf = spec.get_int("leaf", 4);
+  if (leaf < 1 || leaf > 64) {
+    throw InputError("method " + spec.to_string() + ": leaf must be in 1..64, got " + std::to_string(leaf));
+  }
+  p.leaf = static_cast<int>(leaf);
+  p.rebuild = spec.get_double("rebuild", 2.0);
+  if (!(p.rebuild >= 1)) {
+    throw InputError("method " + spec.to_string() + ": rebuild must be >= 1");
+  }
+  p.sweep = spec.get_bool("sweep", true);
+  p.exact = ExactParams::from_spec(spec);
+  return p;
+}
+
+/// Type-erased hierarchy: one implementation per k.
+class KdopDetector::Tree {
+ public:
+  virtual ~Tree() = default;
+  virtual void frame(const Topology& topo, const FrameInput& in, CandidateBuffer& out,
+                     DetectorStats& stats) = 0;
+};
+
+namespace {
+
+template <int K>
+class KdopTree final : public KdopDetector::Tree {
+  using Dop = geometry::Kdop<K>;
+
+  /// Leaf: `first`/`count` index slots of `order_`; internal: child node ids.
+  struct Node {
+    Index first = 0;
+    Index count = 0;
+    Index faces = 0;  ///< faces below the node
+    bool leaf = false;
+  };
+
+ public:
+  explicit KdopTree(const KdopParams& params) : params_(params) {}
+
+  void frame(const Topology& topo, const FrameInput& in, CandidateBuffer& out,
+             DetectorStats& stats) override {
+    if (topo.num_faces() == 0) return;
+    const auto t0 = std::chrono::steady_clock::now();
+    if (nodes_.empty()) build(topo, in.positions, stats);
+    refit(topo, in);
+    double q = quality();
+    if (q > params_.rebuild * built_quality_) {
+      build(topo, in.positions, stats);
+      refit(topo, in);
+      q = quality();
+    }
+    stats.set("refit_ms", ms_since(t0));
+    stats.set("quality", q / built_quality_);
+    stats.set("nodes", static_cast<double>(nodes_.size()));
+
+    const auto t1 = std::chrono::steady_clock::now();
+    traverse(in.threads, out, stats);
+    stats.set("traversal_ms", ms_since(t1));
+  }
+
+ private:
+  // ---- build -------------------------------------------------------------------------------
+  void build(const Topology& topo, PositionsView x, DetectorStats& stats) {
+    const Index nf = topo.num_faces();
+    std::vector<Vec3> centroid(static_cast<std::size_t>(nf));
+    for (Index f = 0; f < nf; ++f) {
+      const Face& t = topo.face(f);
+      centroid[static_cast<std::size_t>(f)] = (narrow::at(x, t[0]) + narrow::at(x, t[1]) + narrow::at(x, t[2])) / 3;
+    }
+    order_.resize(static_cast<std::size_t>(nf));
+    std::iota(order_.begin(), order_.end(), 0);
+    nodes_.assign(1, Node{});
+    levels_.clear();
+    struct Item {
+      Index begin, end;
+      int depth;
+    };
+    std::vector<Item> queue{{0, nf, 0}};
+    for (std::size_t n = 0; n < queue.size(); ++n) {  // node n is queue item n (breadth-first)
+      const Item item = queue[n];
+      if (levels_.size() <= static_cast<std::size_t>(item.depth)) {
+        levels_.push_back({static_cast<Index>(n), static_cast<Index>(n)});
+      }
+      levels_[static_cast<std::size_t>(item.depth)][1] = static_cast<Index>(n + 1);
+      const Index size = item.end - item.begin;
+      Node& node = nodes_[n];
+      node.faces = size;
+      if (size <= params_.leaf) {
+        node = {item.begin, size, size, true};
+        continue;
+      }
+      Vec3 lo = Vec3::Constant(std::numeric_limits<Scalar>::infinity());
+      Vec3 hi = -lo;
+      for (Index i = item.begin; i < item.end; ++i) {
+        const Vec3& c = centroid[static_cast<std::size_t>(order_[static_cast<std::size_t>(i)])];
+        lo = lo.cwiseMin(c);
+        hi = hi.cwiseMax(c);
+      }
+      int axis = 0;
+      (hi - lo).maxCoeff(&axis);
+      const auto less = [&](Index a, Index b) {
+        const Scalar ca = centroid[static_cast<std::size_t>(a)][axis];
+        const Scalar cb = centroid[static_cast<std::size_t>(b)][axis];
+        return ca < cb || (ca == cb && a < b);
+      };
+      const Index parts = std::min<Index>(params_.arity, size);
+      const Index first = static_cast<Index>(nodes_.size());
+      node = {first, parts, size, false};
+      Index prev = item.begin;
+      for (Index i = 0; i < parts; ++i) {
+        const Index cut = item.begin + static_cast<Index>(static_cast<long long>(size) * (i + 1) / parts);
+        if (i + 1 < parts) {
+          std::nth_element(order_.begin() + prev, order_.begin() + cut, order_.begin() + item.end, less);
+        }
+        queue.push_back({prev, cut, item.depth + 1});
+        nodes_.push_back(Node{});
+        prev = cut;
+      }
+    }
+    slot_faces_.resize(order_.size());
+    for (std::size_t s = 0; s < order_.size(); ++s) slot_faces_[s] = topo.face(order_[s]);
+    dops_.assign(nodes_.size(), Dop());
+    face_dops_.assign(order_.size(), Dop());
+    built_quality_ = 0;  // set by the first refit
+    stats.add("rebuilds", 1);
+  }
+
+  // ---- refit -------------------------------------------------------------------------------
+  void refit(const Topology& topo, const FrameInput& in) {
+    const std::size_t nv = in.positions.size();
+    const bool swept = params_.sweep && !in.previous.empty();
+    vertex_dops_.resize(nv);
+    parallel_for_chunks(nv, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t v = begin; v < end; ++v) {
+        Dop d;
+        d.extend(in.positions[v]);
+        if (swept) d.extend(in.previous[v]);
+        d.inflate(in.radius);
+        vertex_dops_[v] = d;
+      }
+    });
+    parallel_for_chunks(order_.size(), in.threads, 4096, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t s = begin; s < end; ++s) {
+        const Face& t = slot_faces_[s];
+        Dop d = vertex_dops_[static_cast<std::size_t>(t[0])];
+        d.merge(vertex_dops_[static_cast<std::size_t>(t[1])]);
+        d.merge(vertex_dops_[static_cast<std::size_t>(t[2])]);
+        face_dops_[s] = d;
+      }
+    });
+    (void)topo;
+    for (std::size_t l = levels_.size(); l-- > 0;) {
+      const auto [lb, le] = levels_[l];
+      parallel_for_chunks(static_cast<std::size_t>(le - lb), in.threads, 1024,
+                          [&](std::size_t begin, std::size_t end) {
+                            for (std::size_t i = begin; i < end; ++i) {
+                              const std::size_t n = static_cast<std::size_t>(lb) + i;
+                              const Node& node = nodes_[n];
+                              Dop d;
+                              if (node.leaf) {
+                                for (Index s = node.first; s < node.first + node.count; ++s)
+                                  d.merge(face_dops_[static_cast<std::size_t>(s)]);
+                              } else {
+                                for (Index c = node.first; c < node.first + node.count; ++c)
+                                  d.merge(dops_[static_cast<std::size_t>(c)]);
+                              }
+                              dops_[n] = d;
+                            }
+                          });
+    }
+    if (built_quality_ == 0) built_quality_ = std::max(quality(), 1e-300);
+  }
+
+  static Scalar extent(const Dop& d) {
+    return (d.max(0) - d.min(0)) + (d.max(1) - d.min(1)) + (d.max(2) - d.min(2));
+  }
+
+  /// Sum of node extents relative to the root's: grows when refit boxes loosen.
+  double quality() const {
+    double sum = 0;
+    for (const Dop& d : dops_) sum += extent(d);
+    const double root = extent(dops_[0]);
+    return root > 0 ? sum / root : 1;
+  }
+
+  // ---- traversal ---------------------------------------------------------------------------
+  void emit_leaf_pair(const Node& a, const Node& b, std::vector<FacePair>& out) const {
+    for (Index i = a.first; i < a.first + a.count; ++i) {
+      const Dop& di = face_dops_[static_cast<std::size_t>(i)];
+      const Face& fi = slot_faces_[static_cast<std::size_t>(i)];
+      for (Index j = b.first; j < b.first + b.count; ++j) {
+        if (!di.overlaps(face_dops_[static_cast<std::size_t>(j)])) continue;
+        if (faces_share_vertex(fi, slot_faces_[static_cast<std::size_t>(j)])) continue;
+        const Index f = order_[static_cast<std::size_t>(i)], g = order_[static_cast<std::size_t>(j)];
+        out.push_back({std::min(f, g), std::max(f, g)});
+      }
+    }
+  }
+
+  void self(Index n, std::vector<FacePair>& out) const {
+    const Node& node = nodes_[static_cast<std::size_t>(n)];
+    if (node.leaf) {
+      for (Index i = node.first; i < node.first + node.count; ++i) {
+        const Dop& di = face_dops_[static_cast<std::size_t>(i)];
+        const Face& fi = slot_faces_[static_cast<std::size_t>(i)];
+        for (Index j = i + 1; j < node.first + node.count; ++j) {
+          if (!di.overlaps(face_dops_[static_cast<std::size_t>(j)])) continue;
+          if (faces_share_vertex(fi, slot_faces_[static_cast<std::size_t>(j)])) continue;
+          const Index f = order_[static_cast<std::size_t>(i)], g = order_[static_cast<std::size_t>(j)];
+          out.push_back({std::min(f, g), std::max(f, g)});
+        }
+      }
+      return;
+    }
+    for (Index c = node.first; c < node.first + node.count; ++c) self(c, out);
+    for (Index c = node.first; c < node.first + node.count; ++c) {
+      for (Index d = c + 1; d < node.first + node.count; ++d) pair(c, d, out);
+    }
+  }
+
+  void pair(Index a, Index b, std::vector<FacePair>& out) const {
+    if (!dops_[static_cast<std::size_t>(a)].overlaps(dops_[static_cast<std::size_t>(b)])) return;
+    const Node& na = nodes_[static_cast<std::size_t>(a)];
+    const Node& nb = nodes_[static_cast<std::size_t>(b)];
+    if (na.leaf && nb.leaf) {
+      emit_leaf_pair(na, nb, out);
+    } else if (na.leaf || (!nb.leaf && nb.faces > na.faces)) {
+      for (Index c = nb.first; c < nb.first + nb.count; ++c) pair(a, c, out);
+    } else {
+      for (Index c = na.first; c < na.first + na.count; ++c) pair(c, b, out);
+    }
+  }
+
+  /// Splits the self-traversal of the root into independent tasks (a == b: self(a), else
+  /// pair(a, b) of overlapping nodes), then runs them in parallel.
+  void traverse(int threads, CandidateBuffer& out, DetectorStats& stats) const {
+    std::vector<std::array<Index, 2>> tasks{{0, 0}};
+    const std::size_t target = resolve_threads(threads) > 1 ? 256 * static_cast<std::size_t>(resolve_threads(threads)) : 1;
+    const auto overlap = [&](Index a, Index b) {
+      return dops_[static_cast<std::size_t>(a)].overlaps(dops_[static_cast<std::size_t>(b)]);
+    };
+    for (int round = 0; round < 16 && tasks.size() < target; ++round) {
+      std::vector<std::array<Index, 2>> next;
+      bool expanded = false;
+      for (const auto& [a, b] : tasks) {
+        const Node& na = nodes_[static_cast<std::size_t>(a)];
+        const Node& nb = nodes_[static_cast<std::size_t>(b)];
+        if (a == b) {
+          if (na.leaf) {
+            next.push_back({a, a});
+            continue;
+          }
+          expanded = true;
+          for (Index c = na.first; c < na.first + na.count; ++c) next.push_back({c, c});
+          for (Index c = na.first; c < na.first + na.count; ++c) {
+            for (Index d = c + 1; d < na.first + na.count; ++d) {
+              if (overlap(c, d)) next.push_back({c, d});
+            }
+          }
+        } else if (na.leaf && nb.leaf) {
+          next.push_back({a, b});
+        } else {
+          expanded = true;
+          if (na.leaf || (!nb.leaf && nb.faces > na.faces)) {
+            for (Index c = nb.first; c < nb.first + nb.count; ++c) {
+              if (overlap(a, c)) next.push_back({a, c});
+            }
+          } else {
+            for (Index c = na.first; c < na.first + na.count; ++c) {
+              if (overlap(c, b)) next.push_back({c, b});
+            }
+          }
+        }
+      }
+      tasks = std::move(next);
+      if (!expanded) break;
+    }
+    stats.set("tasks", static_cast<double>(tasks.size()));
+    parallel_for_chunks(tasks.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
+      std::vector<FacePair> local;
+      for (std::size_t i = begin; i < end; ++i) {
+        const auto [a, b] = tasks[i];
+        if (a == b) {
+          self(a, local);
+        } else {
+          pair(a, b, local);
+        }
+      }
+      out.add(std::move(local));
+    });
+  }
+
+  const KdopParams& params_;
+  std::vector<Node> nodes_;
+  std::vector<Dop> dops_;
+  std::vector<Index> order_;     ///< face of each leaf slot
+  std::vector<Face> slot_faces_;  ///< corners of each slot's face (adjacency test locality)
+  std::vector<Dop> face_dops_;    ///< per slot
+  std::vector<Dop> vertex_dops_;  ///< per vertex, swept and inflated
+  std::vector<std::array<Index, 2>> levels_;  ///< node range of each depth
+  double built_quality_ = 0;
+};
+
+}  // namespace
+
+KdopDetector::KdopDetector(DetectorOptions options, KdopParams params)
+    : ExactDetector(options, params.exact), params_(params) {}
+
+KdopDetector::~KdopDetector() = default;
+
+void KdopDetector::on_exact_topology() {
+  switch (params_.k) {
+    case 6:
+      tree_ = std::make_unique<KdopTree<6>>(params_);
+      break;
+    case 14:
+      tree_ = std::make_unique<KdopTree<14>>(params_);
+      break;
+    case 18:
+      tree_ = std::make_unique<KdopTree<18>>(params_);
+      break;
+    default:
+      tree_ = std::make_unique<KdopTree<26>>(params_);
+      break;
+  }
+}
+
+void KdopDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
+  tree_->frame(topology(), in, out, stats_);
+}
+
+}  // namespace crumple

@@ -1,0 +1,65 @@
+#pragma once
+/// \file
+/// `kdop`: an inflated, motion-oriented k-DOP hierarchy over the faces (ALGORITHMS.md §2;
+/// Klosowski et al. 1998; Mezger, Kimmerle & Etzmuss 2003; Blender's kdop.c), exact through
+/// the shared pipeline of broad_phase.hpp.
+///
+///  - Build (first frame, and again when the quality metric degrades): top-down, faces sorted
+///    by centroid along the largest extent and cut into `arity` equal parts, down to leaves of
+///    at most `leaf` faces. Nodes are stored breadth-first, so every depth is one index range.
+///  - Refit (every frame), bottom-up and level by level in parallel: a face's k-DOP holds its
+///    corners at the current positions and, when previous positions are given, at the
+///    previous ones (the projection of a linearly moving point is linear in time, so this
+///    bounds the whole motion: oriented inflation along the displacement), grown by half the
+///    padded thickness along the unit directions.
+///  - Quality: the sum over nodes of the three coordinate extents, relative to the root's, is
+///    recorded at build; when a refit makes it exceed `rebuild` times that value, the tree is
+///    rebuilt from the current positions (counted in the `rebuilds` stat).
+///  - Self-traversal (node against itself, then its children pairwise; descend the larger of
+///    two overlapping nodes), expanded into many independent tasks run in parallel. Faces that
+///    share a vertex are skipped at the leaves (their orphan sub-pairs are handled by the
+///    pipeline).
+/// Spec: `kdop:k=6|14|18|26,arity=2|4|8,leaf=N,rebuild=R,sweep=on|off` plus `max_contacts`,
+/// `overflow`.
+/// Normal-cone culling (ALGORITHMS.md §3) is not implemented (docs/exact-detectors.md).
+
+#include <crumple/detect/broad_phase.hpp>
+
+#include <memory>
+
+namespace crumple {
+
+/// Parameters of the k-DOP hierarchy.
+struct KdopParams {
+  int k = 18;            ///< 6, 14, 18 or 26 directions
+  int arity = 4;         ///< children per internal node: 2, 4 or 8
+  int leaf = 4;          ///< maximum faces per leaf (1..64)
+  double rebuild = 2.0;  ///< rebuild when the quality metric grows past this factor (>= 1)
+  /// Leaves cover the motion from the previous positions (when given). The contact set is
+  /// the same either way (contacts are proximity at the current positions); off gives
+  /// tighter boxes when the motion is large compared with h.
+  bool sweep = true;
+  ExactParams exact;
+  static KdopParams from_spec(const MethodSpec& spec);
+};
+
+class KdopDetector final : public ExactDetector {
+ public:
+  KdopDetector(DetectorOptions options, KdopParams params);
+  ~KdopDetector() override;
+  Method method() const override { return Method::Kdop; }
+  const KdopParams& params() const { return params_; }
+
+  /// Type-erased tree (one implementation per k).
+  class Tree;
+
+ protected:
+  void on_exact_topology() override;
+  void broad_phase(const FrameInput& in, CandidateBuffer& out) override;
+
+ private:
+  KdopParams params_;
+  std::unique_ptr<Tree> tree_;
+};
+
+}  // namespace crumple

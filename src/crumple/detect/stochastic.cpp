@@ -1,0 +1,605 @@
+#include <crumple/core/error.hpp>
+#include <crumple/detect/narrow_phase.hpp>
+#include <crumple/detect/stochastic.hpp>
+#include <crumple/detect/stochastic_engine.hpp>
+#include <crumple/geometry/distance.hpp>
+#include <crumple/geometry/kdop.hpp>
+#include <crumple/geometry/triangle_intersection.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <string>
+
+namespace crumple {
+
+// ---------------------------------------------------------------------------------------------
+// Names and parameters
+
+std::string_view to_string(StochasticVariant variant) {
+  switch (variant) {
+    case StochasticVariant::Simple: return "simple";
+    case StochasticVariant::PropagateByConvergence: return "propagate-by-convergence";
+    case StochasticVariant::Direct: return "direct";
+    case StochasticVariant::Vertex: return "vertex";
+  }
+  return "?";
+}
+
+std::string_view to_string(Propagation propagation) {
+  switch (propagation) {
+    case Propagation::None: return "none";
+    case Propagation::Linear: return "linear";
+    case Propagation::Full: return "full";
+  }
+  return "?";
+}
+
+std::string_view to_string(PairType type) {
+  switch (type) {
+    case PairType::VV: return "vv";
+    case PairType::EE: return "ee";
+    case PairType::VF: return "vf";
+    case PairType::EF: return "ef";
+  }
+  return "?";
+}
+
+Propagation default_propagation(StochasticVariant variant) {
+  return variant == StochasticVariant::Simple ? Propagation::Full : Propagation::Linear;
+}
+
+StochasticParams StochasticParams::from_spec(const MethodSpec& spec) {
+  const auto fail = [&](const std::string& message) {
+    throw InputError("method " + spec.to_string() + ": " + message);
+  };
+  StochasticParams p;
+  const long long setting = spec.get_int("setting", 0);
+  if (setting < 0 || setting > 2) fail("setting must be 0 (none), 1 or 2, got " + std::to_string(setting));
+
+  static constexpr std::array<std::string_view, 4> kVariants{"simple", "propagate-by-convergence",
+                                                             "direct", "vertex"};
+  const std::string variant = spec.get_choice("variant", "direct", kVariants);
+  if (variant == "simple") p.variant = StochasticVariant::Simple;
+  if (variant == "propagate-by-convergence") p.variant = StochasticVariant::PropagateByConvergence;
+  if (variant == "direct") p.variant = StochasticVariant::Direct;
+  if (variant == "vertex") p.variant = StochasticVariant::Vertex;
+
+  static constexpr std::array<std::string_view, 4> kPropagation{"auto", "none", "linear", "full"};
+  const std::string prop = spec.get_choice("propagation", "auto", kPropagation);
+  if (prop == "auto") {
+    p.propagation = setting == 2 ? Propagation::None : default_propagation(p.variant);
+  } else if (prop == "none") {
+    p.propagation = Propagation::None;
+  } else if (prop == "linear") {
+    p.propagation = Propagation::Linear;
+  } else {
+    p.propagation = Propagation::Full;
+  }
+
+  const long long active = spec.get_int("active", setting == 1 ? 10 : 100);
+  if (active < 1 || active > 100'000'000) fail("active must be in [1, 1e8], got " + std::to_string(active));
+  p.active = static_cast<int>(active);
+  const long long draw = spec.get_int("draw", 0);
+  if (draw < 0 || draw > 100'000'000) fail("draw must be in [0, 1e8] (0 = active), got " + std::to_string(draw));
+  p.draw = draw == 0 ? p.active : static_cast<int>(draw);
+  p.near = spec.get_double("near", 2.0);
+  if (!(std::isfinite(p.near) && p.near >= 1)) fail("near must be a finite multiple >= 1 of the thickness");
+  const long long steps = spec.get_int("steps", 64);
+  if (steps < 1 || steps > 100'000'000) fail("steps must be in [1, 1e8], got " + std::to_string(steps));
+  p.steps = static_cast<int>(steps);
+  p.ef = spec.get_bool("ef", false);
+  const long long seed = spec.get_int("seed", 1);
+  if (seed < 0) fail("seed must be >= 0");
+  p.seed = static_cast<std::uint64_t>(seed);
+  return p;
+}
+
+std::string StochasticParams::to_string() const {
+  char near_text[32];
+  std::snprintf(near_text, sizeof near_text, "%g", near);
+  return "stochastic:variant=" + std::string(crumple::to_string(variant)) +
+         ",active=" + std::to_string(active) + ",draw=" + std::to_string(draw) +
+         ",propagation=" + std::string(crumple::to_string(propagation)) + ",near=" + near_text +
+         ",steps=" + std::to_string(steps) + ",ef=" + (ef ? "on" : "off") +
+         ",seed=" + std::to_string(seed);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pair traits: only distances and neighbour lists are specialised.
+
+namespace {
+
+using stochastic_detail::EngineConfig;
+using stochastic_detail::EngineStats;
+using stochastic_detail::PairEngine;
+using stochastic_detail::PairTable;
+using stochastic_detail::pair_key;
+using stochastic_detail::Verdict;
+
+const Vec3& at(PositionsView x, Index i) { return x[static_cast<std::size_t>(i)]; }
+
+/// Collects the frame's contacts without duplicates, each from the shared narrow phase.
+class Sink {
+ public:
+  void begin(const Topology& topo, PositionsView x, Scalar h2, ContactKinds kinds, ContactSet& out) {
+    topo_ = &topo;
+    x_ = x;
+    h2_ = h2;
+    kinds_ = kinds;
+    out_ = &out;
+    vf_.clear();
+    ee_.clear();
+    tt_.clear();
+  }
+  const ContactKinds& kinds() const { return kinds_; }
+
+  /// Vertex v vs face f (v not a corner). True when they are in contact (recorded once).
+  bool add_vf(Index v, Index f) {
+    if (!kinds_.vf) return false;
+    const std::uint64_t k = pair_key(v, f);
+    if (vf_.contains(k)) return true;
+    const auto c = narrow::vertex_face(x_, *topo_, v, f, h2_);
+    if (!c) return false;
+    vf_.insert(k, 0);
+    out_->vf.push_back(*c);
+    return true;
+  }
+  /// Edges e0, e1 (sharing no vertex), any order.
+  bool add_ee(Index e0, Index e1) {
+    if (!kinds_.ee) return false;
+    if (e1 < e0) std::swap(e0, e1);  // the order the reference uses: bit-identical distances
+    const std::uint64_t k = pair_key(e0, e1);
+    if (ee_.contains(k)) return true;
+    const auto c = narrow::edge_edge(x_, *topo_, e0, e1, h2_);
+    if (!c) return false;
+    ee_.insert(k, 0);
+    out_->ee.push_back(*c);
+    return true;
+  }
+  /// Faces f0, f1 (sharing no vertex), any order: exact intersection test.
+  bool add_tt(Index f0, Index f1) {
+    if (!kinds_.tt) return false;
+    if (f1 < f0) std::swap(f0, f1);
+    const std::uint64_t k = pair_key(f0, f1);
+    if (tt_.contains(k)) return true;
+    const Face& a = topo_->face(f0);
+    const Face& b = topo_->face(f1);
+    if (!geometry::triangles_intersect(at(x_, a[0]), at(x_, a[1]), at(x_, a[2]), at(x_, b[0]),
+                                       at(x_, b[1]), at(x_, b[2]))) {
+      return false;
+    }
+    tt_.insert(k, 0);
+    out_->tt.push_back({f0, f1});
+    return true;
+  }
+
+ private:
+  const Topology* topo_ = nullptr;
+  PositionsView x_;
+  Scalar h2_ = 0;
+  ContactKinds kinds_;
+  ContactSet* out_ = nullptr;
+  PairTable vf_, ee_, tt_;
+};
+
+struct Context;
+
+/// Precise tests between the faces around two vertices (vertex variant, thesis §3.2.2.5
+/// "convergence sur les sommets"), with an 18-DOP pre-test per face pair and per-frame caches
+/// of face pairs and sub-pairs.
+class ZoneTester {
+ public:
+  void reset(Index num_faces) {
+    kdops_.assign(static_cast<std::size_t>(num_faces), {});
+    kdop_gen_.assign(static_cast<std::size_t>(num_faces), 0);
+    gen_ = 0;
+  }
+  void begin_frame() {
+    if (++gen_ == 0) {
+      std::fill(kdop_gen_.begin(), kdop_gen_.end(), 0);
+      gen_ = 1;
+    }
+    face_pairs_.clear();
+    vf_.clear();
+    ee_.clear();
+  }
+  Verdict zone(Context& ctx, Index a, Index b);
+
+ private:
+  using Kdop = geometry::Kdop<18>;
+  const Kdop& kdop(const Context& ctx, Index f);
+  Scalar face_pair(Context& ctx, Index fa, Index fb);
+
+  std::vector<Kdop> kdops_;
+  std::vector<std::uint32_t> kdop_gen_;
+  std::uint32_t gen_ = 0;
+  PairTable face_pairs_, vf_, ee_;
+};
+
+/// What the traits see: the frame's geometry, thresholds, the contact sink and the zone tester.
+struct Context {
+  const Topology& topo;
+  PositionsView x;
+  Scalar h2;     ///< thickness^2: contact when the squared distance is < h2
+  Scalar near;   ///< near distance
+  Scalar near2;  ///< near distance^2
+  Sink& sink;
+  ZoneTester& zone;
+  EngineStats& zone_stats;  ///< where zone tests count their work (the VV engine's extra stats)
+};
+
+Scalar segment_sqr(const Context& c, Index e0, Index e1) {
+  const Edge& a = c.topo.edge(e0);
+  const Edge& b = c.topo.edge(e1);
+  return geometry::segment_segment(at(c.x, a[0]), at(c.x, a[1]), at(c.x, b[0]), at(c.x, b[1])).sqr_distance;
+}
+
+Scalar vertex_face_sqr(const Context& c, Index v, Index f) {
+  const Face& t = c.topo.face(f);
+  return geometry::point_triangle(at(c.x, v), at(c.x, t[0]), at(c.x, t[1]), at(c.x, t[2])).sqr_distance;
+}
+
+bool vertices_adjacent(const Topology& topo, Index a, Index b) {
+  const auto ring = topo.vertex_vertices()[a];
+  return std::binary_search(ring.begin(), ring.end(), b);
+}
+
+/// Vertex–vertex with the L1 distance (the vertex variant's convergence). Pairs of equal or
+/// one-ring vertices are excluded so that walks do not slide onto trivially close pairs. A pair
+/// is near / colliding according to the precise tests of its zone.
+struct VVTraits {
+  static constexpr PairType kType = PairType::VV;
+  static constexpr bool kSymmetric = true;
+  static constexpr bool kSideEffect = false;
+  static Index count_a(const Topology& t) { return t.num_vertices(); }
+  static Index count_b(const Topology& t) { return t.num_vertices(); }
+  static std::span<const Index> neighbours_a(const Topology& t, Index v) { return t.vertex_vertices()[v]; }
+  static std::span<const Index> neighbours_b(const Topology& t, Index v) { return t.vertex_vertices()[v]; }
+  static bool excluded(const Topology& t, Index a, Index b) { return a == b || vertices_adjacent(t, a, b); }
+  static Scalar distance(const Context& c, Index a, Index b) {
+    const Vec3 d = at(c.x, a) - at(c.x, b);
+    return std::abs(d.x()) + std::abs(d.y()) + std::abs(d.z());
+  }
+  static Verdict classify(Context& c, Index a, Index b, Scalar /*l1*/) { return c.zone.zone(c, a, b); }
+};
+
+struct EETraits {
+  static constexpr PairType kType = PairType::EE;
+  static constexpr bool kSymmetric = true;
+  static constexpr bool kSideEffect = true;
+  static Index count_a(const Topology& t) { return t.num_edges(); }
+  static Index count_b(const Topology& t) { return t.num_edges(); }
+  static std::span<const Index> neighbours_a(const Topology& t, Index e) { return t.edge_edges()[e]; }
+  static std::span<const Index> neighbours_b(const Topology& t, Index e) { return t.edge_edges()[e]; }
+  static bool excluded(const Topology& t, Index a, Index b) { return t.edges_adjacent(a, b); }
+  /// Squared distance, computed with the smaller id first like the reference.
+  static Scalar distance(const Context& c, Index a, Index b) {
+    return a < b ? segment_sqr(c, a, b) : segment_sqr(c, b, a);
+  }
+  static Verdict classify(Context& c, Index a, Index b, Scalar d) {
+    return {d < c.h2 && c.sink.add_ee(a, b), d <= c.near2};
+  }
+};
+
+struct VFTraits {
+  static constexpr PairType kType = PairType::VF;
+  static constexpr bool kSymmetric = false;
+  static constexpr bool kSideEffect = true;
+  static Index count_a(const Topology& t) { return t.num_vertices(); }
+  static Index count_b(const Topology& t) { return t.num_faces(); }
+  static std::span<const Index> neighbours_a(const Topology& t, Index v) { return t.vertex_vertices()[v]; }
+  static std::span<const Index> neighbours_b(const Topology& t, Index f) { return t.face_faces()[f]; }
+  static bool excluded(const Topology& t, Index v, Index f) { return t.face_has_vertex(f, v); }
+  static Scalar distance(const Context& c, Index v, Index f) { return vertex_face_sqr(c, v, f); }
+  static Verdict classify(Context& c, Index v, Index f, Scalar d) {
+    return {d < c.h2 && c.sink.add_vf(v, f), d <= c.near2};
+  }
+};
+
+/// Edge–face: squared distance between a segment and a triangle (0 when they meet, else the
+/// smallest of the endpoint–triangle and segment–side distances). A colliding pair records its
+/// VF and EE sub-contacts and, when the edge meets the face, TT contacts of the edge's faces.
+struct EFTraits {
+  static constexpr PairType kType = PairType::EF;
+  static constexpr bool kSymmetric = false;
+  static constexpr bool kSideEffect = true;
+  static Index count_a(const Topology& t) { return t.num_edges(); }
+  static Index count_b(const Topology& t) { return t.num_faces(); }
+  static std::span<const Index> neighbours_a(const Topology& t, Index e) { return t.edge_edges()[e]; }
+  static std::span<const Index> neighbours_b(const Topology& t, Index f) { return t.face_faces()[f]; }
+  static bool excluded(const Topology& t, Index e, Index f) {
+    const Edge& ed = t.edge(e);
+    return t.face_has_vertex(f, ed[0]) || t.face_has_vertex(f, ed[1]);
+  }
+  static Scalar distance(const Context& c, Index e, Index f) {
+    const Edge& ed = c.topo.edge(e);
+    const Face& t = c.topo.face(f);
+    const Vec3 &p = at(c.x, ed[0]), &q = at(c.x, ed[1]);
+    const Vec3 &t0 = at(c.x, t[0]), &t1 = at(c.x, t[1]), &t2 = at(c.x, t[2]);
+    if (geometry::segment_triangle_intersect(p, q, t0, t1, t2)) return 0;
+    Scalar d = std::min(geometry::point_triangle(p, t0, t1, t2).sqr_distance,
+                        geometry::point_triangle(q, t0, t1, t2).sqr_distance);
+    d = std::min(d, geometry::segment_segment(p, q, t0, t1).sqr_distance);
+    d = std::min(d, geometry::segment_segment(p, q, t1, t2).sqr_distance);
+    d = std::min(d, geometry::segment_segment(p, q, t2, t0).sqr_distance);
+    return d;
+  }
+  static Verdict classify(Context& c, Index e, Index f, Scalar d) {
+    const bool colliding = d < c.h2;
+    if (colliding) {
+      const Edge& ed = c.topo.edge(e);
+      c.sink.add_vf(ed[0], f);
+      c.sink.add_vf(ed[1], f);
+      for (const Index side : c.topo.face_edges(f)) c.sink.add_ee(e, side);
+      if (d == 0 && c.sink.kinds().tt) {
+        for (const Index g : c.topo.edge_faces()[e]) {
+          if (!c.topo.faces_adjacent(g, f)) c.sink.add_tt(g, f);
+        }
+      }
+    }
+    return {colliding, d <= c.near2};
+  }
+};
+
+const geometry::Kdop<18>& ZoneTester::kdop(const Context& ctx, Index f) {
+  const auto i = static_cast<std::size_t>(f);
+  if (kdop_gen_[i] != gen_) {
+    const Face& t = ctx.topo.face(f);
+    kdops_[i] = Kdop::from_triangle(at(ctx.x, t[0]), at(ctx.x, t[1]), at(ctx.x, t[2]));
+    kdop_gen_[i] = gen_;
+  }
+  return kdops_[i];
+}
+
+/// Smallest squared distance among the enabled sub-pairs of faces fa, fb (0 when they
+/// intersect and TT is asked), +inf when the k-DOP pre-test shows they are farther than near.
+Scalar ZoneTester::face_pair(Context& ctx, Index fa, Index fb) {
+  const std::uint64_t k = pair_key(std::min(fa, fb), std::max(fa, fb));
+  if (const double* d = face_pairs_.find(k)) {
+    ++ctx.zone_stats.cache_hits;
+    return *d;
+  }
+  ++ctx.zone_stats.face_pairs;
+  constexpr Scalar kInf = std::numeric_limits<Scalar>::infinity();
+  Scalar best = kInf;
+  Kdop grown = kdop(ctx, fa);
+  grown.inflate(ctx.near);
+  if (!grown.overlaps(kdop(ctx, fb))) {
+    ++ctx.zone_stats.kdop_rejects;
+    face_pairs_.insert(k, best);
+    return best;
+  }
+  const Topology& topo = ctx.topo;
+  const Face& A = topo.face(fa);
+  const Face& B = topo.face(fb);
+  const ContactKinds& kinds = ctx.sink.kinds();
+  const auto vf = [&](Index v, Index f) {
+    if (topo.face_has_vertex(f, v)) return;
+    const std::uint64_t key = pair_key(v, f);
+    Scalar d;
+    if (const double* cached = vf_.find(key)) {
+      ++ctx.zone_stats.cache_hits;
+      d = *cached;
+    } else {
+      ++ctx.zone_stats.distance_evals;
+      d = vertex_face_sqr(ctx, v, f);
+      vf_.insert(key, d);
+      if (d < ctx.h2) ctx.sink.add_vf(v, f);
+    }
+    best = std::min(best, d);
+  };
+  const auto ee = [&](Index e0, Index e1) {
+    if (topo.edges_adjacent(e0, e1)) return;
+    if (e1 < e0) std::swap(e0, e1);
+    const std::uint64_t key = pair_key(e0, e1);
+    Scalar d;
+    if (const double* cached = ee_.find(key)) {
+      ++ctx.zone_stats.cache_hits;
+      d = *cached;
+    } else {
+      ++ctx.zone_stats.distance_evals;
+      d = segment_sqr(ctx, e0, e1);
+      ee_.insert(key, d);
+      if (d < ctx.h2) ctx.sink.add_ee(e0, e1);
+    }
+    best = std::min(best, d);
+  };
+  if (kinds.vf) {
+    for (const Index v : A) vf(v, fb);
+    for (const Index v : B) vf(v, fa);
+  }
+  if (kinds.ee) {
+    for (const Index e0 : topo.face_edges(fa)) {
+      for (const Index e1 : topo.face_edges(fb)) ee(e0, e1);
+    }
+  }
+  if (kinds.tt && !topo.faces_adjacent(fa, fb) && kdop(ctx, fa).overlaps(kdop(ctx, fb)) &&
+      ctx.sink.add_tt(fa, fb)) {
+    best = 0;
+  }
+  face_pairs_.insert(k, best);
+  return best;
+}
+
+Verdict ZoneTester::zone(Context& ctx, Index a, Index b) {
+  ++ctx.zone_stats.zone_tests;
+  Scalar best = std::numeric_limits<Scalar>::infinity();
+  for (const Index fa : ctx.topo.vertex_faces()[a]) {
+    for (const Index fb : ctx.topo.vertex_faces()[b]) {
+      if (fa != fb) best = std::min(best, face_pair(ctx, fa, fb));
+    }
+  }
+  return {best < ctx.h2, best <= ctx.near2};
+}
+
+void add_stats(DetectorStats& out, std::string_view prefix, const EngineStats& s, bool zone) {
+  const auto put = [&](std::string_view name, double value) {
+    out.add(std::string(prefix) + std::string(name), value);
+  };
+  put("drawn", s.drawn);
+  put("kept", s.kept);
+  put("deleted", s.deleted);
+  put("duplicates", s.duplicates);
+  put("converge_steps", s.converge_steps);
+  put("distance_evals", s.distance_evals);
+  put("cache_hits", s.cache_hits);
+  put("propagation_visits", s.propagation_visits);
+  put("colliding", s.colliding);
+  if (zone) {
+    put("zone_tests", s.zone_tests);
+    put("face_pairs", s.face_pairs);
+    put("kdop_rejects", s.kdop_rejects);
+  }
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// The detector
+
+struct StochasticDetector::Impl {
+  PairEngine<VVTraits, Context> vv;
+  PairEngine<EETraits, Context> ee;
+  PairEngine<VFTraits, Context> vf;
+  PairEngine<EFTraits, Context> ef;
+  Sink sink;
+  ZoneTester zone;
+  std::mt19937_64 rng;
+};
+
+StochasticDetector::StochasticDetector(DetectorOptions options, StochasticParams params)
+    : Detector(options), params_(params), impl_(std::make_unique<Impl>()) {
+  if (params_.active < 1 || params_.draw < 0 || params_.steps < 1 ||
+      !(std::isfinite(params_.near) && params_.near >= 1)) {
+    throw InputError("stochastic: invalid parameters " + params_.to_string() +
+                     " (active >= 1, draw >= 0, steps >= 1, near >= 1)");
+  }
+}
+
+StochasticDetector::~StochasticDetector() = default;
+
+bool StochasticDetector::runs(PairType type) const {
+  const ContactKinds& k = options().kinds;
+  const bool vertex = params_.variant == StochasticVariant::Vertex;
+  switch (type) {
+    case PairType::VV: return vertex && (k.vf || k.ee || k.tt);
+    case PairType::EE: return !vertex && k.ee;
+    case PairType::VF: return !vertex && k.vf;
+    case PairType::EF: return !vertex && (params_.ef || k.tt);
+  }
+  return false;
+}
+
+std::span<const PrimitivePair> StochasticDetector::near_pairs(PairType type) const {
+  switch (type) {
+    case PairType::VV: return impl_->vv.near_pairs();
+    case PairType::EE: return impl_->ee.near_pairs();
+    case PairType::VF: return impl_->vf.near_pairs();
+    case PairType::EF: return impl_->ef.near_pairs();
+  }
+  return {};
+}
+
+std::span<const PrimitivePair> StochasticDetector::colliding_pairs(PairType type) const {
+  switch (type) {
+    case PairType::VV: return impl_->vv.colliding_pairs();
+    case PairType::EE: return impl_->ee.colliding_pairs();
+    case PairType::VF: return impl_->vf.colliding_pairs();
+    case PairType::EF: return impl_->ef.colliding_pairs();
+  }
+  return {};
+}
+
+void StochasticDetector::on_topology() {
+  impl_->vv.reset();
+  impl_->ee.reset();
+  impl_->vf.reset();
+  impl_->ef.reset();
+  impl_->zone.reset(topology().num_faces());
+  impl_->rng.seed(params_.seed);
+}
+
+void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, ContactSet& out) {
+  const Topology& topo = topology();
+  const Scalar h = options().thickness;
+  const Scalar near = near_distance();
+  Impl& m = *impl_;
+  m.sink.begin(topo, x, h * h, options().kinds, out);
+  m.zone.begin_frame();
+  EngineStats zone_stats;
+  Context ctx{topo, x, h * h, near, near * near, m.sink, m.zone, zone_stats};
+
+  EngineConfig config;
+  config.propagation = params_.propagation;
+  config.active = params_.active;
+  config.draw = params_.draw;
+  config.steps = params_.steps;
+  switch (params_.variant) {
+    case StochasticVariant::Simple:
+      break;
+    case StochasticVariant::PropagateByConvergence:
+      config.by_convergence = true;
+      break;
+    case StochasticVariant::Direct:
+    case StochasticVariant::Vertex:
+      config.direct = true;
+      config.by_convergence = params_.variant == StochasticVariant::Direct;
+      config.cache = true;
+      break;
+  }
+
+  EngineStats total;
+  const auto accumulate = [&](const EngineStats& s) {
+    total.drawn += s.drawn;
+    total.kept += s.kept;
+    total.deleted += s.deleted;
+    total.duplicates += s.duplicates;
+    total.converge_steps += s.converge_steps;
+    total.distance_evals += s.distance_evals;
+    total.cache_hits += s.cache_hits;
+    total.propagation_visits += s.propagation_visits;
+    total.colliding += s.colliding;
+    total.zone_tests += s.zone_tests;
+    total.face_pairs += s.face_pairs;
+    total.kdop_rejects += s.kdop_rejects;
+  };
+
+  // Algorithm 3: per pair type, converge kept pairs, draw new ones, propagate; the engines
+  // share one seeded generator, always called in this order.
+  EngineStats vv_stats;
+  if (runs(PairType::VV)) {
+    m.vv.run_frame(ctx, config, m.rng);
+    vv_stats = m.vv.stats();
+    // Precise sub-pair work done by the zone tests belongs to the VV engine.
+    vv_stats.distance_evals += zone_stats.distance_evals;
+    vv_stats.cache_hits += zone_stats.cache_hits;
+    vv_stats.zone_tests = zone_stats.zone_tests;
+    vv_stats.face_pairs = zone_stats.face_pairs;
+    vv_stats.kdop_rejects = zone_stats.kdop_rejects;
+    accumulate(vv_stats);
+  }
+  if (runs(PairType::EE)) {
+    m.ee.run_frame(ctx, config, m.rng);
+    accumulate(m.ee.stats());
+  }
+  if (runs(PairType::VF)) {
+    m.vf.run_frame(ctx, config, m.rng);
+    accumulate(m.vf.stats());
+  }
+  if (runs(PairType::EF)) {
+    m.ef.run_frame(ctx, config, m.rng);
+    accumulate(m.ef.stats());
+  }
+
+  const bool vertex = params_.variant == StochasticVariant::Vertex;
+  add_stats(stats_, "", total, vertex);
+  if (runs(PairType::VV)) add_stats(stats_, "vv_", vv_stats, true);
+  if (runs(PairType::EE)) add_stats(stats_, "ee_", m.ee.stats(), false);
+  if (runs(PairType::VF)) add_stats(stats_, "vf_", m.vf.stats(), false);
+  if (runs(PairType::EF)) add_stats(stats_, "ef_", m.ef.stats(), false);
+}
+
+}  // namespace crumple

@@ -1,0 +1,358 @@
+#pragma once
+/// \file
+/// The generic engine of the stochastic detector (thesis §3.2.2.6: "only the distance functions
+/// between primitives are specialised"). Internal header: used by stochastic.cpp and its tests.
+///
+/// `PairEngine<Traits>` runs Algorithm 3 for one primitive pair type. A traits class supplies:
+///   static constexpr PairType kType;
+///   static constexpr bool kSymmetric;   // both elements of the same type: pairs stored a < b
+///   static constexpr bool kSideEffect;  // walks record the colliding pairs they meet (false
+///                                       // when classifying is costly, e.g. VV zone tests)
+///   static Index count_a(const Topology&), count_b(const Topology&);
+///   static std::span<const Index> neighbours_a(const Topology&, Index), neighbours_b(...);
+///   static bool excluded(const Topology&, Index a, Index b);  // adjacent: never a contact
+///   static Scalar distance(const Context&, Index a, Index b);  // the convergence metric
+///   static Verdict classify(Context&, Index a, Index b, Scalar distance);  // records contacts
+/// Everything else (convergence, near/duplicate deletion, random draws, propagation, caches,
+/// statistics) is written once here.
+
+#include <crumple/core/types.hpp>
+#include <crumple/detect/stochastic.hpp>
+
+#include <cstdint>
+#include <limits>
+#include <random>
+#include <span>
+#include <utility>
+#include <vector>
+
+namespace crumple::stochastic_detail {
+
+/// Open-addressing hash map from a 64-bit pair key to a double, cleared in O(1) by bumping a
+/// generation stamp (per-frame tables must not cost O(capacity) to reset, nor O(mesh size)).
+class PairTable {
+ public:
+  PairTable() : slots_(64) {}
+
+  void clear() {
+    ++gen_;
+    size_ = 0;
+    if (gen_ == 0) {  // wrapped: invalidate every slot for real
+      for (Slot& s : slots_) s.gen = 0;
+      gen_ = 1;
+    }
+  }
+  std::size_t size() const { return size_; }
+
+  /// Pointer to the value of `key`, or null.
+  const double* find(std::uint64_t key) const {
+    const std::size_t mask = slots_.size() - 1;
+    for (std::size_t i = mix(key) & mask;; i = (i + 1) & mask) {
+      const Slot& s = slots_[i];
+      if (s.gen != gen_) return nullptr;
+      if (s.key == key) return &s.value;
+    }
+  }
+  bool contains(std::uint64_t key) const { return find(key) != nullptr; }
+
+  /// Inserts `key` with `value` unless present; returns the stored value slot and whether it
+  /// was inserted.
+  std::pair<double*, bool> insert(std::uint64_t key, double value) {
+    if (2 * (size_ + 1) > slots_.size()) grow();
+    const std::size_t mask = slots_.size() - 1;
+    for (std::size_t i = mix(key) & mask;; i = (i + 1) & mask) {
+      Slot& s = slots_[i];
+      if (s.gen != gen_) {
+        s = {key, gen_, value};
+        ++size_;
+        return {&s.value, true};
+      }
+      if (s.key == key) return {&s.value, false};
+    }
+  }
+
+ private:
+  struct Slot {
+    std::uint64_t key = 0;
+    std::uint32_t gen = 0;
+    double value = 0;
+  };
+  static std::size_t mix(std::uint64_t k) {  // splitmix64 finaliser
+    k ^= k >> 30;
+    k *= 0xbf58476d1ce4e5b9ULL;
+    k ^= k >> 27;
+    k *= 0x94d049bb133111ebULL;
+    k ^= k >> 31;
+    return static_cast<std::size_t>(k);
+  }
+  void grow() {
+    std::vector<Slot> old;
+    old.swap(slots_);
+    slots_.assign(old.size() * 2, Slot{});
+    const std::uint32_t live = gen_;
+    gen_ = 1;
+    size_ = 0;
+    for (const Slot& s : old) {
+      if (s.gen == live) insert(s.key, s.value);
+    }
+  }
+
+  std::vector<Slot> slots_;
+  std::uint32_t gen_ = 1;
+  std::size_t size_ = 0;
+};
+
+inline std::uint64_t pair_key(Index a, Index b) {
+  return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(a)) << 32) |
+         static_cast<std::uint32_t>(b);
+}
+
+/// Counters of one pair type for one frame (see `StochasticDetector` for their meaning).
+struct EngineStats {
+  double drawn = 0, kept = 0, deleted = 0, duplicates = 0, converge_steps = 0,
+         distance_evals = 0, cache_hits = 0, propagation_visits = 0, colliding = 0,
+         zone_tests = 0, face_pairs = 0, kdop_rejects = 0;
+};
+
+/// What a converged (or visited) pair is: colliding (contacts recorded) and/or near.
+struct Verdict {
+  bool colliding = false;
+  bool near = false;
+};
+
+/// How one engine behaves, derived from the variant.
+struct EngineConfig {
+  bool direct = false;          ///< closest neighbour (all tested) instead of the first closer
+  bool by_convergence = false;  ///< propagation launches convergences instead of plain tests
+  bool cache = false;           ///< cache distances computed this frame
+  Propagation propagation = Propagation::Linear;
+  int active = 100;
+  int draw = 100;
+  int steps = 64;
+};
+
+/// Uniform integer in [0, n) from a 64-bit generator (Lemire's multiply-shift on 32 bits;
+/// the bias is < n / 2^32). Same sequence on every platform.
+inline Index uniform_index(std::mt19937_64& rng, Index n) {
+  const std::uint64_t r = rng() >> 32;
+  return static_cast<Index>((r * static_cast<std::uint64_t>(n)) >> 32);
+}
+
+/// Algorithm 3 for one pair type. `Context` is passed through to the traits.
+template <class Traits, class Context>
+class PairEngine {
+ public:
+  /// Forgets all state (new topology).
+  void reset() {
+    near_.clear();
+    colliding_.clear();
+  }
+
+  const std::vector<PrimitivePair>& near_pairs() const { return near_; }
+  const std::vector<PrimitivePair>& colliding_pairs() const { return colliding_; }
+  const EngineStats& stats() const { return stats_; }
+
+  /// One frame: converge the kept pairs, top up with random draws, propagate.
+  void run_frame(Context& ctx, const EngineConfig& config, std::mt19937_64& rng) {
+    config_ = config;
+    stats_ = {};
+    cache_.clear();
+    path_.clear();
+    prop_.clear();
+    verdict_.clear();
+    colliding_.clear();
+    previous_.swap(near_);
+    near_.clear();
+    const Topology& topo = ctx.topo;
+    for (const PrimitivePair p : previous_) process(ctx, p);
+
+    const Index na = Traits::count_a(topo);
+    const Index nb = Traits::count_b(topo);
+    if (na > 0 && nb > 0) {
+      int drawn = 0;
+      while (static_cast<int>(near_.size()) < config_.active && drawn < config_.draw) {
+        ++drawn;
+        const Index a = uniform_index(rng, na);
+        const Index b = uniform_index(rng, nb);
+        if (Traits::excluded(topo, a, b)) continue;
+        process(ctx, canon(a, b));
+      }
+      stats_.drawn = drawn;
+    }
+
+    if (config_.propagation != Propagation::None) {
+      // colliding_ grows while it is walked: it is the propagation queue.
+      for (std::size_t i = 0; i < colliding_.size(); ++i) propagate(ctx, colliding_[i]);
+    }
+    stats_.kept = static_cast<double>(near_.size());
+  }
+
+ private:
+  enum class Walk { Converged, Merged, Capped };
+  struct WalkResult {
+    PrimitivePair pair;
+    Scalar distance;
+    Walk status;
+  };
+
+  static PrimitivePair canon(Index a, Index b) {
+    if constexpr (Traits::kSymmetric) {
+      if (b < a) std::swap(a, b);
+    }
+    return {a, b};
+  }
+  static std::uint64_t key(PrimitivePair p) { return pair_key(p.a, p.b); }
+
+  Scalar distance(const Context& ctx, PrimitivePair p) {
+    if (config_.cache) {
+      if (const double* d = cache_.find(key(p))) {
+        ++stats_.cache_hits;
+        return *d;
+      }
+    }
+    ++stats_.distance_evals;
+    const Scalar d = Traits::distance(ctx, p.a, p.b);
+    if (config_.cache) cache_.insert(key(p), d);
+    return d;
+  }
+
+  /// Classifies a pair once per frame (contacts recorded by the traits); colliding pairs join
+  /// the colliding list, which is also the propagation queue.
+  Verdict classify(Context& ctx, PrimitivePair p, Scalar d) {
+    if (const double* v = verdict_.find(key(p))) {
+      const int bits = static_cast<int>(*v);
+      return {(bits & 1) != 0, (bits & 2) != 0};
+    }
+    const Verdict v = Traits::classify(ctx, p.a, p.b, d);
+    verdict_.insert(key(p), (v.colliding ? 1 : 0) + (v.near ? 2 : 0));
+    if (v.colliding) {
+      colliding_.push_back(p);
+      ++stats_.colliding;
+    }
+    return v;
+  }
+
+  /// Moves to `q` unless another walk reached it this frame (then this walk is a duplicate).
+  bool enter(PrimitivePair q) { return path_.insert(key(q), 0).second; }
+
+  /// Walks from p to a local minimum of the distance over the pair graph
+  /// {(a', b) : a' ~ a} ∪ {(a, b') : b' ~ b} minus excluded pairs (thesis fig. 3.4).
+  WalkResult converge(Context& ctx, PrimitivePair p) {
+    const Topology& topo = ctx.topo;
+    Scalar d = distance(ctx, p);
+    // Colliding pairs a walk goes through are recorded (free: the distance is known); direct
+    // convergence also records the colliding neighbours it tests (thesis §3.2.2.5).
+    if (Traits::kSideEffect && d < ctx.h2) classify(ctx, p, d);
+    if (!enter(p)) return {p, d, Walk::Merged};
+    const bool side_effect = config_.direct && Traits::kSideEffect;
+    int steps = 0;
+    for (;;) {
+      bool moved = false;
+      if (config_.direct) {
+        // The closest neighbour pair, all of them tested (colliding ones recorded).
+        PrimitivePair best{-1, -1};
+        Scalar best_d = d;
+        const auto consider = [&](PrimitivePair q) {
+          const Scalar dq = distance(ctx, q);
+          if (side_effect && dq < ctx.h2) classify(ctx, q, dq);
+          if (dq < best_d) {
+            best_d = dq;
+            best = q;
+          }
+        };
+        for (const Index n : Traits::neighbours_a(topo, p.a)) {
+          if (!Traits::excluded(topo, n, p.b)) consider(canon(n, p.b));
+        }
+        for (const Index n : Traits::neighbours_b(topo, p.b)) {
+          if (!Traits::excluded(topo, p.a, n)) consider(canon(p.a, n));
+        }
+        if (best.a >= 0) {
+          if (Traits::kSideEffect && best_d < ctx.h2) classify(ctx, best, best_d);
+          if (!enter(best)) return {best, best_d, Walk::Merged};
+          p = best;
+          d = best_d;
+          moved = true;
+          ++steps;
+          ++stats_.converge_steps;
+        }
+      } else {
+        // The first closer neighbour pair, element 1 then element 2 (thesis fig. 3.4, 3.6).
+        for (int side = 0; side < 2; ++side) {
+          const auto list = side == 0 ? Traits::neighbours_a(topo, p.a) : Traits::neighbours_b(topo, p.b);
+          for (const Index n : list) {
+            const bool excl = side == 0 ? Traits::excluded(topo, n, p.b) : Traits::excluded(topo, p.a, n);
+            if (excl) continue;
+            const PrimitivePair q = side == 0 ? canon(n, p.b) : canon(p.a, n);
+            const Scalar dq = distance(ctx, q);
+            if (dq < d) {
+              if (Traits::kSideEffect && dq < ctx.h2) classify(ctx, q, dq);
+              if (!enter(q)) return {q, dq, Walk::Merged};
+              p = q;
+              d = dq;
+              moved = true;
+              ++steps;
+              ++stats_.converge_steps;
+              break;
+            }
+          }
+          if (steps >= config_.steps) break;
+        }
+      }
+      if (!moved) return {p, d, Walk::Converged};
+      if (steps >= config_.steps) return {p, d, Walk::Capped};
+    }
+  }
+
+  /// Converges a kept or drawn pair; keeps it when it is a near local minimum not reached by
+  /// another pair this frame.
+  void process(Context& ctx, PrimitivePair p) {
+    const WalkResult r = converge(ctx, p);
+    if (r.status == Walk::Merged) {
+      ++stats_.deleted;
+      ++stats_.duplicates;
+      return;
+    }
+    const Verdict v = classify(ctx, r.pair, r.distance);
+    if (r.status == Walk::Capped || !v.near) {
+      ++stats_.deleted;
+      return;
+    }
+    near_.push_back(r.pair);
+  }
+
+  /// Visits the neighbour pairs of a colliding pair (never the same pair twice in a frame).
+  void propagate(Context& ctx, PrimitivePair p) {
+    const Topology& topo = ctx.topo;
+    const auto visit = [&](Index a, Index b) {
+      if (Traits::excluded(topo, a, b)) return;
+      const PrimitivePair q = canon(a, b);
+      if (!prop_.insert(key(q), 0).second) return;
+      ++stats_.propagation_visits;
+      if (config_.by_convergence) {
+        const WalkResult r = converge(ctx, q);
+        if (r.status != Walk::Merged) classify(ctx, r.pair, r.distance);
+      } else {
+        classify(ctx, q, distance(ctx, q));
+      }
+    };
+    const auto na = Traits::neighbours_a(topo, p.a);
+    const auto nb = Traits::neighbours_b(topo, p.b);
+    for (const Index n : na) visit(n, p.b);
+    for (const Index n : nb) visit(p.a, n);
+    if (config_.propagation == Propagation::Full) {
+      for (const Index n1 : na) {
+        for (const Index n2 : nb) visit(n1, n2);
+      }
+    }
+  }
+
+  EngineConfig config_;
+  EngineStats stats_;
+  std::vector<PrimitivePair> near_, previous_, colliding_;
+  PairTable cache_;    ///< distances computed this frame (direct and vertex variants)
+  PairTable path_;     ///< pairs reached by a convergence this frame ("visited" hash set)
+  PairTable prop_;     ///< pairs visited by propagation this frame
+  PairTable verdict_;  ///< pairs classified this frame
+};
+
+}  // namespace crumple::stochastic_detail

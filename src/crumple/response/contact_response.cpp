@@ -1,0 +1,111 @@
+#include <crumple/core/error.hpp>
+#include <crumple/response/contact_response.hpp>
+
+namespace crumple::response {
+
+namespace {
+inline std::size_t at(Index i) { return static_cast<std::size_t>(i); }
+}  // namespace
+
+Stencil make_stencil(const VertexFaceContact& c, std::span<const Face> faces) {
+  CRUMPLE_CHECK(c.face >= 0 && at(c.face) < faces.size(), "vertex-face contact face out of range");
+  const Face& f = faces[at(c.face)];
+  Stencil s;
+  s.count = 4;
+  s.vertex = {c.vertex, f[0], f[1], f[2]};
+  s.weight = {1, -c.barycentric[0], -c.barycentric[1], -c.barycentric[2]};
+  s.normal = c.normal;
+  return s;
+}
+
+Stencil make_stencil(const EdgeEdgeContact& c) {
+  Stencil s;
+  s.count = 4;
+  s.vertex = {c.a[0], c.a[1], c.b[0], c.b[1]};
+  s.weight = {-(1 - c.s), -c.s, 1 - c.t, c.t};
+  s.normal = c.normal;
+  return s;
+}
+
+std::vector<Stencil> make_stencils(const ContactSet& contacts, std::span<const Face> faces) {
+  std::vector<Stencil> out;
+  out.reserve(contacts.vf.size() + contacts.ee.size());
+  for (const auto& c : contacts.vf) {
+    if (c.normal.squaredNorm() > 0) out.push_back(make_stencil(c, faces));
+  }
+  for (const auto& c : contacts.ee) {
+    if (c.normal.squaredNorm() > 0) out.push_back(make_stencil(c));
+  }
+  return out;
+}
+
+Scalar relative_normal(const Stencil& s, std::span<const Vec3> q) {
+  Vec3 r = Vec3::Zero();
+  for (int k = 0; k < s.count; ++k) r += s.weight[k] * q[at(s.vertex[k])];
+  return r.dot(s.normal);
+}
+
+Scalar inverse_effective_mass(const Stencil& s, std::span<const Scalar> inv_mass) {
+  Scalar d = 0;
+  for (int k = 0; k < s.count; ++k) d += s.weight[k] * s.weight[k] * inv_mass[at(s.vertex[k])];
+  return d;
+}
+
+namespace {
+void apply(const Stencil& s, std::span<const Scalar> inv_mass, std::span<Vec3> q, Scalar lambda) {
+  for (int k = 0; k < s.count; ++k) {
+    const Scalar w = s.weight[k] * inv_mass[at(s.vertex[k])];
+    if (w != 0) q[at(s.vertex[k])] += (w * lambda) * s.normal;
+  }
+}
+}  // namespace
+
+Scalar correct_velocity(const Stencil& s, std::span<const Scalar> inv_mass, std::span<Vec3> v) {
+  const Scalar vn = relative_normal(s, v);
+  if (!(vn < 0)) return 0;
+  const Scalar d = inverse_effective_mass(s, inv_mass);
+  if (!(d > 0)) return 0;
+  const Scalar lambda = -vn / d;
+  apply(s, inv_mass, v, lambda);
+  return lambda;
+}
+
+Scalar correct_position(const Stencil& s, std::span<const Scalar> inv_mass, std::span<Vec3> x,
+                        Scalar target) {
+  const Scalar gap = relative_normal(s, x);
+  if (!(gap < target)) return 0;
+  const Scalar d = inverse_effective_mass(s, inv_mass);
+  if (!(d > 0)) return 0;
+  const Scalar mu = (target - gap) / d;
+  apply(s, inv_mass, x, mu);
+  return mu;
+}
+
+ResponseStats resolve(std::span<const Stencil> stencils, std::span<const Scalar> inv_mass,
+                      std::span<Vec3> x, std::span<Vec3> v, const ResponseOptions& options) {
+  CRUMPLE_CHECK(options.passes >= 1, "response passes must be >= 1");
+  CRUMPLE_CHECK(x.size() == inv_mass.size() && v.size() == inv_mass.size(),
+                "response arrays must have #V entries");
+  ResponseStats stats;
+  const Scalar too_close = options.thickness * (1 - options.position_tolerance);
+  for (int pass = 0; pass < options.passes; ++pass) {
+    ++stats.passes;
+    std::size_t applied = 0;
+    for (const Stencil& s : stencils) {
+      if (options.velocity && relative_normal(s, v) < -options.velocity_tolerance) {
+        if (correct_velocity(s, inv_mass, v) > 0) ++applied;
+      }
+      if (options.position && options.thickness > 0 && relative_normal(s, x) < too_close) {
+        if (correct_position(s, inv_mass, x, options.thickness) > 0) ++applied;
+      }
+    }
+    stats.corrections += applied;
+    if (applied == 0) {
+      stats.converged = true;
+      break;
+    }
+  }
+  return stats;
+}
+
+}  // namespace crumple::response

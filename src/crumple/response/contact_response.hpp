@@ -1,0 +1,89 @@
+#pragma once
+/// \file
+/// Self-collision response by velocity and position correction (SPEC.md §5, thesis Annex B),
+/// generalised to unequal masses. Stateless kernels plus a Gauss–Seidel loop over contacts.
+///
+/// Every contact is turned into a *stencil*: up to four vertices i with signed weights c_i,
+/// summing to zero, and a unit normal n, such that the relative quantity across the contact is
+/// r = Σ c_i q_i (q = positions or velocities) and its normal part r·n is the gap (positions)
+/// or the separating speed (velocities):
+///  - vertex–face (P4 against triangle P1 P2 P3 with barycentric w): c = (1, −w1, −w2, −w3),
+///    n from the face towards the vertex (Annex B.2);
+///  - edge–edge (a = (p1, p2) at s, b = (p1', p2') at t): c = (−(1−s), −s, 1−t, t), n from a
+///    towards b (Annex B.1).
+///
+/// An impulse λ along n changes vertex i by Δq_i = c_i m_i⁻¹ λ n, hence r·n by λ Σ c_i² m_i⁻¹.
+/// Velocity correction (inelastic, Annex B.1.1/B.2.1): when v_rel·n < 0 (approaching),
+///   λ = −(v_rel·n) / Σ c_i² m_i⁻¹,  so that v_rel·n becomes 0.
+/// Position correction (Annex B.1.2/B.2.2): when the gap g = (Σ c_i x_i)·n is below the target
+/// thickness h,  μ = (h − g) / Σ c_i² m_i⁻¹,  so that the gap becomes h.
+/// With equal masses the denominator is the thesis' (1−s)²+s²+(1−t)²+t² (EE) and
+/// 1/m4 + Σ w_i²/m_i (VF). Linear momentum Σ m_i Δv_i = λ n Σ c_i = 0 is conserved; a pinned
+/// vertex has m⁻¹ = 0 (infinite mass: it does not move and absorbs momentum).
+
+#include <crumple/core/types.hpp>
+#include <crumple/detect/contact.hpp>
+
+#include <array>
+#include <span>
+#include <vector>
+
+namespace crumple::response {
+
+/// Up to four vertices with signed weights (Σ c_i = 0) and a unit normal; see the file comment.
+struct Stencil {
+  std::array<Index, 4> vertex{-1, -1, -1, -1};
+  std::array<Scalar, 4> weight{0, 0, 0, 0};
+  int count = 0;
+  Vec3 normal = Vec3::Zero();
+};
+
+/// Stencil of a vertex–face contact; `faces` gives the face's corners.
+Stencil make_stencil(const VertexFaceContact& contact, std::span<const Face> faces);
+/// Stencil of an edge–edge contact.
+Stencil make_stencil(const EdgeEdgeContact& contact);
+/// Stencils of every VF and EE contact of a set (TT contacts have no response), VF first.
+/// Contacts with a zero normal (degenerate geometry) are skipped.
+std::vector<Stencil> make_stencils(const ContactSet& contacts, std::span<const Face> faces);
+
+/// Σ c_i q_i · n over the stencil (the gap for positions, the separating speed for velocities).
+Scalar relative_normal(const Stencil& stencil, std::span<const Vec3> q);
+/// Σ c_i² m_i⁻¹: the inverse effective mass along the normal (0 when every vertex is pinned).
+Scalar inverse_effective_mass(const Stencil& stencil, std::span<const Scalar> inv_mass);
+
+/// Cancels the approaching normal relative velocity of one contact (no-op when separating or
+/// when every vertex is pinned). Returns the impulse λ applied (>= 0).
+Scalar correct_velocity(const Stencil& stencil, std::span<const Scalar> inv_mass,
+                        std::span<Vec3> velocities);
+/// Pushes the gap of one contact out to `target` (no-op when the gap is already >= target).
+/// Returns μ (>= 0), the positional "impulse".
+Scalar correct_position(const Stencil& stencil, std::span<const Scalar> inv_mass,
+                        std::span<Vec3> positions, Scalar target);
+
+/// Options of the Gauss–Seidel loop.
+struct ResponseOptions {
+  Scalar thickness = 0;       ///< position target h (the detection thickness); 0 = no push-out
+  int passes = 4;             ///< maximum sweeps over every contact per call (>= 1)
+  bool velocity = true;       ///< apply the velocity correction
+  bool position = true;       ///< apply the position correction
+  /// A contact still "approaches" when v_rel·n < −velocity_tolerance (m/s), and is still
+  /// "too close" when the gap < thickness·(1 − position_tolerance).
+  Scalar velocity_tolerance = 1e-9;
+  Scalar position_tolerance = 1e-6;
+};
+
+/// What the loop did.
+struct ResponseStats {
+  int passes = 0;               ///< sweeps run (the last one found nothing left to do, or hit the limit)
+  std::size_t corrections = 0;  ///< velocity plus position corrections applied
+  bool converged = false;       ///< the last sweep found no approaching or too-close contact
+};
+
+/// Sweeps the stencils in order (Gauss–Seidel: each correction sees the previous ones) until a
+/// sweep applies nothing or `options.passes` sweeps ran. `inv_mass`, `positions`, `velocities`
+/// have #V entries.
+ResponseStats resolve(std::span<const Stencil> stencils, std::span<const Scalar> inv_mass,
+                      std::span<Vec3> positions, std::span<Vec3> velocities,
+                      const ResponseOptions& options);
+
+}  // namespace crumple::response

@@ -1,0 +1,59 @@
+#pragma once
+/// \file
+/// Time integrators behind one interface (SPEC.md §6, thesis Annex A.2). Each advances
+/// q = (x, v) by one step h with the forces of `forces.hpp`; a = M⁻¹ f, zero for pinned
+/// particles, whose velocity is therefore kept (a kinematic pin with velocity u moves by h u).
+///
+///  - explicit Euler:  x₁ = x₀ + h v₀,  v₁ = v₀ + h a(x₀, v₀). First order, gains energy;
+///    unstable once h ω > ~0 on undamped springs (ω = √(k/m)).
+///  - symplectic (semi-implicit) Euler:  v₁ = v₀ + h a(x₀, v₀),  x₁ = x₀ + h v₁. First order,
+///    energy bounded for h ω < 2.
+///  - RK4: classical fourth-order Runge–Kutta on (x, v). Accurate, 4 force evaluations,
+///    unstable for h ω > ~2.8.
+///  - implicit (backward) Euler, one linearised Newton step (Baraff & Witkin, "Large steps in
+///    cloth simulation", SIGGRAPH 1998):  (M − h ∂f/∂v − h² ∂f/∂x) Δv = h (f₀ + h ∂f/∂x v₀),
+///    v₁ = v₀ + Δv,  x₁ = x₀ + h v₁, solved by conjugate gradient (Jacobi preconditioner) on the
+///    sparse system, pinned rows and columns replaced by the identity (Δv = 0). Unconditionally
+///    stable, dissipative.
+/// Every integrator is deterministic (same input, same bits) and single-threaded.
+
+#include <crumple/sim/forces.hpp>
+
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace crumple::sim {
+
+enum class IntegratorKind { ExplicitEuler, SymplecticEuler, Rk4, ImplicitEuler };
+
+/// "explicit-euler", "symplectic-euler", "rk4", "implicit-euler".
+std::string_view to_string(IntegratorKind kind);
+/// Parses one of the names above; throws `InputError` listing them.
+IntegratorKind parse_integrator(std::string_view name);
+/// Every kind, in enum order.
+std::span<const IntegratorKind> all_integrators();
+
+struct IntegratorOptions {
+  Scalar cg_tolerance = 1e-8;   ///< relative residual |r|/|b| at which CG stops (implicit)
+  int cg_max_iterations = 1000;
+};
+
+class Integrator {
+ public:
+  virtual ~Integrator() = default;
+  virtual IntegratorKind kind() const = 0;
+  /// Advances `state` (x, v, time) by `dt` seconds (> 0).
+  virtual void step(const Model& model, const ForceField& field, State& state, Scalar dt) = 0;
+  /// CG iterations of the last step (0 for explicit schemes).
+  int last_iterations() const { return last_iterations_; }
+
+ protected:
+  int last_iterations_ = 0;
+};
+
+std::unique_ptr<Integrator> make_integrator(IntegratorKind kind, const IntegratorOptions& options = {});
+
+}  // namespace crumple::sim

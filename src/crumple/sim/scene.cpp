@@ -1,0 +1,419 @@
+#include <crumple/core/error.hpp>
+#include <crumple/mesh/shapes.hpp>
+#include <crumple/sim/scene.hpp>
+
+#include <array>
+#include <charconv>
+#include <limits>
+#include <cmath>
+#include <numbers>
+#include <random>
+
+namespace crumple::sim {
+
+namespace {
+
+// Keys shared by every cloth scene.
+#define CRUMPLE_CLOTH_KEYS(density, stiffness, damping, bending, gravity, air, thickness)          \
+  {"density", density, "cloth mass per area (kg/m^2), lumped on the vertices"},                    \
+      {"stiffness", stiffness, "structural spring stiffness on every mesh edge (N/m)"},           \
+      {"damping", damping, "damping ratio of every spring"},                                      \
+      {"bending", bending, "stiffness of the bending springs across interior edges (N/m, 0 = none)"}, \
+      {"gravity", gravity, "gravity (m/s^2, downwards along -y)"},                                \
+      {"air", air, "air damping (1/s): force -air * m * v"},                                      \
+      {"thickness", thickness, "contact thickness, as a fraction of the mean edge length"}
+
+constexpr std::array<SceneParamInfo, 11> kHanging{{
+    {"nx", "10", "quads along x"},
+    {"ny", "10", "quads along z"},
+    {"size", "1", "side of the square cloth (m)"},
+    {"jitter", "0.01", "seeded random displacement of the initial vertices, fraction of an edge"},
+    CRUMPLE_CLOTH_KEYS("0.1", "50", "0.02", "0", "9.81", "0.2", "0.4"),
+}};
+
+constexpr std::array<SceneParamInfo, 14> kSphere{{
+    {"n", "16", "quads along each side"},
+    {"size", "1.5", "side of the square cloth (m)"},
+    {"height", "0.7", "initial height of the cloth (m)"},
+    {"radius", "0.25", "sphere radius (m); the sphere's centre is under the cloth's centre at y = 0.3"},
+    {"friction", "0.3", "Coulomb friction on the sphere and the floor"},
+    {"jitter", "0.01", "seeded random displacement of the initial vertices, fraction of an edge"},
+    {"sphere-speed", "0", "speed of the sphere along +x (m/s): a kinematic, moving obstacle"},
+    CRUMPLE_CLOTH_KEYS("0.1", "400", "0.1", "0", "9.81", "0.2", "0.3"),
+}};
+
+constexpr std::array<SceneParamInfo, 15> kRibbon{{
+    {"nx", "48", "quads along the ribbon"},
+    {"ny", "3", "quads across the ribbon"},
+    {"length", "2", "ribbon length along x (m)"},
+    {"width", "0.15", "ribbon width (m)"},
+    {"turns", "3", "turns of the driven end about the ribbon's axis over twist-time"},
+    {"approach", "0.5", "fraction of the length the driven end moves towards the other over twist-time"},
+    {"twist-time", "6", "duration of the twist (s); the end is held afterwards"},
+    {"jitter", "0.01", "seeded random displacement of the initial vertices, fraction of an edge"},
+    CRUMPLE_CLOTH_KEYS("0.1", "400", "0.1", "2", "0", "0.5", "0.3"),
+}};
+
+constexpr std::array<SceneParamInfo, 14> kCrumple{{
+    {"n", "20", "quads along each side"},
+    {"size", "1", "side of the square cloth (m)"},
+    {"final", "0.3", "final gap between the two walls, fraction of size"},
+    {"push-time", "5", "time the walls take to close (s)"},
+    {"friction", "0.2", "Coulomb friction on the floor and the walls"},
+    {"jitter", "0.05", "seeded random displacement of the initial vertices, fraction of an edge"},
+    {"wall-height", "0.5", "height of the walls (m)"},
+    CRUMPLE_CLOTH_KEYS("0.1", "400", "0.1", "1", "9.81", "0.5", "0.3"),
+}};
+
+constexpr std::array<SceneParamInfo, 8> kFile{{
+    {"pins", "", "pinned vertex ids separated by ';' (masses from X3D files: 0 pins)"},
+    CRUMPLE_CLOTH_KEYS("0.1", "1000", "0.05", "0", "9.81", "0.1", "0.3"),
+}};
+#undef CRUMPLE_CLOTH_KEYS
+
+constexpr std::array<SceneInfo, 5> kScenes{{
+    {"hanging-cloth",
+     "the thesis scene (SPEC.md §4): a square cloth lattice, initially horizontal, hanging from one "
+     "corner under gravity, no collision response: it falls through itself and collapses into a "
+     "hanging bundle",
+     kHanging},
+    {"cloth-on-sphere", "a square cloth dropped on a sphere resting on the floor, response on", kSphere},
+    {"twisted-ribbon",
+     "a strip pinned at both ends, one end rotated about the strip's axis and moved towards the "
+     "other so the ribbon coils and folds onto itself, response on",
+     kRibbon},
+    {"crumple", "a square cloth on the floor pushed into a pile of folds by two closing walls, response on",
+     kCrumple},
+    {"file", "a mesh or MassSpring model read from a file (keys apply to `crumple simulate FILE`)", kFile},
+}};
+
+std::string join_names() {
+  std::string out;
+  for (const auto& s : kScenes) out += (out.empty() ? "" : ", ") + std::string(s.name);
+  return out;
+}
+
+std::string join_keys(const SceneInfo& info) {
+  std::string out;
+  for (const auto& p : info.params) out += (out.empty() ? "" : ", ") + std::string(p.key);
+  return out;
+}
+
+const SceneParamInfo* find_param(const SceneInfo& info, std::string_view key) {
+  for (const auto& p : info.params) {
+    if (p.key == key) return &p;
+  }
+  return nullptr;
+}
+
+std::string_view trim(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+  return s;
+}
+
+/// Portable uniform double in [-1, 1) from a 64-bit engine (not the implementation-defined
+/// std distributions), so scenes are the same on every standard library.
+Scalar uniform_pm1(std::mt19937_64& rng) {
+  return static_cast<Scalar>(rng() >> 11) * 0x1.0p-52 - 1;
+}
+
+void jitter(Positions& x, Scalar amplitude, std::uint64_t seed) {
+  if (amplitude == 0) return;
+  std::mt19937_64 rng(seed);
+  for (Vec3& p : x) {
+    const Scalar a = uniform_pm1(rng), b = uniform_pm1(rng), c = uniform_pm1(rng);
+    p += amplitude * Vec3(a, b, c);
+  }
+}
+
+Scalar mean_edge_length(const Topology& topo, PositionsView x) {
+  return topo.num_edges() > 0 ? edge_length_stats(topo, x).mean : 1;
+}
+
+ClothParams cloth_params(const SceneSpec& spec) {
+  ClothParams p;
+  p.density = spec.get_double("density");
+  p.stiffness = spec.get_double("stiffness");
+  p.damping_ratio = spec.get_double("damping");
+  p.bending_stiffness = spec.get_double("bending");
+  p.bending_damping_ratio = p.damping_ratio;
+  if (!(p.density > 0)) throw InputError("scene key 'density' must be > 0");
+  return p;
+}
+
+ForceField force_field(const SceneSpec& spec) {
+  ForceField f;
+  f.gravity = Vec3(0, -spec.get_double("gravity"), 0);
+  f.air_damping = spec.get_double("air");
+  return f;
+}
+
+/// Lattice nx × ny of size w × d lying horizontally at height y: lattice vertex (i, j) at
+/// (i w/nx, y, j d/ny).
+TriMesh horizontal_lattice(Index nx, Index ny, Scalar w, Scalar d, Scalar y) {
+  if (nx < 1 || ny < 1) throw InputError("scene lattice needs at least 1 x 1 quads");
+  if (static_cast<long long>(nx + 1) * (ny + 1) > 50'000'000) throw InputError("scene lattice too large");
+  TriMesh flat = shapes::lattice(nx, ny, w, d);
+  Positions x = flat.positions();
+  for (Vec3& p : x) p = Vec3(p.x(), y, p.y());
+  return TriMesh::create(std::move(x), std::vector<Face>(flat.topology().faces().begin(),
+                                                         flat.topology().faces().end()));
+}
+
+response::Obstacle make_obstacle(response::Shape shape, Vec3 velocity, Scalar stop_time, Scalar friction,
+                                 Scalar margin) {
+  response::Obstacle o;
+  o.shape = std::move(shape);
+  o.velocity = velocity;
+  o.stop_time = stop_time;
+  o.friction = friction;
+  o.margin = margin;
+  return o;
+}
+
+constexpr Scalar kForever = std::numeric_limits<Scalar>::infinity();
+
+Scene finish(const SceneSpec& spec, Cloth cloth, Scalar jitter_rel, std::uint64_t seed) {
+  Scene s{spec.to_string(), std::move(cloth.model), std::move(cloth.state), force_field(spec), {}, {}, {}, 0};
+  s.edge_length = mean_edge_length(s.model.topology(), s.state.x);
+  const Positions before = s.state.x;
+  jitter(s.state.x, jitter_rel * s.edge_length, seed);
+  for (Index i = 0; i < s.model.num_particles(); ++i) {
+    if (s.model.pinned(i)) s.state.x[static_cast<std::size_t>(i)] = before[static_cast<std::size_t>(i)];
+  }
+  s.settings.detector.thickness = spec.get_double("thickness") * s.edge_length;
+  return s;
+}
+
+Scene hanging_cloth(const SceneSpec& spec, std::uint64_t seed) {
+  const Index nx = static_cast<Index>(spec.get_int("nx")), ny = static_cast<Index>(spec.get_int("ny"));
+  const Scalar size = spec.get_double("size");
+  const TriMesh mesh = horizontal_lattice(nx, ny, size, size, 0);
+  ClothParams params = cloth_params(spec);
+  params.pins = {0};  // the corner at the origin
+  Scene s = finish(spec, make_cloth(mesh, params), spec.get_double("jitter"), seed);
+  s.settings.response = false;
+  return s;
+}
+
+Scene cloth_on_sphere(const SceneSpec& spec, std::uint64_t seed) {
+  const Index n = static_cast<Index>(spec.get_int("n"));
+  const Scalar size = spec.get_double("size");
+  const TriMesh mesh = horizontal_lattice(n, n, size, size, spec.get_double("height"));
+  Scene s = finish(spec, make_cloth(mesh, cloth_params(spec)), spec.get_double("jitter"), seed);
+  const Scalar friction = spec.get_double("friction");
+  const Scalar margin = 0.5 * s.settings.detector.thickness;
+  s.obstacles.push_back(make_obstacle(response::Sphere{Vec3(0.5 * size, 0.3, 0.5 * size), spec.get_double("radius")},
+                                      Vec3(spec.get_double("sphere-speed"), 0, 0), kForever, friction, margin));
+  s.obstacles.push_back(make_obstacle(response::Plane{Vec3::Zero(), Vec3::UnitY()}, Vec3::Zero(), kForever,
+                                      friction, margin));
+  s.settings.response = true;
+  return s;
+}
+
+Scene twisted_ribbon(const SceneSpec& spec, std::uint64_t seed) {
+  const Index nx = static_cast<Index>(spec.get_int("nx")), ny = static_cast<Index>(spec.get_int("ny"));
+  const Scalar length = spec.get_double("length"), width = spec.get_double("width");
+  const TriMesh mesh = horizontal_lattice(nx, ny, length, width, 1);
+  ClothParams params = cloth_params(spec);
+  std::vector<Index> fixed, driven;
+  for (Index j = 0; j <= ny; ++j) {
+    fixed.push_back(j * (nx + 1));
+    driven.push_back(j * (nx + 1) + nx);
+  }
+  params.pins = fixed;
+  params.pins.insert(params.pins.end(), driven.begin(), driven.end());
+  Scene s = finish(spec, make_cloth(mesh, params), spec.get_double("jitter"), seed);
+  const Scalar twist_time = spec.get_double("twist-time");
+  if (!(twist_time > 0)) throw InputError("scene key 'twist-time' must be > 0");
+  const Scalar omega = 2 * std::numbers::pi * spec.get_double("turns") / twist_time;
+  const Scalar speed = spec.get_double("approach") * length / twist_time;
+  const Vec3 axis_point(length, 1, 0.5 * width);
+  std::vector<Vec3> rest;
+  for (Index v : driven) rest.push_back(mesh.positions()[static_cast<std::size_t>(v)]);
+  s.kinematics = [driven, rest, omega, speed, twist_time, axis_point](State& st) {
+    const Scalar t = std::min(st.time, twist_time);
+    const bool moving = st.time < twist_time;
+    const Scalar angle = omega * t;
+    const Eigen::AngleAxis<Scalar> rot(angle, Vec3::UnitX());
+    const Vec3 shift(-speed * t, 0, 0);
+    for (std::size_t k = 0; k < driven.size(); ++k) {
+      const Vec3 r = rot * (rest[k] - axis_point);
+      const auto i = static_cast<std::size_t>(driven[k]);
+      st.x[i] = axis_point + shift + r;
+      st.v[i] = moving ? Vec3(Vec3(omega, 0, 0).cross(r) + Vec3(-speed, 0, 0)) : Vec3::Zero();
+    }
+  };
+  s.settings.response = true;
+  return s;
+}
+
+Scene crumple_scene(const SceneSpec& spec, std::uint64_t seed) {
+  const Index n = static_cast<Index>(spec.get_int("n"));
+  const Scalar size = spec.get_double("size");
+  const Scalar thickness_guess = spec.get_double("thickness") * size / static_cast<Scalar>(n);
+  const TriMesh mesh = horizontal_lattice(n, n, size, size, thickness_guess);
+  Scene s = finish(spec, make_cloth(mesh, cloth_params(spec)), spec.get_double("jitter"), seed);
+  const Scalar friction = spec.get_double("friction");
+  const Scalar margin = 0.5 * s.settings.detector.thickness;
+  const Scalar push_time = spec.get_double("push-time");
+  if (!(push_time > 0)) throw InputError("scene key 'push-time' must be > 0");
+  const Scalar travel = 0.5 * size * (1 - spec.get_double("final"));
+  const Scalar speed = travel / push_time;
+  const Scalar h = spec.get_double("wall-height");
+  const Scalar half = 0.05 * size;  // wall half thickness
+  const Scalar gap = 2 * margin;    // initial clearance between a wall and the cloth's border
+  const Vec3 c(0.5 * size, 0.5 * h, 0.5 * size);
+  const Scalar off = 0.5 * size + half + gap;
+  for (const Scalar side : {-1.0, 1.0}) {
+    s.obstacles.push_back(make_obstacle(response::Box{c + side * Vec3(off, 0, 0), Vec3(half, 0.5 * h, size)},
+                                        Vec3(-side * speed, 0, 0), push_time, friction, margin));
+  }
+  s.obstacles.push_back(make_obstacle(response::Plane{Vec3::Zero(), Vec3::UnitY()}, Vec3::Zero(), kForever,
+                                      friction, margin));
+  s.settings.response = true;
+  return s;
+}
+
+std::vector<Index> parse_pins(const std::string& text) {
+  std::vector<Index> pins;
+  std::string_view rest = text;
+  while (!rest.empty()) {
+    const auto semi = rest.find(';');
+    const std::string_view item = trim(rest.substr(0, semi));
+    rest = semi == std::string_view::npos ? std::string_view() : rest.substr(semi + 1);
+    if (item.empty()) continue;
+    Index v = 0;
+    const auto [ptr, ec] = std::from_chars(item.data(), item.data() + item.size(), v);
+    if (ec != std::errc() || ptr != item.data() + item.size() || v < 0) {
+      throw InputError("scene key 'pins': expected vertex ids separated by ';', got '" + text + "'");
+    }
+    pins.push_back(v);
+  }
+  return pins;
+}
+
+}  // namespace
+
+std::span<const SceneInfo> all_scenes() { return kScenes; }
+
+const SceneInfo& scene_info(std::string_view name) {
+  for (const auto& s : kScenes) {
+    if (s.name == name) return s;
+  }
+  throw InputError("unknown scene '" + std::string(name) + "' (valid: " + join_names() + ")");
+}
+
+SceneSpec SceneSpec::parse(std::string_view text) {
+  text = trim(text);
+  const auto colon = text.find(':');
+  SceneSpec spec;
+  spec.name_ = std::string(trim(text.substr(0, colon)));
+  scene_info(spec.name_);
+  if (colon == std::string_view::npos) return spec;
+  std::string_view rest = text.substr(colon + 1);
+  while (!rest.empty()) {
+    const auto comma = rest.find(',');
+    const std::string_view item = trim(rest.substr(0, comma));
+    rest = comma == std::string_view::npos ? std::string_view() : rest.substr(comma + 1);
+    if (item.empty()) continue;
+    const auto eq = item.find('=');
+    if (eq == std::string_view::npos) {
+      throw InputError("scene '" + spec.name_ + "': expected key=value, got '" + std::string(item) + "'");
+    }
+    const std::string key(trim(item.substr(0, eq)));
+    for (const auto& [k, v] : spec.params_) {
+      if (k == key) throw InputError("scene '" + spec.name_ + "': key '" + key + "' given twice");
+    }
+    spec.set(key, std::string(trim(item.substr(eq + 1))));
+  }
+  return spec;
+}
+
+SceneSpec& SceneSpec::set(std::string key, std::string value) {
+  const SceneInfo& info = scene_info(name_);
+  if (!find_param(info, key)) {
+    throw InputError("scene '" + name_ + "': unknown key '" + key + "' (valid: " + join_keys(info) + ")");
+  }
+  for (auto& [k, v] : params_) {
+    if (k == key) {
+      v = std::move(value);
+      return *this;
+    }
+  }
+  params_.emplace_back(std::move(key), std::move(value));
+  return *this;
+}
+
+std::string SceneSpec::get_string(std::string_view key) const {
+  for (const auto& [k, v] : params_) {
+    if (k == key) return v;
+  }
+  const SceneParamInfo* p = find_param(scene_info(name_), key);
+  CRUMPLE_CHECK(p != nullptr, "scene key not in the scene's table");
+  return std::string(p->default_value);
+}
+
+Scalar SceneSpec::get_double(std::string_view key) const {
+  const std::string value = get_string(key);
+  Scalar out = 0;
+  const auto [ptr, ec] = std::from_chars(value.data(), value.data() + value.size(), out);
+  if (ec != std::errc() || ptr != value.data() + value.size() || !std::isfinite(out)) {
+    throw InputError("scene '" + name_ + "': key '" + std::string(key) + "' expects a number, got '" + value + "'");
+  }
+  return out;
+}
+
+long long SceneSpec::get_int(std::string_view key) const {
+  const std::string value = get_string(key);
+  long long out = 0;
+  const auto [ptr, ec] = std::from_chars(value.data(), value.data() + value.size(), out);
+  if (ec != std::errc() || ptr != value.data() + value.size()) {
+    throw InputError("scene '" + name_ + "': key '" + std::string(key) + "' expects an integer, got '" + value + "'");
+  }
+  return out;
+}
+
+bool SceneSpec::get_bool(std::string_view key) const {
+  const std::string value = get_string(key);
+  if (value == "on" || value == "true" || value == "1") return true;
+  if (value == "off" || value == "false" || value == "0") return false;
+  throw InputError("scene '" + name_ + "': key '" + std::string(key) + "' expects on or off, got '" + value + "'");
+}
+
+std::string SceneSpec::to_string() const {
+  std::string out = name_;
+  for (std::size_t i = 0; i < params_.size(); ++i) {
+    out += (i == 0 ? ":" : ",") + params_[i].first + "=" + params_[i].second;
+  }
+  return out;
+}
+
+Scene make_scene(const SceneSpec& spec, std::uint64_t seed) {
+  if (spec.name() == "hanging-cloth") return hanging_cloth(spec, seed);
+  if (spec.name() == "cloth-on-sphere") return cloth_on_sphere(spec, seed);
+  if (spec.name() == "twisted-ribbon") return twisted_ribbon(spec, seed);
+  if (spec.name() == "crumple") return crumple_scene(spec, seed);
+  throw InputError("scene '" + spec.name() + "' is made from a file: give the file instead");
+}
+
+Scene make_scene_from_mesh(const TriMesh& mesh, const SceneSpec& params) {
+  CRUMPLE_CHECK(params.name() == "file", "mesh scenes take the 'file' keys");
+  ClothParams p = cloth_params(params);
+  p.pins = parse_pins(params.get_string("pins"));
+  return finish(params, make_cloth(mesh, p), 0, 0);
+}
+
+Scene make_scene_from_model(Model model, State state, const SceneSpec& params) {
+  CRUMPLE_CHECK(params.name() == "file", "model scenes take the 'file' keys");
+  CRUMPLE_CHECK(state.x.size() == static_cast<std::size_t>(model.num_particles()) &&
+                    state.v.size() == state.x.size(),
+                "state must have #V positions and velocities");
+  Scene s{params.to_string(), std::move(model), std::move(state), force_field(params), {}, {}, {}, 0};
+  s.edge_length = mean_edge_length(s.model.topology(), s.state.x);
+  s.settings.detector.thickness = params.get_double("thickness") * s.edge_length;
+  return s;
+}
+
+}  // namespace crumple::sim

@@ -1,0 +1,130 @@
+#include <crumple/core/error.hpp>
+#include <crumple/sim/simulation.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <limits>
+
+namespace crumple::sim {
+
+namespace {
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+}  // namespace
+
+Scalar collision_share(const Topology& topo, const ContactSet& contacts) {
+  const Index ne = topo.num_edges();
+  if (ne == 0) return 0;
+  std::vector<char> hit(static_cast<std::size_t>(ne), 0);
+  for (const auto& c : contacts.ee) {
+    hit[static_cast<std::size_t>(c.edge0)] = 1;
+    hit[static_cast<std::size_t>(c.edge1)] = 1;
+  }
+  for (const auto& c : contacts.vf) {
+    for (Index e : topo.face_edges(c.face)) hit[static_cast<std::size_t>(e)] = 1;
+  }
+  const auto count = std::count(hit.begin(), hit.end(), 1);
+  return static_cast<Scalar>(count) / static_cast<Scalar>(ne);
+}
+
+Simulation::Simulation(Model model, State state, ForceField field,
+                       std::vector<response::Obstacle> obstacles, Kinematics kinematics,
+                       Settings settings, std::int64_t first_frame)
+    : model_(std::move(model)),
+      state_(std::move(state)),
+      field_(field),
+      obstacles_(std::move(obstacles)),
+      kinematics_(std::move(kinematics)),
+      settings_(std::move(settings)),
+      frame_(first_frame) {
+  CRUMPLE_CHECK(settings_.dt > 0, "time step must be > 0");
+  CRUMPLE_CHECK(settings_.substeps >= 1, "substeps must be >= 1");
+  CRUMPLE_CHECK(settings_.passes >= 1, "response passes must be >= 1");
+  CRUMPLE_CHECK(state_.x.size() == static_cast<std::size_t>(model_.num_particles()) &&
+                    state_.v.size() == state_.x.size(),
+                "state must have #V positions and velocities");
+  integrator_ = make_integrator(settings_.integrator, settings_.integrator_options);
+  detector_ = make_detector(settings_.method, settings_.detector);
+  detector_->set_topology(model_.topology_ptr());
+}
+
+void Simulation::detect_now() {
+  const auto start = Clock::now();
+  detector_->update(state_.x, contacts_);
+  contacts_valid_ = true;
+  detect_ms_ += ms_since(start);
+}
+
+const ContactSet& Simulation::contacts() {
+  if (!contacts_valid_) detect_now();
+  return contacts_;
+}
+
+void Simulation::obstacles_pass() {
+  for (const auto& o : obstacles_) {
+    response::resolve_obstacle(o, state_.time, model_.inv_mass(), state_.x, state_.v);
+  }
+}
+
+void Simulation::step() {
+  if (settings_.response && !contacts_valid_) detect_now();
+
+  auto start = Clock::now();
+  integrator_->step(model_, field_, state_, settings_.dt);
+  cg_iterations_ += integrator_->last_iterations();
+  if (kinematics_) kinematics_(state_);
+  integrate_ms_ += ms_since(start);
+
+  start = Clock::now();
+  obstacles_pass();
+  if (settings_.response) {
+    stencils_ = response::make_stencils(contacts_, model_.topology().faces());
+    response::ResponseOptions options;
+    options.thickness = settings_.detector.thickness;
+    options.passes = settings_.passes;
+    const response::ResponseStats stats =
+        response::resolve(stencils_, model_.inv_mass(), state_.x, state_.v, options);
+    corrections_ += stats.corrections;
+    if (!obstacles_.empty() && stats.corrections > 0) obstacles_pass();
+  }
+  response_ms_ += ms_since(start);
+  contacts_valid_ = false;
+}
+
+FrameStats Simulation::frame_stats() {
+  if (!contacts_valid_) detect_now();
+  FrameStats s;
+  s.frame = frame_;
+  s.time = state_.time;
+  s.integrate_ms = integrate_ms_;
+  s.detect_ms = detect_ms_;
+  s.response_ms = response_ms_;
+  s.vf = contacts_.vf.size();
+  s.ee = contacts_.ee.size();
+  s.tt = contacts_.tt.size();
+  s.collision_share = collision_share(model_.topology(), contacts_);
+  s.min_distance = std::numeric_limits<Scalar>::infinity();
+  for (const auto& c : contacts_.vf) s.min_distance = std::min(s.min_distance, c.distance);
+  for (const auto& c : contacts_.ee) s.min_distance = std::min(s.min_distance, c.distance);
+  for (const auto& o : obstacles_) {
+    s.obstacle_penetration = std::max(s.obstacle_penetration, response::max_penetration(o, state_.time, state_.x));
+  }
+  s.cg_iterations = cg_iterations_;
+  s.corrections = corrections_;
+  integrate_ms_ = detect_ms_ = response_ms_ = 0;
+  cg_iterations_ = 0;
+  corrections_ = 0;
+  return s;
+}
+
+FrameStats Simulation::current_stats() { return frame_stats(); }
+
+FrameStats Simulation::advance_frame() {
+  for (int k = 0; k < settings_.substeps; ++k) step();
+  ++frame_;
+  return frame_stats();
+}
+
+}  // namespace crumple::sim

@@ -1,0 +1,109 @@
+#pragma once
+/// \file
+/// The simulation loop: integrate → kinematic pins → obstacles → self-collision response, with
+/// a detector from `detect/` (SPEC.md §1: display → input → deform → handle collisions).
+///
+/// One step of length h, contacts C detected at the step's start positions x₀ (thickness h_c):
+///  1. integrate (x₀, v₀) → (x₁, v₁) with the chosen integrator;
+///  2. the scene's kinematics set the driven (pinned) particles at the new time;
+///  3. every obstacle projects vertices out and corrects their velocity (`response/obstacle.hpp`);
+///  4. with response on: every VF/EE contact of C — its normal and barycentric weights taken at
+///     x₀, so a pair that crossed during the step is pushed back to the side it came from — is
+///     corrected at (x₁, v₁) by `response::resolve` (velocity, then push-out to h_c), for up to
+///     `passes` Gauss–Seidel sweeps until no contact approaches; then obstacles again (3).
+/// Contacts are detected once per step with response on (the detection at a frame's end serves
+/// the next step), once per frame with it off. Deterministic: the same inputs give the same bits.
+
+#include <crumple/detect/detector.hpp>
+#include <crumple/response/contact_response.hpp>
+#include <crumple/response/obstacle.hpp>
+#include <crumple/sim/integrator.hpp>
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+namespace crumple::sim {
+
+/// Sets the driven (pinned) particles' positions and velocities for time `state.time`.
+using Kinematics = std::function<void(State& state)>;
+
+/// How a simulation steps, detects and responds.
+struct Settings {
+  Scalar dt = 1.0 / 600;  ///< step length h (s)
+  int substeps = 10;      ///< steps per frame
+  IntegratorKind integrator = IntegratorKind::ImplicitEuler;
+  IntegratorOptions integrator_options;
+  MethodSpec method{Method::Naive};
+  DetectorOptions detector;  ///< thickness h_c, contact kinds, threads
+  bool response = false;     ///< self-collision response on/off
+  int passes = 4;            ///< Gauss–Seidel sweeps per step (>= 1)
+};
+
+/// Figures of one frame (timings summed over its steps).
+struct FrameStats {
+  std::int64_t frame = 0;
+  Scalar time = 0;
+  double integrate_ms = 0;
+  double detect_ms = 0;
+  double response_ms = 0;  ///< obstacles and self-collision response
+  std::size_t vf = 0, ee = 0, tt = 0;  ///< contacts at the frame's end positions
+  Scalar collision_share = 0;          ///< see `collision_share`
+  /// Smallest VF/EE distance at the frame's end (infinity when there is no contact).
+  Scalar min_distance = 0;
+  Scalar obstacle_penetration = 0;  ///< deepest vertex inside an obstacle at the frame's end (m)
+  int cg_iterations = 0;            ///< summed over the frame's steps (implicit Euler)
+  std::size_t corrections = 0;      ///< response corrections applied over the frame's steps
+};
+
+/// Share of mesh edges (0..1) in at least one contact: both edges of every EE contact and the
+/// three sides of the face of every VF contact. 0 for a mesh without edges.
+Scalar collision_share(const Topology& topology, const ContactSet& contacts);
+
+class Simulation {
+ public:
+  Simulation(Model model, State state, ForceField field, std::vector<response::Obstacle> obstacles,
+             Kinematics kinematics, Settings settings, std::int64_t first_frame = 0);
+
+  /// Stats of the current state (the frame not yet advanced): contacts detected now, zero times
+  /// except detection.
+  FrameStats current_stats();
+  /// Runs `substeps` steps, then detects at the new positions; returns the new frame's stats.
+  FrameStats advance_frame();
+  /// One step (see the file comment).
+  void step();
+
+  const Model& model() const { return model_; }
+  const State& state() const { return state_; }
+  ForceField& field() { return field_; }
+  const Settings& settings() const { return settings_; }
+  std::int64_t frame() const { return frame_; }
+  const std::vector<response::Obstacle>& obstacles() const { return obstacles_; }
+  /// Contacts at the current positions (detected on demand).
+  const ContactSet& contacts();
+
+ private:
+  void detect_now();
+  void obstacles_pass();
+  FrameStats frame_stats();
+
+  Model model_;
+  State state_;
+  ForceField field_;
+  std::vector<response::Obstacle> obstacles_;
+  Kinematics kinematics_;
+  Settings settings_;
+  std::int64_t frame_;
+  std::unique_ptr<Integrator> integrator_;
+  std::unique_ptr<Detector> detector_;
+  ContactSet contacts_;
+  bool contacts_valid_ = false;
+  std::vector<response::Stencil> stencils_;
+  // Accumulated over the current frame.
+  double integrate_ms_ = 0, detect_ms_ = 0, response_ms_ = 0;
+  int cg_iterations_ = 0;
+  std::size_t corrections_ = 0;
+};
+
+}  // namespace crumple::sim

@@ -1,0 +1,164 @@
+// `crumple simulate`: outputs, resume bit for bit, interrupts, files as input, errors.
+#include <crumple/io/mesh_io.hpp>
+#include <crumple/io/x3d.hpp>
+#include <crumple/mesh/shapes.hpp>
+#include <support/run_cli.hpp>
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <fcntl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace crumple {
+namespace {
+
+using testing::cli_temp_dir;
+using testing::run_cli;
+
+std::vector<std::string> read_lines(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  return lines;
+}
+
+std::size_t count_fields(const std::string& line) { return static_cast<std::size_t>(std::count(line.begin(), line.end(), ',')) + 1; }
+
+TEST(Simulate, WritesFramesStatsAndState) {
+  const auto dir = cli_temp_dir("sim-out");
+  const auto r = run_cli("simulate hanging-cloth:nx=4,ny=4 --frames 5 -o " + dir.string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("collision share"), std::string::npos) << r.out;
+  for (int f = 0; f <= 5; ++f) {
+    EXPECT_TRUE(std::filesystem::exists(dir / "frames" / ("00000" + std::to_string(f) + ".obj"))) << f;
+  }
+  const auto lines = read_lines(dir / "stats.csv");
+  ASSERT_EQ(lines.size(), 7u);
+  EXPECT_EQ(lines[0].rfind("frame,time,integrate_ms,detect_ms,response_ms,vf,ee,tt,collision_share", 0), 0u)
+      << lines[0];
+  for (const auto& line : lines) EXPECT_EQ(count_fields(line), count_fields(lines[0])) << line;
+  EXPECT_EQ(lines[6].rfind("5,", 0), 0u);
+  const io::MassSpringData state = io::read_mass_spring(dir / "state.x3d");
+  EXPECT_EQ(state.positions.size(), 25u);
+  EXPECT_EQ(state.masses[0], 0) << "the pinned corner";
+  EXPECT_EQ(state.faces.size(), 32u);
+  const TriMesh last = io::read_mesh(dir / "frames" / "000005.obj");
+  EXPECT_EQ(last.positions(), state.positions) << "the last frame is the saved state";
+  EXPECT_TRUE(std::filesystem::exists(dir / "state.json"));
+}
+
+/// Simulating N + M frames equals simulating N, then resuming from the saved state for M.
+void expect_resume_bit_for_bit(const std::string& scene, int n, int m, const std::string& extra) {
+  const auto dir = cli_temp_dir("sim-resume");
+  const auto whole = dir / "whole", first = dir / "first", second = dir / "second";
+  auto r = run_cli("simulate " + scene + " --frames " + std::to_string(n + m) + " -q " + extra + " -o " + whole.string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  r = run_cli("simulate " + scene + " --frames " + std::to_string(n) + " -q " + extra + " -o " + first.string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  r = run_cli("simulate " + (first / "state.x3d").string() + " --frames " + std::to_string(m) + " -q -o " +
+              second.string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  const io::MassSpringData a = io::read_mass_spring(whole / "state.x3d");
+  const io::MassSpringData b = io::read_mass_spring(second / "state.x3d");
+  EXPECT_EQ(a.positions, b.positions) << scene;
+  EXPECT_EQ(a.velocities, b.velocities) << scene;
+  char name[32];
+  std::snprintf(name, sizeof name, "%06d.obj", n + m);
+  EXPECT_TRUE(std::filesystem::exists(second / "frames" / name)) << "frame numbers continue";
+  const auto sa = read_lines(whole / "stats.csv"), sb = read_lines(second / "stats.csv");
+  ASSERT_EQ(sb.size(), static_cast<std::size_t>(m + 2));
+  // Same frame number, time and contact counts on the last line.
+  const auto prefix = [](const std::string& line) { return line.substr(0, line.find(',', line.find(',') + 1)); };
+  EXPECT_EQ(prefix(sa.back()), prefix(sb.back()));
+}
+
+TEST(Simulate, ResumesHangingClothBitForBit) { expect_resume_bit_for_bit("hanging-cloth:nx=5,ny=5", 6, 5, ""); }
+
+TEST(Simulate, ResumesWithObstaclesResponseAndKinematicsBitForBit) {
+  expect_resume_bit_for_bit("cloth-on-sphere:n=5,sphere-speed=0.2", 4, 3, "--dt 0.004 --substeps 4");
+  expect_resume_bit_for_bit("twisted-ribbon:nx=8,ny=1", 3, 3, "--integrator symplectic-euler --dt 0.0005");
+}
+
+TEST(Simulate, InterruptLeavesCompleteFiles) {
+  const auto dir = cli_temp_dir("sim-int");
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int null = ::open("/dev/null", O_WRONLY);
+    ::dup2(null, 1);
+    ::dup2(null, 2);
+    const std::string out = dir.string();
+    ::execl(CRUMPLE_CLI, CRUMPLE_CLI, "simulate", "hanging-cloth:nx=6,ny=6", "--frames", "1000000", "--every",
+            "7", "-o", out.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  // Wait until a few frames are written, then interrupt.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (read_lines(dir / "stats.csv").size() < 10 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ::kill(pid, SIGINT);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  const auto lines = read_lines(dir / "stats.csv");
+  ASSERT_GE(lines.size(), 10u);
+  for (const auto& line : lines) EXPECT_EQ(count_fields(line), 13u) << line;
+  const io::MassSpringData state = io::read_mass_spring(dir / "state.x3d");
+  EXPECT_EQ(state.positions.size(), 49u);
+  for (const auto& entry : std::filesystem::directory_iterator(dir / "frames")) {
+    EXPECT_EQ(entry.path().extension(), ".obj") << "no temporary file left behind";
+    EXPECT_NO_THROW(io::read_mesh(entry.path())) << entry.path();
+  }
+}
+
+TEST(Simulate, MeshFileWithPinsAndFormats) {
+  const auto dir = cli_temp_dir("sim-file");
+  const TriMesh mesh = shapes::lattice(3, 3);
+  io::write_obj(dir / "cloth.obj", mesh.positions(), mesh.topology().faces());
+  auto r = run_cli("simulate " + (dir / "cloth.obj").string() + " -p 'pins=0;3' -p stiffness=200 --frames 4 " +
+                   "--format ply -o " + (dir / "out").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  const TriMesh last = io::read_mesh(dir / "out" / "frames" / "000004.ply");
+  EXPECT_EQ(last.positions()[0], mesh.positions()[0]);
+  EXPECT_EQ(last.positions()[3], mesh.positions()[3]);
+  EXPECT_NE(last.positions()[15], mesh.positions()[15]);
+  // The saved state is a MassSpring X3D that resumes without a scene.
+  r = run_cli("simulate " + (dir / "out" / "state.x3d").string() + " --frames 2 -q -o " + (dir / "again").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_TRUE(std::filesystem::exists(dir / "again" / "frames" / "000006.obj"));
+}
+
+TEST(Simulate, BadInputIsAOneLineError) {
+  auto r = run_cli("simulate bogus-scene");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("valid: hanging-cloth"), std::string::npos) << r.out;
+  r = run_cli("simulate hanging-cloth:zz=1");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("unknown key 'zz'"), std::string::npos) << r.out;
+  r = run_cli("simulate hanging-cloth --integrator leapfrog --frames 1");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("implicit-euler"), std::string::npos) << r.out;
+  r = run_cli("simulate hanging-cloth --response maybe --frames 1");
+  EXPECT_NE(r.status, 0);
+  r = run_cli("simulate /no/such/file.obj");
+  EXPECT_NE(r.status, 0);
+  r = run_cli("simulate --help");
+  EXPECT_EQ(r.status, 0);
+  EXPECT_NE(r.out.find("cloth-on-sphere"), std::string::npos);
+  EXPECT_NE(r.out.find("twisted-ribbon"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace crumple

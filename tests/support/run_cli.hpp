@@ -1,0 +1,39 @@
+#pragma once
+// Runs the `crumple` binary (path in the CRUMPLE_CLI macro) as a user would, for the CLI tests.
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace crumple::testing {
+
+struct CliResult {
+  int status;       ///< exit status, -1 when the program did not exit normally
+  std::string out;  ///< stdout and stderr together
+};
+
+/// Runs `crumple ARGS` through the shell and collects its output.
+inline CliResult run_cli(const std::string& args) {
+  const std::string command = std::string(CRUMPLE_CLI) + " " + args + " 2>&1";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (!pipe) return {-1, ""};
+  std::string out;
+  std::array<char, 4096> buffer;
+  while (std::size_t n = std::fread(buffer.data(), 1, buffer.size(), pipe)) out.append(buffer.data(), n);
+  const int raw = ::pclose(pipe);
+  return {WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, out};
+}
+
+/// A fresh, empty folder under the temporary directory, unique to this process.
+inline std::filesystem::path cli_temp_dir(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("crumple-cli-" + name + "-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+}  // namespace crumple::testing
