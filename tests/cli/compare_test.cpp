@@ -4,31 +4,16 @@
 
 #include <gtest/gtest.h>
 
-#include <array>
-#include <cstdio>
+#include <support/run_cli.hpp>
+
 #include <filesystem>
 #include <string>
-#include <sys/wait.h>
-#include <unistd.h>
 
 namespace crumple {
 namespace {
 
-struct Output {
-  int status;
-  std::string out;
-};
-
-Output run_cli(const std::string& args) {
-  const std::string command = std::string(CRUMPLE_CLI) + " " + args + " 2>&1";
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (!pipe) return {-1, ""};
-  std::string out;
-  std::array<char, 4096> buffer;
-  while (std::size_t n = std::fread(buffer.data(), 1, buffer.size(), pipe)) out.append(buffer.data(), n);
-  const int raw = ::pclose(pipe);
-  return {WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, out};
-}
+using Output = testing::CliResult;
+using testing::run_cli;
 
 std::size_t count(const std::string& text, const std::string& what) {
   std::size_t n = 0;
@@ -57,15 +42,13 @@ TEST(CliCompare, JsonHasOneObjectPerFrameAndASummary) {
 }
 
 TEST(CliCompare, FramesFromFilesAndNaiveAgainstItself) {
-  const auto dir = std::filesystem::temp_directory_path() / ("crumple-cli-compare-" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
+  const auto dir = testing::cli_temp_dir("compare");
   const FoldingSequence seq({.n = 8, .frames = 5, .seed = 1});
   std::string files;
   for (std::size_t i = 0; i < seq.size(); ++i) {
-    const auto path = dir / ("f" + std::to_string(i) + ".obj");
+    const auto path = dir / std::string("f").append(std::to_string(i)).append(".obj");
     io::write_obj(path, seq.positions(i), seq.mesh().topology().faces());
-    files += " " + path.string();
+    files.append(" ").append(path.string());
   }
   const Output r = run_cli("compare --method naive --thickness " + std::to_string(seq.thickness()) + files);
   ASSERT_EQ(r.status, 0) << r.out;

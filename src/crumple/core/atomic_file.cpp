@@ -13,8 +13,13 @@ namespace crumple {
 namespace {
 std::filesystem::path temporary_name(const std::filesystem::path& path) {
   static std::atomic<unsigned> counter{0};
-  std::string name = "." + path.filename().string() + ".tmp." + std::to_string(::getpid()) + "." +
-                     std::to_string(counter.fetch_add(1));
+  // Built with append: `"." + std::string` chains trip a GCC 12 -Wrestrict false positive.
+  std::string name(".");
+  name.append(path.filename().string())
+      .append(".tmp.")
+      .append(std::to_string(::getpid()))
+      .append(".")
+      .append(std::to_string(counter.fetch_add(1)));
   return path.parent_path() / name;
 }
 }  // namespace

@@ -39,7 +39,7 @@ std::string json_number(double value) {
 
 void JsonObject::key(std::string_view name) {
   if (body_.size() > 1) body_ += ",";
-  body_ += "\"" + json_escape(name) + "\":";
+  body_.append("\"").append(json_escape(name)).append("\":");
 }
 
 JsonObject& JsonObject::add(std::string_view name, double value) {
@@ -62,7 +62,7 @@ JsonObject& JsonObject::add(std::string_view name, bool value) {
 
 JsonObject& JsonObject::add(std::string_view name, std::string_view value) {
   key(name);
-  body_ += "\"" + json_escape(value) + "\"";
+  body_.append("\"").append(json_escape(value)).append("\"");
   return *this;
 }
 

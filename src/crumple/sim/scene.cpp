@@ -264,10 +264,12 @@ Scene crumple_scene(const SceneSpec& spec, std::uint64_t seed) {
   const Scalar h = spec.get_double("wall-height");
   const Scalar half = 0.05 * size;  // wall half thickness
   const Scalar gap = 2 * margin;    // initial clearance between a wall and the cloth's border
-  const Vec3 c(0.5 * size, 0.5 * h, 0.5 * size);
+  // Walls reach below the floor so that no vertex is pushed out through a wall's bottom face.
+  const Scalar below = 0.2 * size;
+  const Vec3 c(0.5 * size, 0.5 * (h - below), 0.5 * size);
   const Scalar off = 0.5 * size + half + gap;
   for (const Scalar side : {-1.0, 1.0}) {
-    s.obstacles.push_back(make_obstacle(response::Box{c + side * Vec3(off, 0, 0), Vec3(half, 0.5 * h, size)},
+    s.obstacles.push_back(make_obstacle(response::Box{c + side * Vec3(off, 0, 0), Vec3(half, 0.5 * (h + below), size)},
                                         Vec3(-side * speed, 0, 0), push_time, friction, margin));
   }
   s.obstacles.push_back(make_obstacle(response::Plane{Vec3::Zero(), Vec3::UnitY()}, Vec3::Zero(), kForever,
