@@ -1,3 +1,4 @@
+#include <crumple/core/atomic_file.hpp>
 #include <crumple/io/io_detail.hpp>
 
 #include <cerrno>
@@ -212,6 +213,41 @@ void check_mesh_for_writing(PositionsView positions, std::span<const Face> faces
                                             std::to_string(nv) + ")");
     }
   }
+}
+
+void append_position_lines(std::string& out, std::string_view prefix, PositionsView positions) {
+  for (const Vec3& p : positions) {
+    out += prefix;
+    append_double(out, p.x());
+    out += ' ';
+    append_double(out, p.y());
+    out += ' ';
+    append_double(out, p.z());
+    out += '\n';
+  }
+}
+
+void append_face_lines(std::string& out, std::string_view prefix, std::span<const Face> faces,
+                       std::int64_t id_offset) {
+  for (const Face& f : faces) {
+    out += prefix;
+    append_int(out, std::int64_t{f[0]} + id_offset);
+    out += ' ';
+    append_int(out, std::int64_t{f[1]} + id_offset);
+    out += ' ';
+    append_int(out, std::int64_t{f[2]} + id_offset);
+    out += '\n';
+  }
+}
+
+void write_string_atomically(const std::filesystem::path& path, const std::string& content,
+                             bool binary) {
+  write_file_atomically(
+      path,
+      [&](std::ostream& stream) {
+        stream.write(content.data(), static_cast<std::streamsize>(content.size()));
+      },
+      binary);
 }
 
 }  // namespace crumple::io::detail

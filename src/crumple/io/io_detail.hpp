@@ -107,4 +107,13 @@ std::int64_t line_of_offset(std::string_view text, std::size_t offset);
 /// [0, #V), and counts that fit `Index`.
 void check_mesh_for_writing(PositionsView positions, std::span<const Face> faces);
 
+/// Appends one line `PREFIXx y z` per position (shortest exact decimals).
+void append_position_lines(std::string& out, std::string_view prefix, PositionsView positions);
+/// Appends one line `PREFIXa b c` per face, each id plus `id_offset` (1 for OBJ).
+void append_face_lines(std::string& out, std::string_view prefix, std::span<const Face> faces,
+                       std::int64_t id_offset);
+/// Writes `content` to `path` atomically (see write_file_atomically).
+void write_string_atomically(const std::filesystem::path& path, const std::string& content,
+                             bool binary = false);
+
 }  // namespace crumple::io::detail

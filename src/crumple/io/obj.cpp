@@ -191,26 +191,9 @@ void write_obj(const std::filesystem::path& path, PositionsView positions,
   out += " vertices, ";
   detail::append_int(out, static_cast<std::int64_t>(faces.size()));
   out += " triangles\n";
-  for (const Vec3& p : positions) {
-    out += "v ";
-    detail::append_double(out, p.x());
-    out += ' ';
-    detail::append_double(out, p.y());
-    out += ' ';
-    detail::append_double(out, p.z());
-    out += '\n';
-  }
-  for (const Face& f : faces) {
-    out += 'f';
-    for (const Index id : f) {
-      out += ' ';
-      detail::append_int(out, std::int64_t{id} + 1);
-    }
-    out += '\n';
-  }
-  write_file_atomically(path, [&](std::ostream& stream) {
-    stream.write(out.data(), static_cast<std::streamsize>(out.size()));
-  });
+  detail::append_position_lines(out, "v ", positions);
+  detail::append_face_lines(out, "f ", faces, 1);
+  detail::write_string_atomically(path, out);
 }
 
 }  // namespace crumple::io

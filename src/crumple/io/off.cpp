@@ -200,25 +200,9 @@ void write_off(const std::filesystem::path& path, PositionsView positions,
   out += ' ';
   detail::append_int(out, static_cast<std::int64_t>(faces.size()));
   out += " 0\n";
-  for (const Vec3& p : positions) {
-    detail::append_double(out, p.x());
-    out += ' ';
-    detail::append_double(out, p.y());
-    out += ' ';
-    detail::append_double(out, p.z());
-    out += '\n';
-  }
-  for (const Face& f : faces) {
-    out += '3';
-    for (const Index id : f) {
-      out += ' ';
-      detail::append_int(out, id);
-    }
-    out += '\n';
-  }
-  write_file_atomically(path, [&](std::ostream& stream) {
-    stream.write(out.data(), static_cast<std::streamsize>(out.size()));
-  });
+  detail::append_position_lines(out, "", positions);
+  detail::append_face_lines(out, "3 ", faces, 0);
+  detail::write_string_atomically(path, out);
 }
 
 }  // namespace crumple::io

@@ -807,22 +807,8 @@ void write_ply(const std::filesystem::path& path, PositionsView positions,
   if (encoding == PlyEncoding::Ascii) {
     out.reserve(256 + positions.size() * 64 + faces.size() * 24);
     append_header(out, "ascii", positions.size(), faces.size());
-    for (const Vec3& p : positions) {
-      detail::append_double(out, p.x());
-      out += ' ';
-      detail::append_double(out, p.y());
-      out += ' ';
-      detail::append_double(out, p.z());
-      out += '\n';
-    }
-    for (const Face& f : faces) {
-      out += '3';
-      for (const Index id : f) {
-        out += ' ';
-        detail::append_int(out, id);
-      }
-      out += '\n';
-    }
+    detail::append_position_lines(out, "", positions);
+    detail::append_face_lines(out, "3 ", faces, 0);
   } else {
     const bool big = encoding == PlyEncoding::BinaryBigEndian;
     const bool swap = big != (std::endian::native == std::endian::big);
@@ -837,10 +823,7 @@ void write_ply(const std::filesystem::path& path, PositionsView positions,
       for (const Index id : f) append_raw(out, static_cast<std::uint32_t>(id), swap);
     }
   }
-  write_file_atomically(
-      path,
-      [&](std::ostream& stream) { stream.write(out.data(), static_cast<std::streamsize>(out.size())); },
-      /*binary=*/true);
+  detail::write_string_atomically(path, out, /*binary=*/true);
 }
 
 }  // namespace crumple::io

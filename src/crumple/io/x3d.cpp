@@ -368,9 +368,7 @@ constexpr std::string_view x3d_epilogue =
     "</X3D>\n";
 
 void write_text(const std::filesystem::path& path, const std::string& text) {
-  write_file_atomically(path, [&](std::ostream& stream) {
-    stream.write(text.data(), static_cast<std::streamsize>(text.size()));
-  });
+  detail::write_string_atomically(path, text);
 }
 
 }  // namespace
