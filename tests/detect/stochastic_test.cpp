@@ -552,5 +552,43 @@ TEST(Stochastic, DegenerateInputs) {
   }
 }
 
+TEST(Stochastic, TimeBudget) {
+  // Parsing: the key, its range and the canonical text.
+  EXPECT_EQ(StochasticParams::from_spec(MethodSpec::parse("stochastic")).budget_ms, 0.0);
+  const StochasticParams p = StochasticParams::from_spec(MethodSpec::parse("stochastic:budget=2.5"));
+  EXPECT_EQ(p.budget_ms, 2.5);
+  EXPECT_NE(p.to_string().find(",budget=2.5"), std::string::npos) << p.to_string();
+  EXPECT_EQ(StochasticParams::from_spec(MethodSpec::parse(p.to_string())).budget_ms, 2.5);
+  EXPECT_THROW(StochasticParams::from_spec(MethodSpec::parse("stochastic:budget=-1")), InputError);
+  EXPECT_THROW(StochasticParams::from_spec(MethodSpec::parse("stochastic:budget=inf")), InputError);
+
+  const FoldingSequence& seq = sequence();
+  const ReferenceRun& ref = reference_run();
+  for (const char* variant : kVariants) {
+    SCOPED_TRACE(variant);
+    // A budget far above the frame's cost changes nothing: same contacts as without one.
+    auto free = make(std::string("stochastic:variant=") + variant, seq.thickness());
+    auto generous = make(std::string("stochastic:budget=100000,variant=") + variant, seq.thickness());
+    // A budget spent before the first draw: nothing is drawn, nothing is found, never a false
+    // contact.
+    auto spent = make(std::string("stochastic:budget=0.000001,variant=") + variant, seq.thickness());
+    for (auto* d : {free.get(), generous.get(), spent.get()}) d->set_topology(seq.mesh().topology_ptr());
+    ContactSet a, b, c;
+    for (std::size_t i = 0; i < seq.size(); ++i) {
+      const Positions x = seq.positions(i);
+      free->update(x, a);
+      generous->update(x, b);
+      spent->update(x, c);
+      ASSERT_EQ(match_contacts(b, a).missed, 0u) << "frame " << i;
+      ASSERT_EQ(match_contacts(b, a).false_contacts, 0u) << "frame " << i;
+      EXPECT_EQ(spent->stats().get("drawn"), 0.0) << "frame " << i;
+      EXPECT_EQ(spent->stats().get("propagation_visits"), 0.0) << "frame " << i;
+      EXPECT_TRUE(c.empty()) << "frame " << i;
+      EXPECT_EQ(match_contacts(c, ref.contacts[i]).false_contacts, 0u);
+    }
+    EXPECT_GT(a.size(), 0u) << "the last frame has contacts to find";
+  }
+}
+
 }  // namespace
 }  // namespace crumple

@@ -1,9 +1,9 @@
 #include <crumple/core/error.hpp>
+#include <crumple/core/spec_text.hpp>
 #include <crumple/detect/method.hpp>
 
 #include <algorithm>
 #include <array>
-#include <charconv>
 #include <cstdlib>
 
 namespace crumple {
@@ -12,7 +12,7 @@ namespace {
 
 constexpr std::array<ParamInfo, 0> kNaiveParams{};
 
-constexpr std::array<ParamInfo, 9> kStochasticParams{{
+constexpr std::array<ParamInfo, 10> kStochasticParams{{
     {"variant", "direct",
      "simple | propagate-by-convergence | direct | vertex (thesis 3.2.2.5; docs/stochastic.md)"},
     {"active", "100", "maximum near pairs kept per pair type (setting=1: 10)"},
@@ -23,6 +23,9 @@ constexpr std::array<ParamInfo, 9> kStochasticParams{{
     {"steps", "64", "maximum convergence moves per pair and frame"},
     {"ef", "off", "also track edge-face pairs (on by itself when tt contacts are asked)"},
     {"seed", "1", "random seed (same seed and frames: same contacts)"},
+    {"budget", "0",
+     "time budget per frame in ms (0 = none): kept pairs first, then draws and propagation "
+     "until it is spent (results then depend on the machine's speed)"},
     {"setting", "0",
      "thesis settings: 1 = 10 active pairs with propagation, 2 = 100 without (keys override)"},
 }};
@@ -80,22 +83,12 @@ constexpr std::array<MethodInfo, 5> kMethods{{
 }};
 
 std::string join_names() {
-  std::string out;
-  for (const auto& m : kMethods) {
-    if (!out.empty()) out += ", ";
-    out += m.name;
-  }
-  return out;
+  return join_list(kMethods, [](const MethodInfo& m) { return std::string(m.name); });
 }
 
 std::string join_keys(const MethodInfo& info) {
   if (info.params.empty()) return "(none)";
-  std::string out;
-  for (const auto& p : info.params) {
-    if (!out.empty()) out += ", ";
-    out += p.key;
-  }
-  return out;
+  return join_list(info.params, [](const ParamInfo& p) { return std::string(p.key); });
 }
 
 const ParamInfo* find_param(const MethodInfo& info, std::string_view key) {
@@ -103,12 +96,6 @@ const ParamInfo* find_param(const MethodInfo& info, std::string_view key) {
     if (p.key == key) return &p;
   }
   return nullptr;
-}
-
-std::string_view trim(std::string_view s) {
-  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
-  while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
-  return s;
 }
 
 }  // namespace
@@ -132,30 +119,12 @@ Method parse_method(std::string_view name) {
 }
 
 MethodSpec MethodSpec::parse(std::string_view text) {
-  text = trim(text);
-  const std::size_t colon = text.find(':');
-  MethodSpec spec(parse_method(trim(text.substr(0, colon))));
-  if (colon == std::string_view::npos) return spec;
-  std::string_view rest = text.substr(colon + 1);
-  if (trim(rest).empty()) return spec;
-  std::size_t start = 0;
-  while (start <= rest.size()) {
-    const std::size_t end = std::min(rest.find(',', start), rest.size());
-    const std::string_view item = trim(rest.substr(start, end - start));
-    const std::size_t eq = item.find('=');
-    if (eq == std::string_view::npos || trim(item.substr(0, eq)).empty()) {
-      throw InputError("method spec '" + std::string(text) + "': expected key=value, got '" +
-                       std::string(item) + "' (valid keys for " +
-                       std::string(crumple::to_string(spec.method_)) + ": " +
-                       join_keys(method_info(spec.method_)) + ")");
-    }
-    const std::string key(trim(item.substr(0, eq)));
-    if (spec.get(key)) {
-      throw InputError("method spec '" + std::string(text) + "': key '" + key + "' given twice");
-    }
-    spec.set(key, std::string(trim(item.substr(eq + 1))));
-    start = end + 1;
-  }
+  const std::string_view name = trim_blanks(trim_blanks(text).substr(0, trim_blanks(text).find(':')));
+  MethodSpec spec(parse_method(name));
+  const MethodInfo& info = method_info(spec.method_);
+  const SpecText split = SpecText::split(
+      text, "method spec", std::string("valid keys for ").append(info.name).append(": ").append(join_keys(info)));
+  for (const auto& [key, value] : split.items) spec.set(key, value);
   return spec;
 }
 
@@ -191,27 +160,25 @@ void MethodSpec::bad_value(std::string_view key, const std::string& value,
 long long MethodSpec::get_int(std::string_view key, long long fallback) const {
   const auto value = get(key);
   if (!value) return fallback;
-  long long out = 0;
-  const auto [ptr, ec] = std::from_chars(value->data(), value->data() + value->size(), out);
-  if (ec != std::errc() || ptr != value->data() + value->size()) bad_value(key, *value, "an integer");
-  return out;
+  const auto out = parse_integer(*value);
+  if (!out) bad_value(key, *value, "an integer");
+  return *out;
 }
 
 double MethodSpec::get_double(std::string_view key, double fallback) const {
   const auto value = get(key);
   if (!value) return fallback;
-  double out = 0;
-  const auto [ptr, ec] = std::from_chars(value->data(), value->data() + value->size(), out);
-  if (ec != std::errc() || ptr != value->data() + value->size()) bad_value(key, *value, "a number");
-  return out;
+  const auto out = parse_number(*value);
+  if (!out) bad_value(key, *value, "a number");
+  return *out;
 }
 
 bool MethodSpec::get_bool(std::string_view key, bool fallback) const {
   const auto value = get(key);
   if (!value) return fallback;
-  if (*value == "on" || *value == "true" || *value == "1") return true;
-  if (*value == "off" || *value == "false" || *value == "0") return false;
-  bad_value(key, *value, "on or off");
+  const auto out = parse_switch(*value);
+  if (!out) bad_value(key, *value, "on or off");
+  return *out;
 }
 
 std::string MethodSpec::get_choice(std::string_view key, std::string_view fallback,
@@ -226,15 +193,6 @@ std::string MethodSpec::get_choice(std::string_view key, std::string_view fallba
   bad_value(key, *value, expected);
 }
 
-std::string MethodSpec::to_string() const {
-  std::string out(crumple::to_string(method_));
-  char sep = ':';
-  for (const auto& [k, v] : params_) {
-    out += sep;
-    out += k + "=" + v;
-    sep = ',';
-  }
-  return out;
-}
+std::string MethodSpec::to_string() const { return format_spec(crumple::to_string(method_), params_); }
 
 }  // namespace crumple

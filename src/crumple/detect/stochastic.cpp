@@ -1,4 +1,5 @@
 #include <crumple/core/error.hpp>
+#include <crumple/core/json.hpp>
 #include <crumple/detect/narrow_phase.hpp>
 #include <crumple/detect/stochastic.hpp>
 #include <crumple/detect/stochastic_engine.hpp>
@@ -8,6 +9,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -94,6 +96,8 @@ StochasticParams StochasticParams::from_spec(const MethodSpec& spec) {
   const long long seed = spec.get_int("seed", 1);
   if (seed < 0) fail("seed must be >= 0");
   p.seed = static_cast<std::uint64_t>(seed);
+  p.budget_ms = spec.get_double("budget", 0);
+  if (!(p.budget_ms >= 0 && p.budget_ms <= 1e6)) fail("budget must be in [0, 1e6] ms (0 = none)");
   return p;
 }
 
@@ -104,7 +108,7 @@ std::string StochasticParams::to_string() const {
          ",active=" + std::to_string(active) + ",draw=" + std::to_string(draw) +
          ",propagation=" + std::string(crumple::to_string(propagation)) + ",near=" + near_text +
          ",steps=" + std::to_string(steps) + ",ef=" + (ef ? "on" : "off") +
-         ",seed=" + std::to_string(seed);
+         ",seed=" + std::to_string(seed) + (budget_ms > 0 ? ",budget=" + json_number(budget_ms) : "");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -448,6 +452,7 @@ void add_stats(DetectorStats& out, std::string_view prefix, const EngineStats& s
   put("cache_hits", s.cache_hits);
   put("propagation_visits", s.propagation_visits);
   put("colliding", s.colliding);
+  if (s.carried > 0) put("carried", s.carried);
   if (zone) {
     put("zone_tests", s.zone_tests);
     put("face_pairs", s.face_pairs);
@@ -473,9 +478,9 @@ struct StochasticDetector::Impl {
 StochasticDetector::StochasticDetector(DetectorOptions options, StochasticParams params)
     : Detector(options), params_(params), impl_(std::make_unique<Impl>()) {
   if (params_.active < 1 || params_.draw < 0 || params_.steps < 1 ||
-      !(std::isfinite(params_.near) && params_.near >= 1)) {
+      !(std::isfinite(params_.near) && params_.near >= 1) || !(params_.budget_ms >= 0)) {
     throw InputError("stochastic: invalid parameters " + params_.to_string() +
-                     " (active >= 1, draw >= 0, steps >= 1, near >= 1)");
+                     " (active >= 1, draw >= 0, steps >= 1, near >= 1, budget >= 0)");
   }
 }
 
@@ -523,6 +528,7 @@ void StochasticDetector::on_topology() {
 }
 
 void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, ContactSet& out) {
+  const auto start = std::chrono::steady_clock::now();
   const Topology& topo = topology();
   const Scalar h = options().thickness;
   const Scalar near = near_distance();
@@ -537,6 +543,11 @@ void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, Con
   config.active = params_.active;
   config.draw = params_.draw;
   config.steps = params_.steps;
+  if (params_.budget_ms > 0) {
+    config.has_deadline = true;
+    config.deadline = start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                  std::chrono::duration<double, std::milli>(params_.budget_ms));
+  }
   switch (params_.variant) {
     case StochasticVariant::Simple:
       break;
@@ -565,13 +576,24 @@ void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, Con
     total.zone_tests += s.zone_tests;
     total.face_pairs += s.face_pairs;
     total.kdop_rejects += s.kdop_rejects;
+    total.carried += s.carried;
   };
 
-  // Algorithm 3: per pair type, converge kept pairs, draw new ones, propagate; the engines
-  // share one seeded generator, always called in this order.
+  // Algorithm 3, phase by phase across the pair types (kept pairs, then draws, then
+  // propagation), so that a time budget serves temporal coherence first. The engines share one
+  // seeded generator; only draws use it, always in this type order.
+  const auto each = [&](const auto& phase) {
+    if (runs(PairType::VV)) phase(m.vv);
+    if (runs(PairType::EE)) phase(m.ee);
+    if (runs(PairType::VF)) phase(m.vf);
+    if (runs(PairType::EF)) phase(m.ef);
+  };
+  each([&](auto& engine) { engine.begin_frame(ctx, config); });
+  each([&](auto& engine) { engine.draw(ctx, m.rng); });
+  each([&](auto& engine) { engine.propagate_all(ctx); });
+
   EngineStats vv_stats;
   if (runs(PairType::VV)) {
-    m.vv.run_frame(ctx, config, m.rng);
     vv_stats = m.vv.stats();
     // Precise sub-pair work done by the zone tests belongs to the VV engine.
     vv_stats.distance_evals += zone_stats.distance_evals;
@@ -581,18 +603,9 @@ void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, Con
     vv_stats.kdop_rejects = zone_stats.kdop_rejects;
     accumulate(vv_stats);
   }
-  if (runs(PairType::EE)) {
-    m.ee.run_frame(ctx, config, m.rng);
-    accumulate(m.ee.stats());
-  }
-  if (runs(PairType::VF)) {
-    m.vf.run_frame(ctx, config, m.rng);
-    accumulate(m.vf.stats());
-  }
-  if (runs(PairType::EF)) {
-    m.ef.run_frame(ctx, config, m.rng);
-    accumulate(m.ef.stats());
-  }
+  if (runs(PairType::EE)) accumulate(m.ee.stats());
+  if (runs(PairType::VF)) accumulate(m.vf.stats());
+  if (runs(PairType::EF)) accumulate(m.ef.stats());
 
   const bool vertex = params_.variant == StochasticVariant::Vertex;
   add_stats(stats_, "", total, vertex);

@@ -24,7 +24,8 @@
 /// Output: the same `ContactSet` as every detector, each contact from the shared narrow phase
 /// (narrow_phase.hpp, so distances are bit-identical with `naive`), no duplicates, no adjacent
 /// pairs, and never a false contact. It may miss contacts (recall < 1): see `compare.hpp`.
-/// Deterministic for a given seed, parameters and input sequence; single-threaded
+/// Deterministic for a given seed, parameters and input sequence (without a time budget,
+/// `StochasticParams::budget_ms`); single-threaded
 /// (`DetectorOptions::threads` is ignored).
 
 #include <crumple/detect/detector.hpp>
@@ -85,6 +86,12 @@ struct StochasticParams {
   /// variant but `vertex`. Forced on when TT contacts are requested. [ef]
   bool ef = false;
   std::uint64_t seed = 1;  ///< [seed]
+  /// Time budget per frame in milliseconds, 0 = none. [budget] When it is spent, the kept pairs
+  /// not yet converged are carried over to the next frame as they are, and random draws and
+  /// propagation stop (each pair type keeps its pairs before any type draws). A walk or a
+  /// propagation step under way finishes, so a frame may overrun by one walk. With a budget the
+  /// results depend on the machine's speed: the detector is deterministic only without one.
+  double budget_ms = 0;
 
   /// Reads a `stochastic:...` spec. `setting=1` (thesis setting 1: active=10, with the variant's
   /// propagation) and `setting=2` (active=100, propagation=none) set defaults that explicit keys
@@ -115,7 +122,8 @@ struct PrimitivePair {
 /// `duplicates` (of which merged into another pair), `converge_steps` (moves),
 /// `distance_evals` (distance kernel calls), `cache_hits`, `propagation_visits` (neighbour
 /// pairs visited by propagation), `colliding` (colliding pairs recorded); for the vertex
-/// variant also `zone_tests`, `face_pairs`, `kdop_rejects`.
+/// variant also `zone_tests`, `face_pairs`, `kdop_rejects`; with a time budget, `carried`
+/// (kept pairs carried over unconverged).
 class StochasticDetector final : public Detector {
  public:
   StochasticDetector(DetectorOptions options, StochasticParams params);

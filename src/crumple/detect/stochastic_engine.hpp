@@ -19,6 +19,7 @@
 #include <crumple/core/types.hpp>
 #include <crumple/detect/stochastic.hpp>
 
+#include <chrono>
 #include <cstdint>
 #include <limits>
 #include <random>
@@ -112,6 +113,8 @@ struct EngineStats {
   double drawn = 0, kept = 0, deleted = 0, duplicates = 0, converge_steps = 0,
          distance_evals = 0, cache_hits = 0, propagation_visits = 0, colliding = 0,
          zone_tests = 0, face_pairs = 0, kdop_rejects = 0;
+  /// Kept pairs carried to the next frame without converging (time budget spent).
+  double carried = 0;
 };
 
 /// What a converged (or visited) pair is: colliding (contacts recorded) and/or near.
@@ -129,6 +132,10 @@ struct EngineConfig {
   int active = 100;
   int draw = 100;
   int steps = 64;
+  /// Time budget of the frame (`StochasticParams::budget_ms`): past the deadline, kept pairs
+  /// are carried over unconverged, and draws and propagation stop.
+  bool has_deadline = false;
+  std::chrono::steady_clock::time_point deadline{};
 };
 
 /// Uniform integer in [0, n) from a 64-bit generator (Lemire's multiply-shift on 32 bits;
@@ -152,8 +159,17 @@ class PairEngine {
   const std::vector<PrimitivePair>& colliding_pairs() const { return colliding_; }
   const EngineStats& stats() const { return stats_; }
 
-  /// One frame: converge the kept pairs, top up with random draws, propagate.
+  /// One frame: converge the kept pairs, top up with random draws, propagate. The detector
+  /// runs each phase for every pair type before the next phase, so that under a time budget
+  /// every type keeps its pairs before any type draws or propagates.
   void run_frame(Context& ctx, const EngineConfig& config, std::mt19937_64& rng) {
+    begin_frame(ctx, config);
+    draw(ctx, rng);
+    propagate_all(ctx);
+  }
+
+  /// Phase 1: resets the per-frame tables and converges the pairs kept from the last frame.
+  void begin_frame(Context& ctx, const EngineConfig& config) {
     config_ = config;
     stats_ = {};
     cache_.clear();
@@ -163,14 +179,25 @@ class PairEngine {
     colliding_.clear();
     previous_.swap(near_);
     near_.clear();
-    const Topology& topo = ctx.topo;
-    for (const PrimitivePair p : previous_) process(ctx, p);
+    for (std::size_t i = 0; i < previous_.size(); ++i) {
+      if (out_of_time()) {  // carry the rest over as they are; they converge next frame
+        near_.insert(near_.end(), previous_.begin() + static_cast<std::ptrdiff_t>(i), previous_.end());
+        stats_.carried = static_cast<double>(previous_.size() - i);
+        break;
+      }
+      process(ctx, previous_[i]);
+    }
+    stats_.kept = static_cast<double>(near_.size());
+  }
 
+  /// Phase 2: random pairs while fewer than `active` are kept (at most `draw`).
+  void draw(Context& ctx, std::mt19937_64& rng) {
+    const Topology& topo = ctx.topo;
     const Index na = Traits::count_a(topo);
     const Index nb = Traits::count_b(topo);
     if (na > 0 && nb > 0) {
       int drawn = 0;
-      while (static_cast<int>(near_.size()) < config_.active && drawn < config_.draw) {
+      while (static_cast<int>(near_.size()) < config_.active && drawn < config_.draw && !out_of_time()) {
         ++drawn;
         const Index a = uniform_index(rng, na);
         const Index b = uniform_index(rng, nb);
@@ -179,12 +206,14 @@ class PairEngine {
       }
       stats_.drawn = drawn;
     }
-
-    if (config_.propagation != Propagation::None) {
-      // colliding_ grows while it is walked: it is the propagation queue.
-      for (std::size_t i = 0; i < colliding_.size(); ++i) propagate(ctx, colliding_[i]);
-    }
     stats_.kept = static_cast<double>(near_.size());
+  }
+
+  /// Phase 3: propagation from every colliding pair (the colliding list grows while it is
+  /// walked: it is the propagation queue).
+  void propagate_all(Context& ctx) {
+    if (config_.propagation == Propagation::None) return;
+    for (std::size_t i = 0; i < colliding_.size() && !out_of_time(); ++i) propagate(ctx, colliding_[i]);
   }
 
  private:
@@ -202,6 +231,10 @@ class PairEngine {
     return {a, b};
   }
   static std::uint64_t key(PrimitivePair p) { return pair_key(p.a, p.b); }
+
+  bool out_of_time() const {
+    return config_.has_deadline && std::chrono::steady_clock::now() >= config_.deadline;
+  }
 
   Scalar distance(const Context& ctx, PrimitivePair p) {
     if (config_.cache) {

@@ -1,4 +1,5 @@
 #include <crumple/core/error.hpp>
+#include <crumple/core/spec_text.hpp>
 #include <crumple/mesh/shapes.hpp>
 #include <crumple/sim/scene.hpp>
 
@@ -23,10 +24,11 @@ namespace {
       {"air", air, "air damping (1/s): force -air * m * v"},                                      \
       {"thickness", thickness, "contact thickness, as a fraction of the mean edge length"}
 
-constexpr std::array<SceneParamInfo, 11> kHanging{{
+constexpr std::array<SceneParamInfo, 12> kHanging{{
     {"nx", "10", "quads along x"},
     {"ny", "10", "quads along z"},
-    {"size", "1", "side of the square cloth (m)"},
+    {"size", "1", "side of the cloth along x (m)"},
+    {"depth", "0", "side of the cloth along z (m); 0 = size (a square cloth)"},
     {"jitter", "0.01", "seeded random displacement of the initial vertices, fraction of an edge"},
     CRUMPLE_CLOTH_KEYS("0.1", "50", "0.02", "0", "9.81", "0.2", "0.4"),
 }};
@@ -88,15 +90,11 @@ constexpr std::array<SceneInfo, 5> kScenes{{
 }};
 
 std::string join_names() {
-  std::string out;
-  for (const auto& s : kScenes) out += (out.empty() ? "" : ", ") + std::string(s.name);
-  return out;
+  return join_list(kScenes, [](const SceneInfo& s) { return std::string(s.name); });
 }
 
 std::string join_keys(const SceneInfo& info) {
-  std::string out;
-  for (const auto& p : info.params) out += (out.empty() ? "" : ", ") + std::string(p.key);
-  return out;
+  return join_list(info.params, [](const SceneParamInfo& p) { return std::string(p.key); });
 }
 
 const SceneParamInfo* find_param(const SceneInfo& info, std::string_view key) {
@@ -104,12 +102,6 @@ const SceneParamInfo* find_param(const SceneInfo& info, std::string_view key) {
     if (p.key == key) return &p;
   }
   return nullptr;
-}
-
-std::string_view trim(std::string_view s) {
-  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
-  while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
-  return s;
 }
 
 /// Portable uniform double in [-1, 1) from a 64-bit engine (not the implementation-defined
@@ -189,7 +181,10 @@ Scene finish(const SceneSpec& spec, Cloth cloth, Scalar jitter_rel, std::uint64_
 Scene hanging_cloth(const SceneSpec& spec, std::uint64_t seed) {
   const Index nx = static_cast<Index>(spec.get_int("nx")), ny = static_cast<Index>(spec.get_int("ny"));
   const Scalar size = spec.get_double("size");
-  const TriMesh mesh = horizontal_lattice(nx, ny, size, size, 0);
+  Scalar depth = spec.get_double("depth");
+  if (!(depth >= 0)) throw InputError("scene key 'depth' must be >= 0 (0 = size)");
+  if (depth == 0) depth = size;
+  const TriMesh mesh = horizontal_lattice(nx, ny, size, depth, 0);
   ClothParams params = cloth_params(spec);
   params.pins = {0};  // the corner at the origin
   Scene s = finish(spec, make_cloth(mesh, params), spec.get_double("jitter"), seed);
@@ -283,7 +278,7 @@ std::vector<Index> parse_pins(const std::string& text) {
   std::string_view rest = text;
   while (!rest.empty()) {
     const auto semi = rest.find(';');
-    const std::string_view item = trim(rest.substr(0, semi));
+    const std::string_view item = trim_blanks(rest.substr(0, semi));
     rest = semi == std::string_view::npos ? std::string_view() : rest.substr(semi + 1);
     if (item.empty()) continue;
     Index v = 0;
@@ -308,28 +303,11 @@ const SceneInfo& scene_info(std::string_view name) {
 }
 
 SceneSpec SceneSpec::parse(std::string_view text) {
-  text = trim(text);
-  const auto colon = text.find(':');
+  const SpecText split = SpecText::split(text, "scene");
   SceneSpec spec;
-  spec.name_ = std::string(trim(text.substr(0, colon)));
+  spec.name_ = split.name;
   scene_info(spec.name_);
-  if (colon == std::string_view::npos) return spec;
-  std::string_view rest = text.substr(colon + 1);
-  while (!rest.empty()) {
-    const auto comma = rest.find(',');
-    const std::string_view item = trim(rest.substr(0, comma));
-    rest = comma == std::string_view::npos ? std::string_view() : rest.substr(comma + 1);
-    if (item.empty()) continue;
-    const auto eq = item.find('=');
-    if (eq == std::string_view::npos) {
-      throw InputError("scene '" + spec.name_ + "': expected key=value, got '" + std::string(item) + "'");
-    }
-    const std::string key(trim(item.substr(0, eq)));
-    for (const auto& [k, v] : spec.params_) {
-      if (k == key) throw InputError("scene '" + spec.name_ + "': key '" + key + "' given twice");
-    }
-    spec.set(key, std::string(trim(item.substr(eq + 1))));
-  }
+  for (const auto& [key, value] : split.items) spec.set(key, value);
   return spec;
 }
 
@@ -359,38 +337,28 @@ std::string SceneSpec::get_string(std::string_view key) const {
 
 Scalar SceneSpec::get_double(std::string_view key) const {
   const std::string value = get_string(key);
-  Scalar out = 0;
-  const auto [ptr, ec] = std::from_chars(value.data(), value.data() + value.size(), out);
-  if (ec != std::errc() || ptr != value.data() + value.size() || !std::isfinite(out)) {
-    throw InputError("scene '" + name_ + "': key '" + std::string(key) + "' expects a number, got '" + value + "'");
-  }
-  return out;
+  const auto out = parse_number(value);
+  if (!out) throw InputError("scene '" + name_ + "': key '" + std::string(key) + "' expects a number, got '" + value + "'");
+  return *out;
 }
 
 long long SceneSpec::get_int(std::string_view key) const {
   const std::string value = get_string(key);
-  long long out = 0;
-  const auto [ptr, ec] = std::from_chars(value.data(), value.data() + value.size(), out);
-  if (ec != std::errc() || ptr != value.data() + value.size()) {
+  const auto out = parse_integer(value);
+  if (!out) {
     throw InputError("scene '" + name_ + "': key '" + std::string(key) + "' expects an integer, got '" + value + "'");
   }
-  return out;
+  return *out;
 }
 
 bool SceneSpec::get_bool(std::string_view key) const {
   const std::string value = get_string(key);
-  if (value == "on" || value == "true" || value == "1") return true;
-  if (value == "off" || value == "false" || value == "0") return false;
-  throw InputError("scene '" + name_ + "': key '" + std::string(key) + "' expects on or off, got '" + value + "'");
+  const auto out = parse_switch(value);
+  if (!out) throw InputError("scene '" + name_ + "': key '" + std::string(key) + "' expects on or off, got '" + value + "'");
+  return *out;
 }
 
-std::string SceneSpec::to_string() const {
-  std::string out = name_;
-  for (std::size_t i = 0; i < params_.size(); ++i) {
-    out += (i == 0 ? ":" : ",") + params_[i].first + "=" + params_[i].second;
-  }
-  return out;
-}
+std::string SceneSpec::to_string() const { return format_spec(name_, params_); }
 
 Scene make_scene(const SceneSpec& spec, std::uint64_t seed) {
   if (spec.name() == "hanging-cloth") return hanging_cloth(spec, seed);
