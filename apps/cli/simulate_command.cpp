@@ -230,6 +230,15 @@ int run_simulate(const SimulateArgs& args) {
   const auto faces = std::vector<Face>(scene.model.topology().faces().begin(), scene.model.topology().faces().end());
   sim::Simulation simulation(std::move(scene.model), std::move(scene.state), scene.field,
                              std::move(scene.obstacles), std::move(scene.kinematics), settings, start.frame);
+  // The stochastic detector's kept pairs and generator, when the method is unchanged.
+  if (side && side->values.count("detector_state")) {
+    if (settings.method.to_string() == side->text("method", side_path)) {
+      simulation.restore_detector_state(side->text("detector_state", side_path));
+    } else if (!side->text("detector_state", side_path).empty()) {
+      std::cerr << "crumple: warning: the method changed from " << side->text("method", side_path)
+                << ": its saved state across frames is not restored\n";
+    }
+  }
 
   if (!args.quiet) {
     std::printf("crumple simulate: %s\n  %d particles, %zu springs, %zu faces, %d edges; dt %.6g s x %d substeps "
@@ -312,6 +321,7 @@ int run_simulate(const SimulateArgs& args) {
                                     .add("kinds", settings.detector.kinds.to_string())
                                     .add("response", settings.response)
                                     .add("passes", settings.passes)
+                                    .add("detector_state", simulation.detector_state())
                                     .str();
   write_file_atomically(out / "state.json", [&](std::ostream& os) { os << side_json << "\n"; });
   ::sigaction(SIGINT, &previous, nullptr);

@@ -552,6 +552,50 @@ TEST(Stochastic, DegenerateInputs) {
   }
 }
 
+TEST(Stochastic, SavedStateReplaysTheLastUpdateAndContinuesIdentically) {
+  const FoldingSequence& seq = sequence();
+  for (const char* variant : kVariants) {
+    SCOPED_TRACE(variant);
+    const std::string spec = std::string("stochastic:active=30,variant=") + variant;
+    auto a = make(spec, seq.thickness());
+    a->set_topology(seq.mesh().topology_ptr());
+    ContactSet ca, cb;
+    const std::size_t k = 25;
+    for (std::size_t i = 0; i <= k; ++i) a->update(seq.positions(i), ca);
+    const std::string state = a->save_state();
+    ASSERT_EQ(state.find('\n'), std::string::npos) << "one line";
+    auto b = make(spec, seq.thickness());
+    b->set_topology(seq.mesh().topology_ptr());
+    b->load_state(state);
+    b->update(seq.positions(k), cb);  // replays a's last update
+    ASSERT_EQ(match_contacts(cb, ca).missed + match_contacts(cb, ca).false_contacts, 0u);
+    EXPECT_EQ(b->save_state(), state);
+    for (std::size_t i = k + 1; i < seq.size(); ++i) {
+      a->update(seq.positions(i), ca);
+      b->update(seq.positions(i), cb);
+      ASSERT_EQ(ca.size(), cb.size()) << "frame " << i;
+      ASSERT_EQ(match_contacts(cb, ca).missed, 0u) << "frame " << i;
+    }
+    // A state that does not fit is refused with a clear message.
+    auto other = make("stochastic:active=31", seq.thickness());
+    other->set_topology(seq.mesh().topology_ptr());
+    EXPECT_THROW(other->load_state(state), InputError);
+    EXPECT_THROW(b->load_state("stochastic-state-1 nonsense"), InputError);
+    const TriMesh tiny = shapes::lattice(2, 2, 1, 1);
+    auto small = make(spec, seq.thickness());
+    small->set_topology(tiny.topology_ptr());
+    if (state.find(" ee 0 ") == std::string::npos || state.find(" vv 0 ") == std::string::npos) {
+      EXPECT_THROW(small->load_state(state), InputError) << "pairs out of range for a smaller mesh";
+    }
+    EXPECT_NO_THROW(small->load_state(""));
+  }
+  auto naive = make("naive", 0.1);
+  naive->set_topology(sequence().mesh().topology_ptr());
+  EXPECT_EQ(naive->save_state(), "");
+  EXPECT_NO_THROW(naive->load_state(""));
+  EXPECT_THROW(naive->load_state("stochastic-state-1 x"), InputError);
+}
+
 TEST(Stochastic, TimeBudget) {
   // Parsing: the key, its range and the canonical text.
   EXPECT_EQ(StochasticParams::from_spec(MethodSpec::parse("stochastic")).budget_ms, 0.0);

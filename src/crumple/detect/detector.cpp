@@ -74,6 +74,12 @@ void Detector::update(PositionsView previous, PositionsView positions, ContactSe
   out.sort();
 }
 
+void Detector::load_state(std::string_view text) {
+  if (text.find_first_not_of(" \t\r\n") == std::string_view::npos) return;
+  throw InputError("method " + std::string(to_string(method())) +
+                   " keeps no state across frames: cannot restore a saved detector state");
+}
+
 std::unique_ptr<Detector> make_detector(const MethodSpec& spec, const DetectorOptions& options) {
   switch (spec.method()) {
     case Method::Naive:

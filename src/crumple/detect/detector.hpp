@@ -17,6 +17,7 @@
 
 #include <memory>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -67,6 +68,16 @@ class Detector {
 
   /// Counters of the last update (pairs tested, candidates, ...), method-specific.
   const DetectorStats& stats() const { return stats_; }
+
+  /// The state carried across frames that changes later results, as one line of text — the
+  /// state *before* the last update, so that replaying that update on the same positions gives
+  /// the same contacts and ends in the current state (what a resumed simulation needs). Empty
+  /// for methods whose results do not depend on earlier frames (every exact method).
+  virtual std::string save_state() const { return {}; }
+  /// Restores a `save_state` text (the topology must be set). An empty text is always
+  /// accepted; text that does not fit this method, its parameters or the topology throws
+  /// `InputError`.
+  virtual void load_state(std::string_view text);
 
  protected:
   /// Called after a new topology is set; detectors build their per-mesh structures here.

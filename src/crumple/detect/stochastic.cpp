@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <sstream>
 #include <string>
 
 namespace crumple {
@@ -473,6 +474,10 @@ struct StochasticDetector::Impl {
   Sink sink;
   ZoneTester zone;
   std::mt19937_64 rng;
+  /// The state before the last update (`save_state`).
+  std::mt19937_64 saved_rng;
+  std::array<std::vector<PrimitivePair>, 4> saved_near;
+  bool saved = false;
 };
 
 StochasticDetector::StochasticDetector(DetectorOptions options, StochasticParams params)
@@ -525,6 +530,78 @@ void StochasticDetector::on_topology() {
   impl_->ef.reset();
   impl_->zone.reset(topology().num_faces());
   impl_->rng.seed(params_.seed);
+  impl_->saved = false;
+}
+
+namespace {
+
+constexpr std::array<PairType, 4> kPairTypes{PairType::VV, PairType::EE, PairType::VF, PairType::EF};
+
+/// Number of elements of each side of a pair type.
+std::pair<Index, Index> pair_counts(const Topology& t, PairType type) {
+  switch (type) {
+    case PairType::VV: return {t.num_vertices(), t.num_vertices()};
+    case PairType::EE: return {t.num_edges(), t.num_edges()};
+    case PairType::VF: return {t.num_vertices(), t.num_faces()};
+    case PairType::EF: return {t.num_edges(), t.num_faces()};
+  }
+  return {0, 0};
+}
+
+}  // namespace
+
+std::string StochasticDetector::save_state() const {
+  const Impl& m = *impl_;
+  std::ostringstream out;
+  out << "stochastic-state-1 " << params_.to_string() << " rng " << (m.saved ? m.saved_rng : m.rng);
+  for (std::size_t i = 0; i < kPairTypes.size(); ++i) {
+    const std::span<const PrimitivePair> pairs =
+        m.saved ? std::span<const PrimitivePair>(m.saved_near[i]) : near_pairs(kPairTypes[i]);
+    out << " " << to_string(kPairTypes[i]) << " " << pairs.size();
+    for (const PrimitivePair& p : pairs) out << " " << p.a << " " << p.b;
+  }
+  return out.str();
+}
+
+void StochasticDetector::load_state(std::string_view text) {
+  if (text.find_first_not_of(" \t\r\n") == std::string_view::npos) return;
+  const Topology& topo = topology();
+  std::istringstream in{std::string(text)};
+  const auto fail = [](const std::string& what) {
+    throw InputError("stochastic detector state: " + what);
+  };
+  std::string word, params, rng_word;
+  in >> word >> params >> rng_word;
+  if (word != "stochastic-state-1") fail("expected 'stochastic-state-1', got '" + word + "'");
+  if (params != params_.to_string()) {
+    fail("saved with " + params + " but the detector is " + params_.to_string());
+  }
+  if (rng_word != "rng") fail("expected 'rng'");
+  std::mt19937_64 rng;
+  if (!(in >> rng)) fail("bad generator state");
+  std::array<std::vector<PrimitivePair>, 4> near;
+  for (std::size_t i = 0; i < kPairTypes.size(); ++i) {
+    std::size_t n = 0;
+    if (!(in >> word >> n) || word != to_string(kPairTypes[i])) {
+      fail("expected the '" + std::string(to_string(kPairTypes[i])) + "' pair list");
+    }
+    const auto [na, nb] = pair_counts(topo, kPairTypes[i]);
+    if (n > static_cast<std::size_t>(params_.active) + static_cast<std::size_t>(na)) fail("too many pairs");
+    for (std::size_t k = 0; k < n; ++k) {
+      PrimitivePair p;
+      if (!(in >> p.a >> p.b)) fail("truncated pair list");
+      if (p.a < 0 || p.a >= na || p.b < 0 || p.b >= nb) fail("pair out of range for this mesh");
+      near[i].push_back(p);
+    }
+  }
+  if (in >> word) fail("unexpected '" + word + "' after the pair lists");
+  Impl& m = *impl_;
+  m.rng = rng;
+  m.vv.restore(std::move(near[0]));
+  m.ee.restore(std::move(near[1]));
+  m.vf.restore(std::move(near[2]));
+  m.ef.restore(std::move(near[3]));
+  m.saved = false;
 }
 
 void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, ContactSet& out) {
@@ -533,6 +610,12 @@ void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, Con
   const Scalar h = options().thickness;
   const Scalar near = near_distance();
   Impl& m = *impl_;
+  m.saved_rng = m.rng;
+  for (std::size_t i = 0; i < kPairTypes.size(); ++i) {
+    const auto pairs = near_pairs(kPairTypes[i]);
+    m.saved_near[i].assign(pairs.begin(), pairs.end());
+  }
+  m.saved = true;
   m.sink.begin(topo, x, h * h, options().kinds, out);
   m.zone.begin_frame();
   EngineStats zone_stats;

@@ -141,6 +141,12 @@ class StochasticDetector final : public Detector {
   /// Colliding pairs of the last update (kept as state, Algorithm 3), in the order recorded.
   std::span<const PrimitivePair> colliding_pairs(PairType type) const;
 
+  /// `stochastic-state-1 <params> rng <generator state> vv N a b ... ee N ... vf N ... ef N ...`:
+  /// the generator and the kept near pairs before the last update (see `Detector::save_state`).
+  std::string save_state() const override;
+  /// Checks that the saved parameters equal this detector's and every pair fits the topology.
+  void load_state(std::string_view text) override;
+
  protected:
   void on_topology() override;
   void detect(PositionsView previous, PositionsView positions, ContactSet& out) override;

@@ -156,6 +156,11 @@ class PairEngine {
   }
 
   const std::vector<PrimitivePair>& near_pairs() const { return near_; }
+  /// Replaces the kept near pairs (a restored state; the caller validates them).
+  void restore(std::vector<PrimitivePair> near) {
+    near_ = std::move(near);
+    colliding_.clear();
+  }
   const std::vector<PrimitivePair>& colliding_pairs() const { return colliding_; }
   const EngineStats& stats() const { return stats_; }
 

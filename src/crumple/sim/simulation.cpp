@@ -57,6 +57,11 @@ void Simulation::detect_now() {
   detect_ms_ += ms_since(start);
 }
 
+void Simulation::restore_detector_state(std::string_view text) {
+  detector_->load_state(text);
+  contacts_valid_ = false;
+}
+
 const ContactSet& Simulation::contacts() {
   if (!contacts_valid_) detect_now();
   return contacts_;

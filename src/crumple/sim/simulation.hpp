@@ -22,6 +22,8 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
+#include <string_view>
 #include <vector>
 
 namespace crumple::sim {
@@ -82,6 +84,12 @@ class Simulation {
   const std::vector<response::Obstacle>& obstacles() const { return obstacles_; }
   /// Contacts at the current positions (detected on demand).
   const ContactSet& contacts();
+
+  /// The detector's state across frames (`Detector::save_state`: empty for exact methods),
+  /// saved with the simulation state so a resumed run detects bit for bit as the original.
+  std::string detector_state() const { return detector_->save_state(); }
+  /// Restores it; the next detection, on the same positions, replays the last one.
+  void restore_detector_state(std::string_view text);
 
  private:
   void detect_now();
