@@ -14,5 +14,7 @@ Run add_detect_command(CLI::App& app);
 Run add_compare_command(CLI::App& app);
 Run add_info_command(CLI::App& app);
 Run add_simulate_command(CLI::App& app);
+Run add_bench_command(CLI::App& app);
+Run add_render_command(CLI::App& app);
 
 }  // namespace crumple::cli

@@ -26,6 +26,10 @@ int main(int argc, char** argv) {
       crumple::cli::add_info_command);
   add("simulate", "Simulate a cloth scene or model with self-collision detection and response",
       crumple::cli::add_simulate_command);
+  add("bench", "Reproduce the thesis' Figure 4.2/4.3 benchmarks and write tables and plots",
+      crumple::cli::add_bench_command);
+  add("render", "Render a scene, a mesh or frames to PNG with colliding edges in red",
+      crumple::cli::add_render_command);
 
   try {
     app.parse(argc, argv);

@@ -8,6 +8,7 @@
 #include <crumple/core/json.hpp>
 #include <crumple/io/x3d.hpp>
 #include <crumple/sim/mass_spring.hpp>
+#include <crumple/sim/scene.hpp>
 
 #include <charconv>
 #include <filesystem>
@@ -15,8 +16,27 @@
 #include <map>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace crumple::cli {
+
+/// A scene spec with the `--param KEY=VALUE` options applied (keys checked by the scene).
+inline sim::SceneSpec apply_params(sim::SceneSpec spec, const std::vector<std::string>& params) {
+  for (const std::string& item : params) {
+    const auto eq = item.find('=');
+    if (eq == std::string::npos) throw InputError("--param expects KEY=VALUE, got '" + item + "'");
+    spec.set(item.substr(0, eq), item.substr(eq + 1));
+  }
+  return spec;
+}
+
+/// Whether a file's bytes contain `needle` (e.g. an X3D file holding a `MassSpring` node).
+inline bool file_mentions(const std::filesystem::path& path, const std::string& needle) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str().find(needle) != std::string::npos;
+}
 
 inline sim::Model model_from_mass_spring(const io::MassSpringData& d) {
   std::vector<sim::Spring> springs;

@@ -65,22 +65,6 @@ bool has_extension(const std::string& input) {
   return !ext.empty() && input.find(':') == std::string::npos;
 }
 
-bool file_mentions(const std::filesystem::path& path, const std::string& needle) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return buffer.str().find(needle) != std::string::npos;
-}
-
-sim::SceneSpec apply_params(sim::SceneSpec spec, const std::vector<std::string>& params) {
-  for (const std::string& item : params) {
-    const auto eq = item.find('=');
-    if (eq == std::string::npos) throw InputError("--param expects KEY=VALUE, got '" + item + "'");
-    spec.set(item.substr(0, eq), item.substr(eq + 1));
-  }
-  return spec;
-}
-
 /// What a run starts from.
 struct Start {
   sim::Scene scene;

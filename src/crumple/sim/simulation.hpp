@@ -85,6 +85,8 @@ class Simulation {
   /// Contacts at the current positions (detected on demand).
   const ContactSet& contacts();
 
+  /// The detector (read-only: its statistics, and for the stochastic one its kept pairs).
+  const Detector& detector() const { return *detector_; }
   /// The detector's state across frames (`Detector::save_state`: empty for exact methods),
   /// saved with the simulation state so a resumed run detects bit for bit as the original.
   std::string detector_state() const { return detector_->save_state(); }

@@ -1,0 +1,143 @@
+// Measurement primitives of `crumple bench` (see bench_suite.hpp).
+#include "bench_suite.hpp"
+
+#include <crumple/core/error.hpp>
+#include <crumple/sim/scene.hpp>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <fstream>
+#include <thread>
+
+namespace crumple::cli::bench {
+
+Recording record_scene(const std::string& spec, std::int64_t frames, std::uint64_t seed,
+                       const std::function<void(std::int64_t)>& on_frame) {
+  sim::Scene scene = sim::make_scene(sim::SceneSpec::parse(spec), seed);
+  sim::Settings settings = scene.settings;
+  settings.method = MethodSpec::parse("kdop");
+  settings.detector.threads = 1;
+  Recording r;
+  r.spec = scene.spec;
+  r.thickness = settings.detector.thickness;
+  const auto faces = scene.model.topology().faces();
+  r.mesh = TriMesh::create(scene.state.x, std::vector<Face>(faces.begin(), faces.end()));
+  sim::Simulation simulation(std::move(scene.model), std::move(scene.state), scene.field,
+                             std::move(scene.obstacles), std::move(scene.kinematics), settings);
+  r.frames.push_back(simulation.state().x);
+  r.share.push_back(simulation.current_stats().collision_share);
+  for (std::int64_t k = 0; k < frames; ++k) {
+    const sim::FrameStats stats = simulation.advance_frame();
+    r.frames.push_back(simulation.state().x);
+    r.share.push_back(stats.collision_share);
+    if (on_frame) on_frame(k + 1);
+  }
+  return r;
+}
+
+Timing time_method(std::shared_ptr<const Topology> topology, const std::vector<Positions>& frames,
+                   const std::string& spec, const DetectorOptions& options, const TimingPlan& plan,
+                   const std::vector<ContactSet>* reference) {
+  CRUMPLE_CHECK(plan.first <= plan.timed_from && plan.timed_from <= plan.last && plan.last <= frames.size(),
+                "timing plan out of the frame range");
+  CRUMPLE_CHECK(plan.repetitions >= 1, "at least one repetition");
+  const std::size_t timed = plan.last - plan.timed_from;
+  CRUMPLE_CHECK(reference == nullptr || reference->size() == timed, "one reference set per timed frame");
+  const MethodSpec method = MethodSpec::parse(spec);
+
+  Timing t;
+  t.spec = method.to_string();
+  std::vector<std::vector<double>> samples(timed);
+  ContactSet out;
+  for (int rep = 0; rep < plan.repetitions; ++rep) {
+    auto detector = make_detector(method, options);
+    detector->set_topology(topology);
+    for (std::size_t i = plan.first; i < plan.last; ++i) {
+      const Positions& previous = frames[i == plan.first ? i : i - 1];
+      const auto start = std::chrono::steady_clock::now();
+      detector->update(previous, frames[i], out);
+      const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+      if (i < plan.timed_from) continue;
+      const std::size_t k = i - plan.timed_from;
+      samples[k].push_back(ms);
+      if (rep > 0) continue;  // seeded: every repetition finds the same contacts
+      t.distance_evals += detector->stats().get("distance_evals") / static_cast<double>(timed);
+      if (reference != nullptr) t.match.push_back(match_contacts(out, (*reference)[k]));
+      if (plan.keep_contacts) t.contacts.push_back(out);
+    }
+  }
+  t.ms.reserve(timed);
+  for (auto& s : samples) {
+    std::nth_element(s.begin(), s.begin() + static_cast<std::ptrdiff_t>(s.size() / 2), s.end());
+    t.ms.push_back(s[s.size() / 2]);
+  }
+  return t;
+}
+
+namespace {
+
+/// First line of a command's output, empty on failure.
+std::string command_line_output(const std::string& command) {
+  std::string out;
+  if (FILE* p = ::popen(command.c_str(), "r")) {
+    std::array<char, 256> buf{};
+    if (std::fgets(buf.data(), static_cast<int>(buf.size()), p) != nullptr) out = buf.data();
+    ::pclose(p);
+  }
+  while (!out.empty() && (out.back() == '\n' || out.back() == '\r')) out.pop_back();
+  return out;
+}
+
+}  // namespace
+
+std::string machine_description() {
+  std::string model = "unknown CPU";
+  std::ifstream cpuinfo("/proc/cpuinfo");
+  for (std::string line; std::getline(cpuinfo, line);) {
+    if (line.rfind("model name", 0) == 0) {
+      const auto colon = line.find(':');
+      if (colon != std::string::npos) model = line.substr(line.find_first_not_of(' ', colon + 1));
+      break;
+    }
+  }
+  std::string out = model;
+  out.append(", ").append(std::to_string(std::thread::hardware_concurrency())).append(" hardware threads, ");
+#if defined(__clang__)
+  out.append("clang ").append(__clang_version__);
+#elif defined(__GNUC__)
+  out.append("g++ ").append(std::to_string(__GNUC__)).append(".").append(std::to_string(__GNUC_MINOR__));
+#endif
+#if defined(NDEBUG)
+  out.append(", optimised build");
+#else
+  out.append(", unoptimised build (assertions on)");
+#endif
+  return out;
+}
+
+std::string source_commit() {
+#ifdef CRUMPLE_SOURCE_DIR
+  const std::string dir = CRUMPLE_SOURCE_DIR;
+  const std::string head = command_line_output("git -C '" + dir + "' rev-parse --short=12 HEAD 2>/dev/null");
+  if (head.empty()) return "unknown";
+  const std::string dirty =
+      command_line_output("git -C '" + dir + "' status --porcelain --untracked-files=no 2>/dev/null");
+  return dirty.empty() ? head : head + "-dirty";
+#else
+  return "unknown";
+#endif
+}
+
+std::string utc_now() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  ::gmtime_r(&now, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+}  // namespace crumple::cli::bench

@@ -1,0 +1,69 @@
+#pragma once
+// Measurement primitives of `crumple bench`: record a simulated scene once, then time any
+// detector on the same recorded frames, in order (the stochastic detector needs the temporal
+// coherence of consecutive frames), with its per-frame recall against a reference run.
+
+#include <crumple/detect/compare.hpp>
+#include <crumple/detect/detector.hpp>
+#include <crumple/mesh/mesh.hpp>
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace crumple::cli::bench {
+
+/// Frames of one simulated scene, with the share of edges in collision of each frame.
+struct Recording {
+  std::string spec;  ///< canonical scene spec
+  TriMesh mesh;      ///< topology and the first frame
+  std::vector<Positions> frames;
+  std::vector<double> share;  ///< `sim::collision_share` of each frame (VF + EE contacts)
+  Scalar thickness = 0;       ///< the scene's contact thickness
+};
+
+/// Simulates `spec` for `frames` frames (frame 0 is the initial state, so `frames + 1` are
+/// kept). Detection during recording uses the exact `kdop` detector (its contact set is
+/// naive's, checked by the tests), only to measure the collision share.
+Recording record_scene(const std::string& spec, std::int64_t frames, std::uint64_t seed,
+                       const std::function<void(std::int64_t)>& on_frame = {});
+
+/// One method timed on a sequence of frames.
+struct Timing {
+  std::string spec;
+  std::vector<double> ms;           ///< per timed frame: median over the repetitions
+  std::vector<ContactMatch> match;  ///< per timed frame against the reference (if any)
+  std::vector<ContactSet> contacts;  ///< per timed frame (only when asked to keep them)
+  /// Mean over the timed frames of the detector's `distance_evals` counter (stochastic only).
+  double distance_evals = 0;
+};
+
+/// What to time: frames `[first, last)` of `frames` are fed in order to a fresh detector,
+/// each with the previous frame as motion; frames before `timed_from` warm the detector up
+/// (fed, not timed). Every repetition starts from a fresh detector, so a seeded method does the
+/// same work each time; the median per frame is kept.
+struct TimingPlan {
+  std::size_t first = 0;
+  std::size_t timed_from = 0;
+  std::size_t last = 0;
+  int repetitions = 3;
+  bool keep_contacts = false;
+};
+
+/// Times `spec` on `frames` (one topology). `reference`, when given, holds the reference's
+/// contacts of each timed frame (index 0 = frame `timed_from`).
+Timing time_method(std::shared_ptr<const Topology> topology, const std::vector<Positions>& frames, const std::string& spec,
+                   const DetectorOptions& options, const TimingPlan& plan,
+                   const std::vector<ContactSet>* reference);
+
+/// Machine description for the report: CPU model, hardware threads, compiler.
+std::string machine_description();
+/// `git describe`-like identity of the source tree (`unknown` when git or the tree is absent).
+std::string source_commit();
+/// Current UTC date and time, ISO 8601.
+std::string utc_now();
+
+}  // namespace crumple::cli::bench
