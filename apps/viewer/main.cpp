@@ -11,6 +11,7 @@
 
 #include <crumple/core/error.hpp>
 #include <crumple/detect/compare.hpp>
+#include <crumple/detect/kdop_tree.hpp>
 #include <crumple/detect/stochastic.hpp>
 #include <crumple/io/frames.hpp>
 #include <crumple/io/mesh_io.hpp>
@@ -61,6 +62,7 @@ struct Options {
   bool wireframe = false;
   bool springs = false;
   bool active_pairs = false;
+  int kdop_level = -1;
   bool recall = false;
 };
 
@@ -279,6 +281,7 @@ class App {
         thin.line(s.a, s.b, pal.contact);
     }
     if (show_active_pairs) active_pairs(thin);
+    if (kdop_level >= 0) kdop_boxes(thin);
     if (grabbed_ >= 0 && sim_ && sim_->field().drag) {
       thin.line(x[static_cast<std::size_t>(grabbed_)], sim_->field().drag->target,
                 render::Rgb{255, 140, 0});
@@ -286,6 +289,25 @@ class App {
     }
     gl.batch(thin, 1.0f, 5.0f);
     gl.batch(thick, 2.5f, 5.0f);
+  }
+
+  /// The boxes of one level of the kdop detector's hierarchy (x, y, z slabs of its k-DOPs) as
+  /// refitted by its last update.
+  void kdop_boxes(Batch& batch) {
+    const Detector* d = sim_ ? &sim_->detector() : playback_detector_.get();
+    const auto* kdop = dynamic_cast<const KdopDetector*>(d);
+    if (kdop == nullptr) return;
+    const render::Rgb colour{60, 170, 90};
+    for (const Bounds& b : kdop->node_boxes(kdop_level)) {
+      const auto corner = [&](int i) {
+        return Vec3(i & 1 ? b.max.x() : b.min.x(), i & 2 ? b.max.y() : b.min.y(), i & 4 ? b.max.z() : b.min.z());
+      };
+      for (int i = 0; i < 8; ++i) {
+        for (int bit : {1, 2, 4}) {
+          if (!(i & bit)) batch.line(corner(i), corner(i | bit), colour);
+        }
+      }
+    }
   }
 
   /// The stochastic detector's near (active) pairs: those the simulation's own detector (or the
@@ -374,7 +396,16 @@ class App {
       } else {
         ImGui::TextDisabled("active pairs: stochastic detector only");
       }
-      ImGui::TextDisabled("k-DOP boxes: not exposed by the kdop detector");
+      if (const auto* kdop = dynamic_cast<const KdopDetector*>(sim_ ? &sim_->detector() : playback_detector_.get())) {
+        bool on = kdop_level >= 0;
+        if (ImGui::Checkbox("k-DOP boxes", &on)) kdop_level = on ? 0 : -1;
+        if (on && kdop->levels() > 0) {
+          ImGui::SameLine();
+          ImGui::SliderInt("level", &kdop_level, 0, kdop->levels() - 1);
+        }
+      } else {
+        ImGui::TextDisabled("k-DOP boxes: kdop detector only");
+      }
     }
     if (ImGui::CollapsingHeader("Statistics", ImGuiTreeNodeFlags_DefaultOpen)) {
       ImGui::Text("%.1f fps   frame %lld", fps, static_cast<long long>(stats_.frame));
@@ -525,6 +556,7 @@ class App {
   bool paused = false;
   bool step_request = false;
   bool show_active_pairs = false;
+  int kdop_level = -1;  ///< level of the k-DOP hierarchy drawn, -1 = none
   float speed = 1;
   float drag_stiffness = 20;
   float drag_damping = 0.5f;
@@ -613,6 +645,7 @@ int run(Options options) {
   const bool print_recall = options.recall;
   const bool wireframe = options.wireframe, springs = options.springs,
              active_pairs = options.active_pairs;
+  const int kdop_level = options.kdop_level;
   App app(std::move(options));  // loads before any window opens: bad input fails fast
 
   glfwSetErrorCallback(on_glfw_error);
@@ -653,6 +686,7 @@ int run(Options options) {
     app.draw_options.wireframe = wireframe;
     app.draw_options.masses_springs = springs;
     app.show_active_pairs = active_pairs;
+    app.kdop_level = kdop_level;
     if (print_recall) {
       app.compute_recall();
       std::printf("crumple-view: %s\n", app.recall_text().c_str());
@@ -796,6 +830,9 @@ int main(int argc, char** argv) {
   cli.add_flag("--springs", options.springs, "Start drawing the masses and springs only");
   cli.add_flag("--active-pairs", options.active_pairs,
                "Start showing the stochastic detector's active pairs");
+  cli.add_option("--kdop-level", options.kdop_level,
+                 "Draw the boxes of this level of the kdop detector's hierarchy (0 = root)")
+      ->check(CLI::Range(0, 64));
   cli.add_flag("--recall", options.recall,
                "Print the recall of the detector against naive for the first picture");
   cli.add_flag("--exit", options.exit, "Draw one frame (after --frames), save --screenshot, exit");

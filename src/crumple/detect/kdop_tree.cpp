@@ -47,6 +47,8 @@ class KdopDetector::Tree {
   virtual ~Tree() = default;
   virtual void frame(const Topology& topo, const FrameInput& in, CandidateBuffer& out,
                      DetectorStats& stats) = 0;
+  virtual int levels() const = 0;
+  virtual std::vector<Bounds> boxes(int depth) const = 0;
 };
 
 namespace {
@@ -85,6 +87,19 @@ class KdopTree final : public KdopDetector::Tree {
     const auto t1 = std::chrono::steady_clock::now();
     traverse(in.threads, out, stats);
     stats.set("traversal_ms", ms_since(t1));
+  }
+
+  int levels() const override { return static_cast<int>(levels_.size()); }
+
+  std::vector<Bounds> boxes(int depth) const override {
+    std::vector<Bounds> out;
+    if (depth < 0 || depth >= levels() || dops_.size() != nodes_.size()) return out;
+    const auto [begin, end] = levels_[static_cast<std::size_t>(depth)];
+    for (Index n = begin; n < end; ++n) {
+      const Dop& d = dops_[static_cast<std::size_t>(n)];
+      out.push_back({Vec3(d.min(0), d.min(1), d.min(2)), Vec3(d.max(0), d.max(1), d.max(2))});
+    }
+    return out;
   }
 
  private:
@@ -352,6 +367,12 @@ void KdopDetector::on_exact_topology() {
       tree_ = std::make_unique<KdopTree<26>>(params_);
       break;
   }
+}
+
+int KdopDetector::levels() const { return tree_ ? tree_->levels() : 0; }
+
+std::vector<Bounds> KdopDetector::node_boxes(int depth) const {
+  return tree_ ? tree_->boxes(depth) : std::vector<Bounds>{};
 }
 
 void KdopDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {

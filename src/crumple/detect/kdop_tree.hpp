@@ -26,6 +26,7 @@
 #include <crumple/detect/broad_phase.hpp>
 
 #include <memory>
+#include <vector>
 
 namespace crumple {
 
@@ -49,6 +50,13 @@ class KdopDetector final : public ExactDetector {
   ~KdopDetector() override;
   Method method() const override { return Method::Kdop; }
   const KdopParams& params() const { return params_; }
+
+  /// Number of levels of the current tree (0 before the first update).
+  int levels() const;
+  /// The axis-aligned boxes (x, y, z slabs of the k-DOPs, inflated and swept as refitted) of
+  /// the nodes at `depth` (0 = root) after the last update; empty past the deepest level. For
+  /// drawing a level of the hierarchy (the viewer).
+  std::vector<Bounds> node_boxes(int depth) const;
 
   /// Type-erased tree (one implementation per k).
   class Tree;
