@@ -144,7 +144,7 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
   const bool proximity = options().kinds.vf || options().kinds.ee;
   const Scalar pad = (proximity ? h * (1 + 1e-6) : 0) + 1e-9 * magnitude;
 
-  FrameInput in{previous, x, pad / 2, threads};
+  FrameInput in{previous, x, pad / 2, threads, !proximity};
   broad_phase(in, candidates_);
   stats_.set("candidates", static_cast<double>(candidates_.total()));
   stats_.set("broad_ms", ms_since(t0));

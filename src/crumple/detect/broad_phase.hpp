@@ -57,6 +57,9 @@ struct FrameInput {
   PositionsView positions;
   Scalar radius = 0;  ///< inflate every face box by this on each side (pad / 2)
   int threads = 0;
+  /// Only intersections (TT) are asked: no proximity, so a patch that provably cannot
+  /// intersect itself may be skipped (normal-cone culling, kdop_tree.hpp).
+  bool intersection_only = false;
 };
 
 /// Thread-safe sink of candidate chunks (each task appends its own vector once).

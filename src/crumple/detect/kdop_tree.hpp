@@ -19,9 +19,16 @@
 ///    two overlapping nodes), expanded into many independent tasks run in parallel. Faces that
 ///    share a vertex are skipped at the leaves (their orphan sub-pairs are handled by the
 ///    pipeline).
-/// Spec: `kdop:k=6|14|18|26,arity=2|4|8,leaf=N,rebuild=R,sweep=on|off` plus `max_contacts`,
+/// Spec: `kdop:k=6|14|18|26,arity=2|4|8,leaf=N,rebuild=R,sweep=on|off,cones=on|off` plus `max_contacts`,
 /// `overflow`.
-/// Normal-cone culling (ALGORITHMS.md §3) is not implemented (docs/exact-detectors.md).
+///  - Normal-cone culling (ALGORITHMS.md §3; Volino & Magnenat-Thalmann), for intersection-only
+///    queries (`kinds` = tt): a node whose faces all face one of 26 fixed directions V (a
+///    per-face bit mask ANDed up the tree) and whose boundary, projected along V, is one
+///    star-shaped loop traversed once, projects one-to-one onto the plane, so no two of its
+///    points coincide: its self-test is skipped. Proximity (vf, ee) is never culled: a patch that
+///    is a height field can still hold features closer than the thickness (ALGORITHMS.md §3
+///    pitfalls). Needs consistently oriented faces; any doubt (degenerate face, an edge used
+///    twice in one direction, a loop winding more than once) keeps the self-test.
 
 #include <crumple/detect/broad_phase.hpp>
 
@@ -40,6 +47,10 @@ struct KdopParams {
   /// the same either way (contacts are proximity at the current positions); off gives
   /// tighter boxes when the motion is large compared with h.
   bool sweep = true;
+  /// Normal-cone culling of self-tests for intersection-only queries (see the file comment).
+  /// Off by default: on the real meshes it skips under 1% of the candidates and costs more
+  /// than it saves (docs/exact-detectors.md).
+  bool cones = false;
   ExactParams exact;
   static KdopParams from_spec(const MethodSpec& spec);
 };
