@@ -149,39 +149,29 @@ Csv read_csv(const std::filesystem::path& path) {
   return csv;
 }
 
-class CliBench : public ::testing::Test {
- protected:
-  static void SetUpTestSuite() {
-    dir_ = new std::filesystem::path(testing::cli_temp_dir("bench"));
-    result_ = new testing::CliResult(run_cli("bench --quick --out " + dir_->string()));
-  }
-  static void TearDownTestSuite() {
-    std::filesystem::remove_all(*dir_);
-    delete dir_;
-    delete result_;
-  }
-  static std::filesystem::path* dir_;
-  static testing::CliResult* result_;
+// One run of `crumple bench --quick` (tens of seconds under sanitizers), checked part by part.
+struct QuickRun {
+  std::filesystem::path dir = testing::cli_temp_dir("bench");
+  testing::CliResult result = run_cli("bench --quick --out " + dir.string());
+  ~QuickRun() { std::filesystem::remove_all(dir); }
 };
-std::filesystem::path* CliBench::dir_ = nullptr;
-testing::CliResult* CliBench::result_ = nullptr;
 
-TEST_F(CliBench, QuickRunWritesEveryOutput) {
-  ASSERT_EQ(result_->status, 0) << result_->out;
-  EXPECT_NE(result_->out.find("wrote"), std::string::npos) << result_->out;
+void expect_every_output(const QuickRun& run) {
+  ASSERT_EQ(run.result.status, 0) << run.result.out;
+  EXPECT_NE(run.result.out.find("wrote"), std::string::npos) << run.result.out;
   for (const char* name : {"bench.md", "bench.json", "fig42.csv", "fig43.csv", "second.csv", "scaling.csv",
                            "budget.csv", "fig42-fps.svg", "fig42-speedup.svg", "scaling.svg", "budget.svg"}) {
-    EXPECT_TRUE(std::filesystem::is_regular_file(*dir_ / name)) << name;
+    EXPECT_TRUE(std::filesystem::is_regular_file(run.dir / name)) << name;
   }
   // Atomic writes leave no temporary file behind.
-  for (const auto& entry : std::filesystem::directory_iterator(*dir_)) {
+  for (const auto& entry : std::filesystem::directory_iterator(run.dir)) {
     EXPECT_EQ(entry.path().filename().string().find(".tmp"), std::string::npos) << entry.path();
   }
 }
 
-TEST_F(CliBench, JsonIsWellFormedAndHasEveryTable) {
-  ASSERT_EQ(result_->status, 0) << result_->out;
-  const std::string json = slurp(*dir_ / "bench.json");
+void expect_well_formed_json(const QuickRun& run) {
+  ASSERT_EQ(run.result.status, 0) << run.result.out;
+  const std::string json = slurp(run.dir / "bench.json");
   EXPECT_TRUE(JsonChecker(json).valid()) << json.substr(0, 400);
   for (const char* key : {"\"machine\":", "\"commit\":", "\"fig42\":[", "\"fig43\":[", "\"second\":[",
                           "\"scaling\":[", "\"budget\":["}) {
@@ -191,9 +181,9 @@ TEST_F(CliBench, JsonIsWellFormedAndHasEveryTable) {
   EXPECT_FALSE(JsonChecker("{\"a\":1} x").valid());
 }
 
-TEST_F(CliBench, TablesAreRectangularAndExactMethodsAreExact) {
-  ASSERT_EQ(result_->status, 0) << result_->out;
-  const Csv fig42 = read_csv(*dir_ / "fig42.csv");
+void expect_coherent_tables(const QuickRun& run) {
+  ASSERT_EQ(run.result.status, 0) << run.result.out;
+  const Csv fig42 = read_csv(run.dir / "fig42.csv");
   EXPECT_FALSE(fig42.ragged);
   EXPECT_EQ(fig42.rows.size(), 2u * 16u * 4u);  // two tables x 16 methods x 4 bins
   std::size_t measured = 0;
@@ -209,7 +199,7 @@ TEST_F(CliBench, TablesAreRectangularAndExactMethodsAreExact) {
   }
   EXPECT_GT(measured, 0u);  // some bin held frames
 
-  const Csv scaling = read_csv(*dir_ / "scaling.csv");
+  const Csv scaling = read_csv(run.dir / "scaling.csv");
   EXPECT_FALSE(scaling.ragged);
   EXPECT_GE(scaling.rows.size(), 2u * 6u);  // two lattices x at least the six non-naive methods
   for (const auto& row : scaling.rows) {
@@ -220,24 +210,44 @@ TEST_F(CliBench, TablesAreRectangularAndExactMethodsAreExact) {
     EXPECT_GT(std::stod(row.at("mean_ms")), 0.0);
   }
   for (const char* name : {"fig43.csv", "second.csv", "budget.csv"}) {
-    const Csv t = read_csv(*dir_ / name);
+    const Csv t = read_csv(run.dir / name);
     EXPECT_FALSE(t.ragged) << name;
     EXPECT_FALSE(t.rows.empty()) << name;
   }
 }
 
-TEST_F(CliBench, MarkdownAndPlotsAreComplete) {
-  ASSERT_EQ(result_->status, 0) << result_->out;
-  const std::string md = slurp(*dir_ / "bench.md");
+void expect_markdown_and_plots(const QuickRun& run) {
+  ASSERT_EQ(run.result.status, 0) << run.result.out;
+  const std::string md = slurp(run.dir / "bench.md");
   for (const char* part : {"## Figure 4.2", "## Figure 4.3", "second test", "## Scaling", "## Time budget",
                            "| naive O(n²)", "![fps](fig42-fps.svg)"}) {
     EXPECT_NE(md.find(part), std::string::npos) << part;
   }
   for (const char* name : {"fig42-fps.svg", "fig42-speedup.svg", "scaling.svg", "budget.svg"}) {
-    const std::string svg = slurp(*dir_ / name);
+    const std::string svg = slurp(run.dir / name);
     EXPECT_EQ(svg.rfind("<svg xmlns=\"http://www.w3.org/2000/svg\"", 0), 0u) << name;
     EXPECT_NE(svg.find("</svg>\n"), std::string::npos) << name;
     EXPECT_NE(svg.find("<polyline"), std::string::npos) << name << " has no data line";
+  }
+}
+
+TEST(CliBench, QuickRunWritesWellFormedCoherentOutputs) {
+  const QuickRun run;
+  {
+    SCOPED_TRACE("outputs");
+    expect_every_output(run);
+  }
+  {
+    SCOPED_TRACE("json");
+    expect_well_formed_json(run);
+  }
+  {
+    SCOPED_TRACE("tables");
+    expect_coherent_tables(run);
+  }
+  {
+    SCOPED_TRACE("markdown and plots");
+    expect_markdown_and_plots(run);
   }
 }
 
