@@ -164,14 +164,9 @@ class PairEngine {
   const std::vector<PrimitivePair>& colliding_pairs() const { return colliding_; }
   const EngineStats& stats() const { return stats_; }
 
-  /// One frame: converge the kept pairs, top up with random draws, propagate. The detector
-  /// runs each phase for every pair type before the next phase, so that under a time budget
-  /// every type keeps its pairs before any type draws or propagates.
-  void run_frame(Context& ctx, const EngineConfig& config, std::mt19937_64& rng) {
-    begin_frame(ctx, config);
-    draw(ctx, rng);
-    propagate_all(ctx);
-  }
+  // One frame is three phases — converge the kept pairs, top up with random draws, propagate —
+  // that the detector runs for every pair type before the next phase, so that under a time
+  // budget every type keeps its pairs before any type draws or propagates.
 
   /// Phase 1: resets the per-frame tables and converges the pairs kept from the last frame.
   void begin_frame(Context& ctx, const EngineConfig& config) {
