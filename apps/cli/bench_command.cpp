@@ -209,13 +209,8 @@ BinFigures bin_figures(const Timing& t, const Timing& naive, const std::vector<d
     sum += t.ms[i];
     naive_sum += naive.ms[i];
     if (!t.match.empty()) {
-      const ContactMatch& m = t.match[i];
-      f.total.reference += m.reference;
-      f.total.found += m.found;
-      f.total.missed += m.missed;
-      f.total.false_contacts += m.false_contacts;
-      f.total.reported += m.reported;
-      f.max_missed = std::max(f.max_missed, m.missed);
+      f.total += t.match[i];
+      f.max_missed = std::max(f.max_missed, t.match[i].missed);
     }
   }
   if (f.frames) {
@@ -227,13 +222,7 @@ BinFigures bin_figures(const Timing& t, const Timing& naive, const std::vector<d
 
 ContactMatch sum_matches(const std::vector<ContactMatch>& matches) {
   ContactMatch total;
-  for (const ContactMatch& m : matches) {
-    total.reference += m.reference;
-    total.found += m.found;
-    total.missed += m.missed;
-    total.false_contacts += m.false_contacts;
-    total.reported += m.reported;
-  }
+  for (const ContactMatch& m : matches) total += m;
   return total;
 }
 

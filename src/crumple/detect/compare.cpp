@@ -160,11 +160,7 @@ ComparisonSummary compare_impl(Detector& method, const FrameSource& frames,
     const ContactSet& ref = reference(i, previous, current, frame.reference_ms);
     frame.match = match_contacts(got, ref);
     frame.stats = method.stats();
-    summary.total.reference += frame.match.reference;
-    summary.total.found += frame.match.found;
-    summary.total.missed += frame.match.missed;
-    summary.total.false_contacts += frame.match.false_contacts;
-    summary.total.reported += frame.match.reported;
+    summary.total += frame.match;
     summary.min_recall = std::min(summary.min_recall, frame.match.recall());
     ms_sum += frame.ms;
     ref_sum += frame.reference_ms;

@@ -95,6 +95,15 @@ struct ContactMatch {
   double recall() const { return reference == 0 ? 1.0 : static_cast<double>(found) / reference; }
   /// found / reported (1 when nothing is reported).
   double precision() const { return reported == 0 ? 1.0 : static_cast<double>(found) / reported; }
+  /// Adds another frame's counts (totals over a sequence).
+  ContactMatch& operator+=(const ContactMatch& o) {
+    reference += o.reference;
+    found += o.found;
+    missed += o.missed;
+    false_contacts += o.false_contacts;
+    reported += o.reported;
+    return *this;
+  }
 };
 
 /// Matches two contact sets by identity (both sorted canonically, as detectors return them).
