@@ -90,7 +90,7 @@ StochasticParams StochasticParams::from_spec(const MethodSpec& spec) {
   p.draw = draw == 0 ? p.active : static_cast<int>(draw);
   p.near = spec.get_double("near", 2.0);
   if (!(std::isfinite(p.near) && p.near >= 1)) fail("near must be a finite multiple >= 1 of the thickness");
-  const long long steps = spec.get_int("steps", 64);
+  const long long steps = spec.get_int("steps", 16);
   if (steps < 1 || steps > 100'000'000) fail("steps must be in [1, 1e8], got " + std::to_string(steps));
   p.steps = static_cast<int>(steps);
   p.ef = spec.get_bool("ef", false);
@@ -453,6 +453,7 @@ void add_stats(DetectorStats& out, std::string_view prefix, const EngineStats& s
   put("cache_hits", s.cache_hits);
   put("propagation_visits", s.propagation_visits);
   put("colliding", s.colliding);
+  put("walking", s.walking);
   if (s.carried > 0) put("carried", s.carried);
   if (zone) {
     put("zone_tests", s.zone_tests);
@@ -476,7 +477,7 @@ struct StochasticDetector::Impl {
   std::mt19937_64 rng;
   /// The state before the last update (`save_state`).
   std::mt19937_64 saved_rng;
-  std::array<std::vector<PrimitivePair>, 4> saved_near;
+  std::array<std::vector<PrimitivePair>, 4> saved_near, saved_walking;
   bool saved = false;
 };
 
@@ -509,6 +510,16 @@ std::span<const PrimitivePair> StochasticDetector::near_pairs(PairType type) con
     case PairType::EE: return impl_->ee.near_pairs();
     case PairType::VF: return impl_->vf.near_pairs();
     case PairType::EF: return impl_->ef.near_pairs();
+  }
+  return {};
+}
+
+std::span<const PrimitivePair> StochasticDetector::walking_pairs(PairType type) const {
+  switch (type) {
+    case PairType::VV: return impl_->vv.walking_pairs();
+    case PairType::EE: return impl_->ee.walking_pairs();
+    case PairType::VF: return impl_->vf.walking_pairs();
+    case PairType::EF: return impl_->ef.walking_pairs();
   }
   return {};
 }
@@ -553,12 +564,15 @@ std::pair<Index, Index> pair_counts(const Topology& t, PairType type) {
 std::string StochasticDetector::save_state() const {
   const Impl& m = *impl_;
   std::ostringstream out;
-  out << "stochastic-state-1 " << params_.to_string() << " rng " << (m.saved ? m.saved_rng : m.rng);
-  for (std::size_t i = 0; i < kPairTypes.size(); ++i) {
-    const std::span<const PrimitivePair> pairs =
-        m.saved ? std::span<const PrimitivePair>(m.saved_near[i]) : near_pairs(kPairTypes[i]);
-    out << " " << to_string(kPairTypes[i]) << " " << pairs.size();
+  out << "stochastic-state-2 " << params_.to_string() << " rng " << (m.saved ? m.saved_rng : m.rng);
+  const auto put = [&](std::span<const PrimitivePair> pairs) {
+    out << " " << pairs.size();
     for (const PrimitivePair& p : pairs) out << " " << p.a << " " << p.b;
+  };
+  for (std::size_t i = 0; i < kPairTypes.size(); ++i) {
+    out << " " << to_string(kPairTypes[i]);
+    put(m.saved ? std::span<const PrimitivePair>(m.saved_near[i]) : near_pairs(kPairTypes[i]));
+    put(m.saved ? std::span<const PrimitivePair>(m.saved_walking[i]) : walking_pairs(kPairTypes[i]));
   }
   return out.str();
 }
@@ -572,35 +586,40 @@ void StochasticDetector::load_state(std::string_view text) {
   };
   std::string word, params, rng_word;
   in >> word >> params >> rng_word;
-  if (word != "stochastic-state-1") fail("expected 'stochastic-state-1', got '" + word + "'");
+  if (word != "stochastic-state-2") fail("expected 'stochastic-state-2', got '" + word + "'");
   if (params != params_.to_string()) {
     fail("saved with " + params + " but the detector is " + params_.to_string());
   }
   if (rng_word != "rng") fail("expected 'rng'");
   std::mt19937_64 rng;
   if (!(in >> rng)) fail("bad generator state");
-  std::array<std::vector<PrimitivePair>, 4> near;
+  std::array<std::vector<PrimitivePair>, 4> near, walking;
   for (std::size_t i = 0; i < kPairTypes.size(); ++i) {
-    std::size_t n = 0;
-    if (!(in >> word >> n) || word != to_string(kPairTypes[i])) {
-      fail("expected the '" + std::string(to_string(kPairTypes[i])) + "' pair list");
+    if (!(in >> word) || word != to_string(kPairTypes[i])) {
+      fail("expected the '" + std::string(to_string(kPairTypes[i])) + "' pair lists");
     }
     const auto [na, nb] = pair_counts(topo, kPairTypes[i]);
-    if (n > static_cast<std::size_t>(params_.active) + static_cast<std::size_t>(na)) fail("too many pairs");
-    for (std::size_t k = 0; k < n; ++k) {
-      PrimitivePair p;
-      if (!(in >> p.a >> p.b)) fail("truncated pair list");
-      if (p.a < 0 || p.a >= na || p.b < 0 || p.b >= nb) fail("pair out of range for this mesh");
-      near[i].push_back(p);
-    }
+    const auto read = [&](std::vector<PrimitivePair>& pairs) {
+      std::size_t n = 0;
+      if (!(in >> n)) fail("expected a pair count");
+      if (n > static_cast<std::size_t>(params_.active) + static_cast<std::size_t>(na)) fail("too many pairs");
+      for (std::size_t k = 0; k < n; ++k) {
+        PrimitivePair p;
+        if (!(in >> p.a >> p.b)) fail("truncated pair list");
+        if (p.a < 0 || p.a >= na || p.b < 0 || p.b >= nb) fail("pair out of range for this mesh");
+        pairs.push_back(p);
+      }
+    };
+    read(near[i]);
+    read(walking[i]);
   }
   if (in >> word) fail("unexpected '" + word + "' after the pair lists");
   Impl& m = *impl_;
   m.rng = rng;
-  m.vv.restore(std::move(near[0]));
-  m.ee.restore(std::move(near[1]));
-  m.vf.restore(std::move(near[2]));
-  m.ef.restore(std::move(near[3]));
+  m.vv.restore(std::move(near[0]), std::move(walking[0]));
+  m.ee.restore(std::move(near[1]), std::move(walking[1]));
+  m.vf.restore(std::move(near[2]), std::move(walking[2]));
+  m.ef.restore(std::move(near[3]), std::move(walking[3]));
   m.saved = false;
 }
 
@@ -612,8 +631,10 @@ void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, Con
   Impl& m = *impl_;
   m.saved_rng = m.rng;
   for (std::size_t i = 0; i < kPairTypes.size(); ++i) {
-    const auto pairs = near_pairs(kPairTypes[i]);
-    m.saved_near[i].assign(pairs.begin(), pairs.end());
+    const auto near_now = near_pairs(kPairTypes[i]);
+    const auto walking_now = walking_pairs(kPairTypes[i]);
+    m.saved_near[i].assign(near_now.begin(), near_now.end());
+    m.saved_walking[i].assign(walking_now.begin(), walking_now.end());
   }
   m.saved = true;
   m.sink.begin(topo, x, h * h, options().kinds, out);
@@ -660,6 +681,7 @@ void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, Con
     total.face_pairs += s.face_pairs;
     total.kdop_rejects += s.kdop_rejects;
     total.carried += s.carried;
+    total.walking += s.walking;
   };
 
   // Algorithm 3, phase by phase across the pair types (kept pairs, then draws, then

@@ -11,9 +11,10 @@
 ///   1. converges each kept near pair to a local minimum of distance (walking to neighbour pairs:
 ///      element 1 replaced by a topological neighbour, then element 2, ...); deletes it when it
 ///      ends farther than the near distance or merges into a pair already reached this frame
-///      (duplicate); records it when it collides;
-///   2. draws random pairs (at most `draw` per frame) while fewer than `active` pairs are kept,
-///      converging and filtering them the same way;
+///      (duplicate); records it when it collides; then takes last frame's unfinished walks
+///      further. A walk stops after `steps` moves and goes on next frame;
+///   2. draws random pairs (at most `draw` per frame) while fewer than `active` pairs are kept
+///      or walking, converging and filtering them the same way;
 ///   3. propagates from every colliding pair to neighbouring pairs.
 /// The cost per frame is bounded by the parameters (`active`, `draw`, `steps`) and by the size of
 /// the colliding regions (propagation), not by the mesh size.
@@ -79,9 +80,10 @@ struct StochasticParams {
   /// Near distance as a multiple of the thickness h: a converged pair farther than near·h is
   /// deleted. Must be >= 1. [near]
   Scalar near = 2;
-  /// Maximum convergence steps (moves) per pair and frame; a walk that does not reach a local
-  /// minimum within them is deleted (its collisions are still recorded). [steps]
-  int steps = 64;
+  /// Maximum convergence steps (moves) per pair and frame; a walk that has not reached a local
+  /// minimum after them stops where it is and goes on next frame (it counts among the `active`
+  /// pairs meanwhile). [steps]
+  int steps = 16;
   /// Also run the edge–face pair type (its VF/EE sub-contacts, and TT when asked), in every
   /// variant but `vertex`. Forced on when TT contacts are requested. [ef]
   bool ef = false;
@@ -118,7 +120,8 @@ struct PrimitivePair {
 
 /// The stochastic detector. Statistics of the last update (`stats()`), totals over pair types
 /// then per type with a `vv_`/`ee_`/`vf_`/`ef_` prefix: `drawn` (random pairs drawn), `kept`
-/// (near pairs kept for the next frame), `deleted` (too far, duplicate or not converged),
+/// (near pairs kept for the next frame), `walking` (walks carried to the next frame unfinished,
+/// after `steps` moves this frame), `deleted` (converged too far, or duplicate),
 /// `duplicates` (of which merged into another pair), `converge_steps` (moves),
 /// `distance_evals` (distance kernel calls), `cache_hits`, `propagation_visits` (neighbour
 /// pairs visited by propagation), `colliding` (colliding pairs recorded); for the vertex
@@ -138,11 +141,14 @@ class StochasticDetector final : public Detector {
   bool runs(PairType type) const;
   /// Near pairs kept after the last update, in a deterministic order.
   std::span<const PrimitivePair> near_pairs(PairType type) const;
+  /// Where the unfinished walks stand after the last update (they go on next frame).
+  std::span<const PrimitivePair> walking_pairs(PairType type) const;
   /// Colliding pairs of the last update (kept as state, Algorithm 3), in the order recorded.
   std::span<const PrimitivePair> colliding_pairs(PairType type) const;
 
-  /// `stochastic-state-1 <params> rng <generator state> vv N a b ... ee N ... vf N ... ef N ...`:
-  /// the generator and the kept near pairs before the last update (see `Detector::save_state`).
+  /// `stochastic-state-2 <params> rng <generator state> vv N a b ... M a b ... ee N ... M ... vf
+  /// ... ef ...`: the generator, and per pair type the N kept near pairs and the M unfinished
+  /// walks, as they were before the last update (see `Detector::save_state`).
   std::string save_state() const override;
   /// Checks that the saved parameters equal this detector's and every pair fits the topology.
   void load_state(std::string_view text) override;

@@ -115,6 +115,8 @@ struct EngineStats {
          zone_tests = 0, face_pairs = 0, kdop_rejects = 0;
   /// Kept pairs carried to the next frame without converging (time budget spent).
   double carried = 0;
+  /// Walks carried to the next frame unfinished (`steps` moves made this frame).
+  double walking = 0;
 };
 
 /// What a converged (or visited) pair is: colliding (contacts recorded) and/or near.
@@ -131,7 +133,7 @@ struct EngineConfig {
   Propagation propagation = Propagation::Linear;
   int active = 100;
   int draw = 100;
-  int steps = 64;
+  int steps = 16;
   /// Time budget of the frame (`StochasticParams::budget_ms`): past the deadline, kept pairs
   /// are carried over unconverged, and draws and propagation stop.
   bool has_deadline = false;
@@ -152,13 +154,18 @@ class PairEngine {
   /// Forgets all state (new topology).
   void reset() {
     near_.clear();
+    walking_.clear();
     colliding_.clear();
   }
 
+  /// Converged near pairs kept for the next frame.
   const std::vector<PrimitivePair>& near_pairs() const { return near_; }
-  /// Replaces the kept near pairs (a restored state; the caller validates them).
-  void restore(std::vector<PrimitivePair> near) {
+  /// Where the unfinished walks stand; they go on next frame.
+  const std::vector<PrimitivePair>& walking_pairs() const { return walking_; }
+  /// Replaces the kept pairs and walks (a restored state; the caller validates them).
+  void restore(std::vector<PrimitivePair> near, std::vector<PrimitivePair> walking) {
     near_ = std::move(near);
+    walking_ = std::move(walking);
     colliding_.clear();
   }
   const std::vector<PrimitivePair>& colliding_pairs() const { return colliding_; }
@@ -168,7 +175,8 @@ class PairEngine {
   // that the detector runs for every pair type before the next phase, so that under a time
   // budget every type keeps its pairs before any type draws or propagates.
 
-  /// Phase 1: resets the per-frame tables and converges the pairs kept from the last frame.
+  /// Phase 1: resets the per-frame tables, converges the pairs kept from the last frame, then
+  /// takes the unfinished walks further.
   void begin_frame(Context& ctx, const EngineConfig& config) {
     config_ = config;
     stats_ = {};
@@ -179,15 +187,21 @@ class PairEngine {
     colliding_.clear();
     previous_.swap(near_);
     near_.clear();
-    for (std::size_t i = 0; i < previous_.size(); ++i) {
-      if (out_of_time()) {  // carry the rest over as they are; they converge next frame
-        near_.insert(near_.end(), previous_.begin() + static_cast<std::ptrdiff_t>(i), previous_.end());
-        stats_.carried = static_cast<double>(previous_.size() - i);
-        break;
+    previous_walking_.swap(walking_);
+    walking_.clear();
+    const auto run = [&](const std::vector<PrimitivePair>& pairs, std::vector<PrimitivePair>& carry) {
+      for (std::size_t i = 0; i < pairs.size(); ++i) {
+        if (out_of_time()) {  // carry the rest over as they are; they go on next frame
+          carry.insert(carry.end(), pairs.begin() + static_cast<std::ptrdiff_t>(i), pairs.end());
+          stats_.carried += static_cast<double>(pairs.size() - i);
+          return;
+        }
+        process(ctx, pairs[i]);
       }
-      process(ctx, previous_[i]);
-    }
-    stats_.kept = static_cast<double>(near_.size());
+    };
+    run(previous_, near_);
+    run(previous_walking_, walking_);
+    count_kept();
   }
 
   /// Phase 2: random pairs while fewer than `active` are kept (at most `draw`).
@@ -197,7 +211,8 @@ class PairEngine {
     const Index nb = Traits::count_b(topo);
     if (na > 0 && nb > 0) {
       int drawn = 0;
-      while (static_cast<int>(near_.size()) < config_.active && drawn < config_.draw && !out_of_time()) {
+      while (static_cast<int>(near_.size() + walking_.size()) < config_.active && drawn < config_.draw &&
+             !out_of_time()) {
         ++drawn;
         const Index a = uniform_index(rng, na);
         const Index b = uniform_index(rng, nb);
@@ -206,7 +221,7 @@ class PairEngine {
       }
       stats_.drawn = drawn;
     }
-    stats_.kept = static_cast<double>(near_.size());
+    count_kept();
   }
 
   /// Phase 3: propagation from every colliding pair (the colliding list grows while it is
@@ -231,6 +246,11 @@ class PairEngine {
     return {a, b};
   }
   static std::uint64_t key(PrimitivePair p) { return pair_key(p.a, p.b); }
+
+  void count_kept() {
+    stats_.kept = static_cast<double>(near_.size());
+    stats_.walking = static_cast<double>(walking_.size());
+  }
 
   bool out_of_time() const {
     return config_.has_deadline && std::chrono::steady_clock::now() >= config_.deadline;
@@ -336,8 +356,9 @@ class PairEngine {
     }
   }
 
-  /// Converges a kept or drawn pair; keeps it when it is a near local minimum not reached by
-  /// another pair this frame.
+  /// Converges a kept, walking or drawn pair; keeps it when it is a near local minimum not
+  /// reached by another pair this frame, and carries it to the next frame when its walk is not
+  /// over (so that no walk costs more than `steps` moves per frame, on any mesh size).
   void process(Context& ctx, PrimitivePair p) {
     const WalkResult r = converge(ctx, p);
     if (r.status == Walk::Merged) {
@@ -346,11 +367,13 @@ class PairEngine {
       return;
     }
     const Verdict v = classify(ctx, r.pair, r.distance);
-    if (r.status == Walk::Capped || !v.near) {
+    if (r.status == Walk::Capped) {
+      walking_.push_back(r.pair);
+    } else if (v.near) {
+      near_.push_back(r.pair);
+    } else {
       ++stats_.deleted;
-      return;
     }
-    near_.push_back(r.pair);
   }
 
   /// Visits the neighbour pairs of a colliding pair (never the same pair twice in a frame).
@@ -381,7 +404,7 @@ class PairEngine {
 
   EngineConfig config_;
   EngineStats stats_;
-  std::vector<PrimitivePair> near_, previous_, colliding_;
+  std::vector<PrimitivePair> near_, previous_, walking_, previous_walking_, colliding_;
   PairTable cache_;    ///< distances computed this frame (direct and vertex variants)
   PairTable path_;     ///< pairs reached by a convergence this frame ("visited" hash set)
   PairTable prop_;     ///< pairs visited by propagation this frame
