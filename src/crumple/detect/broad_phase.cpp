@@ -58,8 +58,10 @@ void ExactDetector::on_topology() {
   const Topology& topo = topology();
   const Index nf = topo.num_faces();
   const Index nv = topo.num_vertices();
-  vertex_mask_.assign(static_cast<std::size_t>(nf), 0);
-  edge_mask_.assign(static_cast<std::size_t>(nf), 0);
+  // Ownership: each vertex and edge belongs to one of its faces (bit k of the masks: corner k,
+  // side k), so that a candidate face pair tests each feature pair once.
+  std::vector<std::uint8_t> vertex_mask_(static_cast<std::size_t>(nf), 0);
+  std::vector<std::uint8_t> edge_mask_(static_cast<std::size_t>(nf), 0);
   isolated_.clear();
   for (Index v = 0; v < nv; ++v) {
     const auto faces = topo.vertex_faces()[v];
@@ -105,6 +107,14 @@ void ExactDetector::on_topology() {
         }
       }
     }
+  }
+  packed_.assign(static_cast<std::size_t>(nf), PackedFace{});
+  for (Index f = 0; f < nf; ++f) {
+    PackedFace& pf = packed_[static_cast<std::size_t>(f)];
+    pf.v = topo.face(f);
+    pf.e = topo.face_edges(f);
+    pf.vertex_mask = vertex_mask_[static_cast<std::size_t>(f)];
+    pf.edge_mask = edge_mask_[static_cast<std::size_t>(f)];
   }
   on_exact_topology();
 }
@@ -188,28 +198,12 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   const Scalar h2 = h * h;
   const ContactKinds kinds = options().kinds;
   const std::size_t nf = static_cast<std::size_t>(topo.num_faces());
-  const std::size_t ne = static_cast<std::size_t>(topo.num_edges());
+  const Scalar half = pad / 2;
 
-  // Cheap-rejection boxes at the current positions.
-  face_pad_.resize(nf);
-  edge_half_.resize(ne);
   parallel_for_chunks(nf, threads, 4096, [&](std::size_t begin, std::size_t end) {
     for (std::size_t f = begin; f < end; ++f) {
-      const Face& t = topo.face(static_cast<Index>(f));
-      Box b = point_box(narrow::at(x, t[0]));
-      grow(b, narrow::at(x, t[1]));
-      grow(b, narrow::at(x, t[2]));
-      inflate(b, pad);
-      face_pad_[f] = b;
-    }
-  });
-  parallel_for_chunks(ne, threads, 4096, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t e = begin; e < end; ++e) {
-      const Edge& ed = topo.edge(static_cast<Index>(e));
-      Box b = point_box(narrow::at(x, ed[0]));
-      grow(b, narrow::at(x, ed[1]));
-      inflate(b, pad / 2);
-      edge_half_[e] = b;
+      PackedFace& pf = packed_[f];
+      for (int k = 0; k < 3; ++k) pf.p[static_cast<std::size_t>(k)] = narrow::at(x, pf.v[static_cast<std::size_t>(k)]);
     }
   });
 
@@ -224,34 +218,47 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     ee_tests += local.ee_tests;
     tt_tests += local.tt_tests;
   };
-  const auto test_vf = [&](Index v, Index g, LocalContacts& local) {
-    const Vec3& p = narrow::at(x, v);
-    if (!face_pad_[static_cast<std::size_t>(g)].contains(p)) return;
+  // Vertex v at p against face g: cheap rejections, then the shared kernel.
+  const auto test_vf = [&](const Vec3& p, Index v, const PackedFace& t, Index g, LocalContacts& local) {
+    // Box of the face padded by pad.
+    for (int i = 0; i < 3; ++i) {
+      const Scalar lo = std::min({t.p[0][i], t.p[1][i], t.p[2][i]}) - pad;
+      const Scalar hi = std::max({t.p[0][i], t.p[1][i], t.p[2][i]}) + pad;
+      if (!(lo <= p[i] && p[i] <= hi)) return;
+    }
     // Plane rejection: dist(p, triangle) >= dist(p, plane) = |(p - a) . n| / |n|. Rejected only
     // beyond pad plus a bound on the rounding of the dot product (degenerate n: never).
-    const Face& t = topo.face(g);
-    const Vec3& a = narrow::at(x, t[0]);
-    const Vec3 e1 = narrow::at(x, t[1]) - a, e2 = narrow::at(x, t[2]) - a, w = p - a;
+    const Vec3& a = t.p[0];
+    const Vec3 e1 = t.p[1] - a, e2 = t.p[2] - a, w = p - a;
     const Vec3 n = e1.cross(e2);
     const Scalar wn = std::abs(w.dot(n));
     if (wn > pad * n.norm() + 1e-13 * std::sqrt(w.squaredNorm() * e1.squaredNorm() * e2.squaredNorm())) return;
     ++local.vf_tests;
     if (auto c = narrow::vertex_face(x, topo, v, g, h2)) local.set.vf.push_back(*c);
   };
-  const auto test_ee = [&](Index e0, Index e1, LocalContacts& local) {  // e0 < e1
-    if (!edge_half_[static_cast<std::size_t>(e0)].overlaps(edge_half_[static_cast<std::size_t>(e1)])) return;
+  // Edges e0 = (p0, p1) and e1 = (q0, q1), any order.
+  const auto test_ee = [&](const Vec3& p0, const Vec3& p1, Index e0, const Vec3& q0, const Vec3& q1, Index e1,
+                           LocalContacts& local) {
+    // Boxes of the edges padded by pad / 2 overlap.
+    for (int i = 0; i < 3; ++i) {
+      if (!(std::min(p0[i], p1[i]) - half <= std::max(q0[i], q1[i]) + half &&
+            std::min(q0[i], q1[i]) - half <= std::max(p0[i], p1[i]) + half)) {
+        return;
+      }
+    }
     // Line rejection: dist(segments) >= dist(lines) = |w . (d0 x d1)| / |d0 x d1|, with the
     // same rounding guard (parallel edges: never rejected here).
-    const Edge& ea = topo.edge(e0);
-    const Edge& eb = topo.edge(e1);
-    const Vec3& p0 = narrow::at(x, ea[0]);
-    const Vec3 d0 = narrow::at(x, ea[1]) - p0, d1 = narrow::at(x, eb[1]) - narrow::at(x, eb[0]);
-    const Vec3 w = narrow::at(x, eb[0]) - p0;
+    const Vec3 d0 = p1 - p0, d1 = q1 - q0, w = q0 - p0;
     const Vec3 n = d0.cross(d1);
     const Scalar wn = std::abs(w.dot(n));
     if (wn > pad * n.norm() + 1e-13 * std::sqrt(w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm())) return;
     ++local.ee_tests;
-    if (auto c = narrow::edge_edge(x, topo, e0, e1, h2)) local.set.ee.push_back(*c);
+    if (auto c = narrow::edge_edge(x, topo, std::min(e0, e1), std::max(e0, e1), h2)) local.set.ee.push_back(*c);
+  };
+  const auto test_edge_ids = [&](Index e0, Index e1, LocalContacts& local) {
+    const Edge& a = topo.edge(e0);
+    const Edge& b = topo.edge(e1);
+    test_ee(narrow::at(x, a[0]), narrow::at(x, a[1]), e0, narrow::at(x, b[0]), narrow::at(x, b[1]), e1, local);
   };
 
   // 1. Broad-phase candidates (faces sharing no vertex).
@@ -265,41 +272,39 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
         std::upper_bound(offsets.begin(), offsets.end(), begin) - offsets.begin() - 1);
     for (std::size_t i = begin; i < end; ++i) {
       while (i >= offsets[c + 1]) ++c;
-      const FacePair& p = chunks[c][i - offsets[c]];
-      const Index f = p[0], g = p[1];
-      const Face& a = topo.face(f);
-      const Face& b = topo.face(g);
+      const FacePair& pair = chunks[c][i - offsets[c]];
+      const Index f = pair[0], g = pair[1];
+      const PackedFace& a = packed_[static_cast<std::size_t>(f)];
+      const PackedFace& b = packed_[static_cast<std::size_t>(g)];
       if (kinds.vf) {
-        const unsigned mf = vertex_mask_[static_cast<std::size_t>(f)];
-        const unsigned mg = vertex_mask_[static_cast<std::size_t>(g)];
-        for (int k = 0; k < 3; ++k) {
-          if (mf >> k & 1u) test_vf(a[k], g, local);
-          if (mg >> k & 1u) test_vf(b[k], f, local);
+        for (std::size_t k = 0; k < 3; ++k) {
+          if (a.vertex_mask >> k & 1u) test_vf(a.p[k], a.v[k], b, g, local);
+          if (b.vertex_mask >> k & 1u) test_vf(b.p[k], b.v[k], a, f, local);
         }
       }
-      if (kinds.ee) {
-        const unsigned mf = edge_mask_[static_cast<std::size_t>(f)];
-        const unsigned mg = edge_mask_[static_cast<std::size_t>(g)];
-        if (mf != 0 && mg != 0) {
-          const auto& ea = topo.face_edges(f);
-          const auto& eb = topo.face_edges(g);
-          for (int i2 = 0; i2 < 3; ++i2) {
-            if (!(mf >> i2 & 1u)) continue;
-            for (int j = 0; j < 3; ++j) {
-              if (!(mg >> j & 1u)) continue;
-              test_ee(std::min(ea[i2], eb[j]), std::max(ea[i2], eb[j]), local);
-            }
+      if (kinds.ee && a.edge_mask != 0 && b.edge_mask != 0) {
+        for (std::size_t i2 = 0; i2 < 3; ++i2) {
+          if (!(a.edge_mask >> i2 & 1u)) continue;
+          for (std::size_t j = 0; j < 3; ++j) {
+            if (!(b.edge_mask >> j & 1u)) continue;
+            test_ee(a.p[i2], a.p[(i2 + 1) % 3], a.e[i2], b.p[j], b.p[(j + 1) % 3], b.e[j], local);
           }
         }
       }
-      if (kinds.tt && face_pad_[static_cast<std::size_t>(f)].overlaps(face_pad_[static_cast<std::size_t>(g)])) {
-        ++local.tt_tests;
-        const Index f0 = std::min(f, g), f1 = std::max(f, g);
-        const Face& s = topo.face(f0);
-        const Face& t = topo.face(f1);
-        if (geometry::triangles_intersect(narrow::at(x, s[0]), narrow::at(x, s[1]), narrow::at(x, s[2]),
-                                          narrow::at(x, t[0]), narrow::at(x, t[1]), narrow::at(x, t[2]))) {
-          local.set.tt.push_back({f0, f1});
+      if (kinds.tt) {
+        // Boxes of the faces padded by pad overlap.
+        bool apart = false;
+        for (int k = 0; k < 3; ++k) {
+          apart |= std::min({a.p[0][k], a.p[1][k], a.p[2][k]}) - pad > std::max({b.p[0][k], b.p[1][k], b.p[2][k]}) + pad;
+          apart |= std::min({b.p[0][k], b.p[1][k], b.p[2][k]}) - pad > std::max({a.p[0][k], a.p[1][k], a.p[2][k]}) + pad;
+        }
+        if (!apart) {
+          ++local.tt_tests;
+          const PackedFace& s = f < g ? a : b;
+          const PackedFace& t = f < g ? b : a;
+          if (geometry::triangles_intersect(s.p[0], s.p[1], s.p[2], t.p[0], t.p[1], t.p[2])) {
+            local.set.tt.push_back({std::min(f, g), std::max(f, g)});
+          }
         }
       }
     }
@@ -310,14 +315,20 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   if (kinds.vf) {
     parallel_for_chunks(orphan_vf_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
       LocalContacts local;
-      for (std::size_t i = begin; i < end; ++i) test_vf(orphan_vf_[i][0], orphan_vf_[i][1], local);
+      for (std::size_t i = begin; i < end; ++i) {
+        const auto [v, g] = orphan_vf_[i];
+        test_vf(narrow::at(x, v), v, packed_[static_cast<std::size_t>(g)], g, local);
+      }
       merge(local);
     });
     // 3. Isolated vertices against every face.
     parallel_for_chunks(isolated_.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
       LocalContacts local;
       for (std::size_t i = begin; i < end; ++i) {
-        for (Index g = 0; g < static_cast<Index>(nf); ++g) test_vf(isolated_[i], g, local);
+        const Index v = isolated_[i];
+        for (Index g = 0; g < static_cast<Index>(nf); ++g) {
+          test_vf(narrow::at(x, v), v, packed_[static_cast<std::size_t>(g)], g, local);
+        }
       }
       merge(local);
     });
@@ -325,7 +336,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   if (kinds.ee) {
     parallel_for_chunks(orphan_ee_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
       LocalContacts local;
-      for (std::size_t i = begin; i < end; ++i) test_ee(orphan_ee_[i][0], orphan_ee_[i][1], local);
+      for (std::size_t i = begin; i < end; ++i) test_edge_ids(orphan_ee_[i][0], orphan_ee_[i][1], local);
       merge(local);
     });
   }

@@ -134,15 +134,19 @@ class ExactDetector : public Detector {
   ExactParams params_;
   bool overflowed_ = false;
   CandidateBuffer candidates_;
-  // Ownership: bit k of vertex_mask_[f] set when f owns its corner k; edge_mask_[f] likewise
-  // for its side k.
-  std::vector<std::uint8_t> vertex_mask_, edge_mask_;
   std::vector<std::array<Index, 2>> orphan_vf_;  ///< (vertex, face) sub-pairs of adjacent faces
   std::vector<std::array<Index, 2>> orphan_ee_;  ///< (edge, edge), first < second
   std::vector<Index> isolated_;                  ///< vertices used by no face
-  // Per-frame scratch: face boxes padded by `pad` (current positions), edge boxes padded by
-  // pad / 2.
-  std::vector<Box> face_pad_, edge_half_;
+  /// What the narrow phase reads of one face, packed so that a candidate pair touches two
+  /// records (the corners' positions are copied in every frame).
+  struct PackedFace {
+    std::array<Vec3, 3> p;         ///< corner positions
+    Face v;                        ///< corner ids
+    std::array<Index, 3> e;        ///< side ids (side k joins corners k and k+1)
+    std::uint8_t vertex_mask = 0;  ///< bit k: this face owns corner k
+    std::uint8_t edge_mask = 0;    ///< bit k: this face owns side k
+  };
+  std::vector<PackedFace> packed_;
 };
 
 }  // namespace crumple

@@ -335,6 +335,8 @@ class KdopTree final : public KdopDetector::Tree {
         vertex_dops_[v] = d;
       }
     });
+    swept_ = swept;
+    if (swept) now_dops_.resize(order_.size());
     parallel_for_chunks(order_.size(), in.threads, 4096, [&](std::size_t begin, std::size_t end) {
       for (std::size_t s = begin; s < end; ++s) {
         const Face& t = slot_faces_[s];
@@ -342,6 +344,12 @@ class KdopTree final : public KdopDetector::Tree {
         d.merge(vertex_dops_[static_cast<std::size_t>(t[1])]);
         d.merge(vertex_dops_[static_cast<std::size_t>(t[2])]);
         face_dops_[s] = d;
+        if (swept) {
+          Dop now;
+          for (const Index v : t) now.extend(in.positions[static_cast<std::size_t>(v)]);
+          now.inflate(in.radius);
+          now_dops_[s] = now;
+        }
       }
     });
     (void)topo;
@@ -380,15 +388,26 @@ class KdopTree final : public KdopDetector::Tree {
   }
 
   // ---- traversal ---------------------------------------------------------------------------
+  /// Slots i, j are a candidate face pair: their boxes overlap and they share no corner. The
+  /// tree's boxes cover the motion (the hierarchy serves swept queries); contacts are proximity
+  /// at the current positions, so a pair whose boxes of the current positions are apart (each
+  /// inflated by half the pad, like the swept ones) has none and is not a candidate.
+  bool candidate(Index i, Index j) const {
+    const auto si = static_cast<std::size_t>(i), sj = static_cast<std::size_t>(j);
+    if (!face_dops_[si].overlaps(face_dops_[sj])) return false;
+    if (swept_ && !now_dops_[si].overlaps(now_dops_[sj])) return false;
+    return !faces_share_vertex(slot_faces_[si], slot_faces_[sj]);
+  }
+
+  void emit(Index i, Index j, std::vector<FacePair>& out) const {
+    const Index f = order_[static_cast<std::size_t>(i)], g = order_[static_cast<std::size_t>(j)];
+    out.push_back({std::min(f, g), std::max(f, g)});
+  }
+
   void emit_leaf_pair(const Node& a, const Node& b, std::vector<FacePair>& out) const {
     for (Index i = a.first; i < a.first + a.count; ++i) {
-      const Dop& di = face_dops_[static_cast<std::size_t>(i)];
-      const Face& fi = slot_faces_[static_cast<std::size_t>(i)];
       for (Index j = b.first; j < b.first + b.count; ++j) {
-        if (!di.overlaps(face_dops_[static_cast<std::size_t>(j)])) continue;
-        if (faces_share_vertex(fi, slot_faces_[static_cast<std::size_t>(j)])) continue;
-        const Index f = order_[static_cast<std::size_t>(i)], g = order_[static_cast<std::size_t>(j)];
-        out.push_back({std::min(f, g), std::max(f, g)});
+        if (candidate(i, j)) emit(i, j, out);
       }
     }
   }
@@ -398,13 +417,8 @@ class KdopTree final : public KdopDetector::Tree {
     const Node& node = nodes_[static_cast<std::size_t>(n)];
     if (node.leaf) {
       for (Index i = node.first; i < node.first + node.count; ++i) {
-        const Dop& di = face_dops_[static_cast<std::size_t>(i)];
-        const Face& fi = slot_faces_[static_cast<std::size_t>(i)];
         for (Index j = i + 1; j < node.first + node.count; ++j) {
-          if (!di.overlaps(face_dops_[static_cast<std::size_t>(j)])) continue;
-          if (faces_share_vertex(fi, slot_faces_[static_cast<std::size_t>(j)])) continue;
-          const Index f = order_[static_cast<std::size_t>(i)], g = order_[static_cast<std::size_t>(j)];
-          out.push_back({std::min(f, g), std::max(f, g)});
+          if (candidate(i, j)) emit(i, j, out);
         }
       }
       return;
@@ -495,6 +509,8 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<Face> slot_faces_;  ///< corners of each slot's face (adjacency test locality)
   std::vector<Dop> face_dops_;    ///< per slot
   std::vector<Dop> vertex_dops_;  ///< per vertex, swept and inflated
+  std::vector<Dop> now_dops_;     ///< per slot, current positions only, inflated (when swept)
+  bool swept_ = false;            ///< this frame's boxes cover the motion
   std::vector<std::array<Index, 2>> levels_;  ///< node range of each depth
   double built_quality_ = 0;
   // Normal-cone culling (intersection-only frames).
