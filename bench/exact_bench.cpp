@@ -155,7 +155,7 @@ int reference(const std::string& data, const std::string& out_path, int threads,
 struct Row {
   std::string scene, method, query;
   int threads = 0;
-  double ms = 0, cpu_ms = 0, refit_ms = 0, traversal_ms = 0, narrow_ms = 0, candidates = 0;
+  double ms = 0, cpu_ms = 0, refit_ms = 0, traversal_ms = 0, narrow_ms = 0, sort_ms = 0, candidates = 0;
   std::size_t vf = 0, ee = 0, tt = 0;
 };
 
@@ -192,6 +192,7 @@ int bench(const std::string& data, const std::vector<std::string>& methods, cons
             row.refit_ms = d->stats().get("refit_ms");
             row.traversal_ms = d->stats().get("traversal_ms");
             row.narrow_ms = d->stats().get("narrow_ms");
+            row.sort_ms = d->stats().get("sort_ms");
             row.candidates = d->stats().get("candidates");
             row.vf = out.vf.size();
             row.ee = out.ee.size();
@@ -200,9 +201,9 @@ int bench(const std::string& data, const std::vector<std::string>& methods, cons
           }
           std::sort(runs.begin(), runs.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
           const Row& med = runs[runs.size() / 2].second;
-          std::fprintf(stderr, "%-18s %-6s %-24s %d thr  %9.2f ms  cpu %9.2f ms  (refit %.2f, traversal %.2f, narrow %.2f; %.0f candidates; vf %zu ee %zu tt %zu)\n",
+          std::fprintf(stderr, "%-18s %-6s %-24s %d thr  %9.2f ms  cpu %9.2f ms  (refit %.2f, traversal %.2f, narrow %.2f, sort %.2f; %.0f candidates; vf %zu ee %zu tt %zu)\n",
                        s.name, qname.c_str(), method.c_str(), threads, med.ms, med.cpu_ms, med.refit_ms,
-                       med.traversal_ms, med.narrow_ms, med.candidates, med.vf, med.ee, med.tt);
+                       med.traversal_ms, med.narrow_ms, med.sort_ms, med.candidates, med.vf, med.ee, med.tt);
           rows.push_back(med);
         }
       }
@@ -224,6 +225,7 @@ int bench(const std::string& data, const std::vector<std::string>& methods, cons
                  .add("refit_ms", r.refit_ms)
                  .add("traversal_ms", r.traversal_ms)
                  .add("narrow_ms", r.narrow_ms)
+                 .add("sort_ms", r.sort_ms)
                  .add("candidates", r.candidates)
                  .add("vf", r.vf)
                  .add("ee", r.ee)
@@ -235,13 +237,13 @@ int bench(const std::string& data, const std::vector<std::string>& methods, cons
   }
   if (!md_path.empty()) {
     std::ofstream out(md_path);
-    out << "| scene | query | method | threads | total ms | CPU ms | refit ms | traversal ms | narrow ms | candidates | VF | EE | TT |\n";
-    out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    out << "| scene | query | method | threads | total ms | CPU ms | refit ms | traversal ms | narrow ms | sort ms | candidates | VF | EE | TT |\n";
+    out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for (const Row& r : rows) {
       char line[512];
-      std::snprintf(line, sizeof line, "| %s | %s | `%s` | %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.0f | %zu | %zu | %zu |\n",
+      std::snprintf(line, sizeof line, "| %s | %s | `%s` | %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.0f | %zu | %zu | %zu |\n",
                     r.scene.c_str(), r.query.c_str(), r.method.c_str(), r.threads, r.ms, r.cpu_ms, r.refit_ms,
-                    r.traversal_ms, r.narrow_ms, r.candidates, r.vf, r.ee, r.tt);
+                    r.traversal_ms, r.narrow_ms, r.sort_ms, r.candidates, r.vf, r.ee, r.tt);
       out << line;
     }
   }

@@ -65,22 +65,39 @@ struct FrameInput {
 /// Thread-safe sink of candidate chunks (each task appends its own vector once).
 class CandidateBuffer {
  public:
-  void add(std::vector<FacePair>&& chunk) {
-    if (chunk.empty()) return;
+  /// An empty chunk to fill, reusing the storage of a cleared one when there is some (a frame
+  /// holds up to millions of candidates: fresh allocations of that size cost page faults).
+  std::vector<FacePair> take() {
     const std::lock_guard lock(mutex_);
+    if (spare_.empty()) return {};
+    std::vector<FacePair> chunk = std::move(spare_.back());
+    spare_.pop_back();
+    return chunk;
+  }
+  void add(std::vector<FacePair>&& chunk) {
+    const std::lock_guard lock(mutex_);
+    if (chunk.empty()) {
+      if (chunk.capacity() > 0) spare_.push_back(std::move(chunk));
+      return;
+    }
     total_ += chunk.size();
     chunks_.push_back(std::move(chunk));
   }
   std::size_t total() const { return total_; }
   const std::vector<std::vector<FacePair>>& chunks() const { return chunks_; }
+  /// Forgets the candidates, keeping the chunks' storage for `take`.
   void clear() {
+    for (auto& chunk : chunks_) {
+      chunk.clear();
+      spare_.push_back(std::move(chunk));
+    }
     chunks_.clear();
     total_ = 0;
   }
 
  private:
   std::mutex mutex_;
-  std::vector<std::vector<FacePair>> chunks_;
+  std::vector<std::vector<FacePair>> chunks_, spare_;
   std::size_t total_ = 0;
 };
 

@@ -146,7 +146,7 @@ void HashDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
   const auto t1 = std::chrono::steady_clock::now();
   // Bucket-major: pairs of entries of one bucket that are the same cell (sequential access).
   parallel_for_chunks(n, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
-    std::vector<FacePair> local;
+    std::vector<FacePair> local = out.take();
     for (std::size_t b = begin; b < end; ++b) {
       const std::uint32_t s0 = bucket_start_[b], s1 = bucket_start_[b + 1];
       if (s1 - s0 < 2) continue;

@@ -41,7 +41,7 @@ KdopParams KdopParams::from_spec(const MethodSpec& spec) {
   if (!(p.rebuild >= 1)) {
     throw InputError("method " + spec.to_string() + ": rebuild must be >= 1");
   }
-  p.sweep = spec.get_bool("sweep", true);
+  p.sweep = spec.get_bool("sweep", false);
   p.cones = spec.get_bool("cones", false);
   p.exact = ExactParams::from_spec(spec);
   return p;
@@ -489,7 +489,7 @@ class KdopTree final : public KdopDetector::Tree {
     }
     stats.set("tasks", static_cast<double>(tasks.size()));
     parallel_for_chunks(tasks.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
-      std::vector<FacePair> local;
+      std::vector<FacePair> local = out.take();
       for (std::size_t i = begin; i < end; ++i) {
         const auto [a, b] = tasks[i];
         if (a == b) {

@@ -43,10 +43,11 @@ struct KdopParams {
   int arity = 4;         ///< children per internal node: 2, 4 or 8
   int leaf = 4;          ///< maximum faces per leaf (1..64)
   double rebuild = 2.0;  ///< rebuild when the quality metric grows past this factor (>= 1)
-  /// Leaves cover the motion from the previous positions (when given). The contact set is
-  /// the same either way (contacts are proximity at the current positions); off gives
-  /// tighter boxes when the motion is large compared with h.
-  bool sweep = true;
+  /// The hierarchy covers the motion from the previous positions (when given): the thesis'
+  /// motion-oriented inflation. The contact set is the same either way (contacts are proximity
+  /// at the current positions, and leaf pairs are also checked with boxes of the current
+  /// positions), so it only costs traversal time; off by default (docs/exact-detectors.md).
+  bool sweep = false;
   /// Normal-cone culling of self-tests for intersection-only queries (see the file comment).
   /// Off by default: on the real meshes it skips under 1% of the candidates and costs more
   /// than it saves (docs/exact-detectors.md).

@@ -35,9 +35,10 @@ constexpr std::array<ParamInfo, 8> kKdopParams{{
     {"arity", "4", "2 | 4 | 8: children per node"},
     {"leaf", "4", "maximum faces per leaf (1..64)"},
     {"rebuild", "2", "rebuild the tree when the refit quality metric grows past this factor"},
-    {"sweep", "on",
-     "on | off: leaves also cover the motion from the previous frame (same contacts; off is "
-     "tighter under large motion)"},
+    {"sweep", "off",
+     "on | off: the hierarchy also covers the motion from the previous frame (the thesis' "
+     "motion-oriented inflation; same contacts, which are proximity at the current positions, "
+     "so off is faster)"},
     {"cones", "off",
      "on | off: skip the self-test of patches that provably cannot intersect themselves "
      "(normals in a cone, star-shaped contour); intersection-only queries (--kinds tt)"},

@@ -104,7 +104,7 @@ void SapDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
   const auto t1 = std::chrono::steady_clock::now();
   const std::size_t a1 = static_cast<std::size_t>((ax + 1) % 3), a2 = static_cast<std::size_t>((ax + 2) % 3);
   parallel_for_chunks(nf, in.threads, 1024, [&](std::size_t begin, std::size_t end) {
-    std::vector<FacePair> local;
+    std::vector<FacePair> local = out.take();
     for (std::size_t i = begin; i < end; ++i) {
       const Box& bi = sorted_boxes_[i];
       const Scalar hi = bi.hi[static_cast<std::size_t>(ax)];
