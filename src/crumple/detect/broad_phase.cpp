@@ -222,6 +222,14 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     ee_tests += local.ee_tests;
     tt_tests += local.tt_tests;
   };
+  // |wn| / |n| > pad with a margin for the rounding of wn (|wn| <= sqrt(scale)): the distance
+  // to a plane or between two lines exceeds pad. The square roots are taken only when the
+  // squares say it may (most pairs that reach this test are kept).
+  const auto beyond = [pad](Scalar wn, const Vec3& n, Scalar scale) {
+    const Scalar nn = n.squaredNorm();
+    if (!(wn * wn > pad * pad * nn)) return false;
+    return std::abs(wn) > pad * std::sqrt(nn) + 1e-13 * std::sqrt(scale);
+  };
   // Vertex v at p against face g: cheap rejections, then the shared kernel.
   const auto test_vf = [&](const Vec3& p, Index v, const PackedFace& t, Index g, LocalContacts& local) {
     // Box of the face padded by pad.
@@ -235,8 +243,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     const Vec3& a = t.p[0];
     const Vec3 e1 = t.p[1] - a, e2 = t.p[2] - a, w = p - a;
     const Vec3 n = e1.cross(e2);
-    const Scalar wn = std::abs(w.dot(n));
-    if (wn > pad * n.norm() + 1e-13 * std::sqrt(w.squaredNorm() * e1.squaredNorm() * e2.squaredNorm())) return;
+    if (beyond(w.dot(n), n, w.squaredNorm() * e1.squaredNorm() * e2.squaredNorm())) return;
     ++local.vf_tests;
     if (auto c = narrow::vertex_face(x, topo, v, g, h2)) local.set.vf.push_back(*c);
   };
@@ -254,8 +261,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     // same rounding guard (parallel edges: never rejected here).
     const Vec3 d0 = p1 - p0, d1 = q1 - q0, w = q0 - p0;
     const Vec3 n = d0.cross(d1);
-    const Scalar wn = std::abs(w.dot(n));
-    if (wn > pad * n.norm() + 1e-13 * std::sqrt(w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm())) return;
+    if (beyond(w.dot(n), n, w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm())) return;
     ++local.ee_tests;
     if (auto c = narrow::edge_edge(x, topo, std::min(e0, e1), std::max(e0, e1), h2)) local.set.ee.push_back(*c);
   };
