@@ -2,7 +2,6 @@
 #include "bench_suite.hpp"
 
 #include <crumple/core/error.hpp>
-#include <crumple/sim/scene.hpp>
 
 #include <algorithm>
 #include <array>
@@ -13,30 +12,6 @@
 #include <thread>
 
 namespace crumple::cli::bench {
-
-Recording record_scene(const std::string& spec, std::int64_t frames, std::uint64_t seed,
-                       const std::function<void(std::int64_t)>& on_frame) {
-  sim::Scene scene = sim::make_scene(sim::SceneSpec::parse(spec), seed);
-  sim::Settings settings = scene.settings;
-  settings.method = MethodSpec::parse("kdop");
-  settings.detector.threads = 1;
-  Recording r;
-  r.spec = scene.spec;
-  r.thickness = settings.detector.thickness;
-  const auto faces = scene.model.topology().faces();
-  r.mesh = TriMesh::create(scene.state.x, std::vector<Face>(faces.begin(), faces.end()));
-  sim::Simulation simulation(std::move(scene.model), std::move(scene.state), scene.field,
-                             std::move(scene.obstacles), std::move(scene.kinematics), settings);
-  r.frames.push_back(simulation.state().x);
-  r.share.push_back(simulation.current_stats().collision_share);
-  for (std::int64_t k = 0; k < frames; ++k) {
-    const sim::FrameStats stats = simulation.advance_frame();
-    r.frames.push_back(simulation.state().x);
-    r.share.push_back(stats.collision_share);
-    if (on_frame) on_frame(k + 1);
-  }
-  return r;
-}
 
 Timing time_method(std::shared_ptr<const Topology> topology, const std::vector<Positions>& frames,
                    const std::string& spec, const DetectorOptions& options, const TimingPlan& plan,

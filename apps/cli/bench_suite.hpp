@@ -6,6 +6,7 @@
 #include <crumple/detect/compare.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/mesh/mesh.hpp>
+#include <crumple/sim/scene.hpp>
 
 #include <cstddef>
 #include <cstdint>
@@ -16,20 +17,8 @@
 
 namespace crumple::cli::bench {
 
-/// Frames of one simulated scene, with the share of edges in collision of each frame.
-struct Recording {
-  std::string spec;  ///< canonical scene spec
-  TriMesh mesh;      ///< topology and the first frame
-  std::vector<Positions> frames;
-  std::vector<double> share;  ///< `sim::collision_share` of each frame (VF + EE contacts)
-  Scalar thickness = 0;       ///< the scene's contact thickness
-};
-
-/// Simulates `spec` for `frames` frames (frame 0 is the initial state, so `frames + 1` are
-/// kept). Detection during recording uses the exact `kdop` detector (its contact set is
-/// naive's, checked by the tests), only to measure the collision share.
-Recording record_scene(const std::string& spec, std::int64_t frames, std::uint64_t seed,
-                       const std::function<void(std::int64_t)>& on_frame = {});
+using sim::Recording;
+using sim::record_scene;
 
 /// One method timed on a sequence of frames.
 struct Timing {

@@ -17,19 +17,9 @@ namespace {
 /// Frames 120..219 of the default hanging cloth (seed 1): 15% to 55% of the edges in collision.
 const VectorFrames& frames() {
   static const VectorFrames f = [] {
-    sim::Scene scene = sim::make_scene(sim::SceneSpec::parse("hanging-cloth"), 1);
-    sim::Settings settings = scene.settings;
-    settings.method = MethodSpec::parse("kdop");
-    const auto faces = scene.model.topology().faces();
-    TriMesh mesh = TriMesh::create(scene.state.x, std::vector<Face>(faces.begin(), faces.end()));
-    sim::Simulation simulation(std::move(scene.model), std::move(scene.state), scene.field,
-                               std::move(scene.obstacles), std::move(scene.kinematics), settings);
-    std::vector<Positions> kept;
-    for (int k = 1; k < 220; ++k) {
-      simulation.advance_frame();
-      if (k >= 120) kept.push_back(simulation.state().x);
-    }
-    return VectorFrames(std::move(mesh), std::move(kept), "hanging-cloth");
+    sim::Recording r = sim::record_scene("hanging-cloth", 219, 1);
+    std::vector<Positions> kept(r.frames.begin() + 120, r.frames.end());
+    return VectorFrames(std::move(r.mesh), std::move(kept), "hanging-cloth");
   }();
   return f;
 }

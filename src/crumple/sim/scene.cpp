@@ -386,4 +386,28 @@ Scene make_scene_from_model(Model model, State state, const SceneSpec& params) {
   return s;
 }
 
+Recording record_scene(const std::string& spec, std::int64_t frames, std::uint64_t seed,
+                       const std::function<void(std::int64_t)>& on_frame) {
+  Scene scene = make_scene(SceneSpec::parse(spec), seed);
+  Settings settings = scene.settings;
+  settings.method = MethodSpec::parse("kdop");
+  settings.detector.threads = 1;
+  Recording r;
+  r.spec = scene.spec;
+  r.thickness = settings.detector.thickness;
+  const auto faces = scene.model.topology().faces();
+  r.mesh = TriMesh::create(scene.state.x, std::vector<Face>(faces.begin(), faces.end()));
+  Simulation simulation(std::move(scene.model), std::move(scene.state), scene.field,
+                             std::move(scene.obstacles), std::move(scene.kinematics), settings);
+  r.frames.push_back(simulation.state().x);
+  r.share.push_back(simulation.current_stats().collision_share);
+  for (std::int64_t k = 0; k < frames; ++k) {
+    const FrameStats stats = simulation.advance_frame();
+    r.frames.push_back(simulation.state().x);
+    r.share.push_back(stats.collision_share);
+    if (on_frame) on_frame(k + 1);
+  }
+  return r;
+}
+
 }  // namespace crumple::sim

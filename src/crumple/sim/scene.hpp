@@ -11,6 +11,7 @@
 #include <crumple/sim/simulation.hpp>
 
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -81,5 +82,21 @@ Scene make_scene_from_mesh(const TriMesh& mesh, const SceneSpec& params);
 /// A scene around an existing model and state (an X3D `MassSpring` node): gravity, air damping
 /// and the suggested settings from the `file` keys of `params`; the cloth keys are ignored.
 Scene make_scene_from_model(Model model, State state, const SceneSpec& params);
+
+/// Frames of one simulated built-in scene, with the share of edges in collision of each.
+struct Recording {
+  std::string spec;  ///< canonical scene spec
+  TriMesh mesh;      ///< topology and the first frame
+  std::vector<Positions> frames;
+  std::vector<double> share;  ///< `collision_share` of each frame (VF + EE contacts)
+  Scalar thickness = 0;       ///< the scene's contact thickness
+};
+
+/// Simulates the built-in scene `spec` for `frames` frames with its suggested settings (frame 0
+/// is the initial state, so `frames + 1` are kept). Detection during the recording uses the
+/// exact `kdop` detector on one thread, so the frames do not depend on the machine.
+/// `on_frame(k)` is called after frame k (progress).
+Recording record_scene(const std::string& spec, std::int64_t frames, std::uint64_t seed,
+                       const std::function<void(std::int64_t)>& on_frame = {});
 
 }  // namespace crumple::sim
