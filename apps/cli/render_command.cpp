@@ -157,13 +157,14 @@ class Painter {
   }
 
   render::Picture paint(const Topology& topology, PositionsView x, const ContactSet& contacts,
-                        std::span<const Edge> springs, std::span<const bool> pinned) const {
+                        std::span<const Edge> springs, std::span<const bool> pinned,
+                        std::span<const response::Shape> obstacles) const {
     render::Camera cam;
     cam.yaw_deg = camera_.yaw;
     cam.pitch_deg = camera_.pitch;
     cam.fit(compute_bounds(x), static_cast<double>(size_.width) / size_.height);
     if (camera_.distance) cam.distance = *camera_.distance;
-    render::Frame frame{&topology, x, &contacts, springs, pinned};
+    render::Frame frame{&topology, x, &contacts, springs, pinned, obstacles};
     return render::render_frame(frame, cam, size_.width, size_.height, options_, supersample_);
   }
   const Size& size() const { return size_; }
@@ -189,11 +190,12 @@ struct Output {
   long long pictures = 0;
 
   void frame(long long index, const Topology& topology, PositionsView x, const ContactSet& contacts,
-             std::span<const Edge> springs = {}, std::span<const bool> pinned = {}) {
+             std::span<const Edge> springs = {}, std::span<const bool> pinned = {},
+             std::span<const response::Shape> obstacles = {}) {
     const bool video_frame = !args.video.empty() && index % args.every == 0;
     const bool is_last = index == last;
     if (!video_frame && !(is_last && !args.out.empty())) return;
-    const render::Picture picture = painter.paint(topology, x, contacts, springs, pinned);
+    const render::Picture picture = painter.paint(topology, x, contacts, springs, pinned, obstacles);
     if (video_frame) {
       render::write_png(frame_png(args.video, index), picture);
       ++pictures;
@@ -251,9 +253,12 @@ void render_scene(const RenderArgs& args, Output& output) {
                                      static_cast<std::size_t>(simulation.model().num_particles()));
   const long long last = args.frame.value_or(0);
   output.last = last;
+  std::vector<response::Shape> shapes;
   for (long long f = 0;; ++f) {
+    shapes.clear();
+    for (const response::Obstacle& o : simulation.obstacles()) shapes.push_back(o.at_time(simulation.state().time));
     output.frame(f, simulation.model().topology(), simulation.state().x, simulation.contacts(),
-                 springs, pinned);
+                 springs, pinned, shapes);
     if (f >= last) break;
     simulation.advance_frame();
   }

@@ -244,6 +244,16 @@ class App {
     const Topology& topo = topology();
     const PositionsView x = positions();
     const render::Palette& pal = draw_options.palette;
+    if (sim_) {  // the rigid obstacles, in one grey, where they are at the simulation's time
+      render::Palette grey = pal;
+      grey.front = grey.back = pal.obstacle;
+      const Bounds box = compute_bounds(x);
+      for (const response::Obstacle& o : sim_->obstacles()) {
+        const render::ShapeMesh m =
+            render::shape_mesh(o.at_time(sim_->state().time), (box.min + box.max) / 2, 3 * box.diagonal());
+        gl.surface(m.faces, m.positions, grey, lighting);
+      }
+    }
     Batch thin, thick;
     if (draw_options.masses_springs) {
       if (sim_) {

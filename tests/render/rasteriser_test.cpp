@@ -248,7 +248,7 @@ TEST(Colouring, RedPixelsExactlyWhereCollidingEdgesProject) {
   const Camera cam = front_camera();
   DrawOptions options;
   options.wireframe = true;
-  const Frame frame{&t, mesh.positions(), &contacts, {}, {}};
+  const Frame frame{&t, mesh.positions(), &contacts, {}, {}, {}};
   const Picture p = render_frame(frame, cam, 200, 200, options, 1);
   // Vertical edges at x = -0.8 (column 20) and x = 0.4 (column 140), rows 70..130.
   int red = 0;
@@ -270,7 +270,7 @@ TEST(Colouring, RedPixelsExactlyWhereCollidingEdgesProject) {
   // No contacts: no red at all.
   const ContactSet none;
   const Picture q =
-      render_frame(Frame{&t, mesh.positions(), &none, {}, {}}, cam, 200, 200, options, 1);
+      render_frame(Frame{&t, mesh.positions(), &none, {}, {}, {}}, cam, 200, 200, options, 1);
   for (int y = 0; y < 200; ++y) {
     for (int x = 0; x < 200; ++x) ASSERT_FALSE(is_collision_red(q.at(x, y))) << x << "," << y;
   }
@@ -283,12 +283,53 @@ TEST(Colouring, MassesAndSpringsMode) {
   const std::vector<Edge> springs{{0, 5}};
   const bool pinned[6] = {true, false, false, false, false, false};
   const Picture p =
-      render_frame(Frame{&mesh.topology(), mesh.positions(), nullptr, springs, pinned},
+      render_frame(Frame{&mesh.topology(), mesh.positions(), nullptr, springs, pinned, {}},
                    front_camera(), 100, 100, options, 1);
   EXPECT_EQ(p.at(10, 65), options.palette.pinned) << "vertex 0 at (-0.8, -0.3)";
   EXPECT_EQ(p.at(90, 35), options.palette.mass) << "vertex 5 at (0.8, 0.3)";
   EXPECT_EQ(p.at(50, 50), options.palette.spring) << "the one spring crosses the centre";
   EXPECT_EQ(p.at(30, 65), options.palette.background) << "no surface, no mesh edges";
+}
+
+TEST(Colouring, ObstacleMeshesLieOnTheirShapes) {
+  const response::Sphere sphere{Vec3(1, 2, 3), 0.5};
+  const ShapeMesh s = shape_mesh(sphere, Vec3::Zero(), 1);
+  EXPECT_EQ(s.faces.size(), 2u * 32 * 16);
+  for (const Vec3& p : s.positions) EXPECT_NEAR((p - sphere.center).norm(), 0.5, 1e-12);
+  response::Box box;
+  box.center = Vec3(0, 1, 0);
+  box.half_extents = Vec3(1, 2, 3);
+  const ShapeMesh b = shape_mesh(box, Vec3::Zero(), 1);
+  EXPECT_EQ(b.faces.size(), 12u);
+  for (const Vec3& p : b.positions) {
+    const Vec3 q = (p - box.center).cwiseAbs().cwiseQuotient(box.half_extents);
+    EXPECT_NEAR(q.maxCoeff(), 1, 1e-12) << "on the surface";
+    EXPECT_NEAR(q.minCoeff(), 1, 1e-12) << "the 8 corners only";
+  }
+  const response::Plane floor{Vec3(0, -1, 0), Vec3::UnitY()};
+  const ShapeMesh f = shape_mesh(floor, Vec3(5, 7, -2), 4);
+  Vec3 mean = Vec3::Zero();
+  for (const Vec3& p : f.positions) {
+    EXPECT_NEAR(p.y(), -1, 1e-12);
+    EXPECT_LE(std::max(std::abs(p.x() - 5), std::abs(p.z() + 2)), 2 + 1e-12) << "4 wide around the centre";
+    mean += p / static_cast<double>(f.positions.size());
+  }
+  EXPECT_NEAR((mean - Vec3(5, -1, -2)).norm(), 0, 1e-12);
+}
+
+TEST(Colouring, ObstaclesAreDrawnBehindTheCloth) {
+  // A strip in z = 0 in front of a sphere centred behind it: the sphere shows around the strip,
+  // the strip hides it where they overlap.
+  const TriMesh mesh = strip(2);
+  const response::Shape shapes[] = {response::Sphere{Vec3(0, 0, -1.2), 1}};
+  DrawOptions options;
+  options.colliding_edges = false;
+  const Picture p = render_frame(Frame{&mesh.topology(), mesh.positions(), nullptr, {}, {}, shapes},
+                                 front_camera(), 100, 100, options, 1);
+  const auto grey = [](Rgb c) { return c.r == c.g && std::abs(c.r - c.b) < 12 && c.r < 250; };
+  EXPECT_TRUE(grey(p.at(50, 30))) << "the sphere above the strip";
+  EXPECT_FALSE(grey(p.at(50, 50))) << "the strip in front of it";
+  EXPECT_EQ(p.at(3, 3), options.palette.background);
 }
 
 TEST(Picture, PngRoundTripsAndIsWrittenAtomically) {

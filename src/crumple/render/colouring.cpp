@@ -3,6 +3,10 @@
 #include <crumple/core/error.hpp>
 #include <crumple/render/rasteriser.hpp>
 
+#include <cmath>
+#include <numbers>
+#include <type_traits>
+
 namespace crumple::render {
 
 std::vector<bool> colliding_edges(const Topology& topology, const ContactSet& contacts) {
@@ -31,6 +35,63 @@ std::vector<Segment> contact_segments(const Topology& topology, PositionsView po
   return out;
 }
 
+namespace {
+
+/// Quads of an (nu + 1) × (nv + 1) grid of points `at(i, j)`, as two triangles each.
+template <class At>
+void grid(ShapeMesh& m, int nu, int nv, At at) {
+  const auto base = static_cast<Index>(m.positions.size());
+  for (int j = 0; j <= nv; ++j) {
+    for (int i = 0; i <= nu; ++i) m.positions.push_back(at(i, j));
+  }
+  const auto id = [&](int i, int j) { return base + static_cast<Index>(j * (nu + 1) + i); };
+  for (int j = 0; j < nv; ++j) {
+    for (int i = 0; i < nu; ++i) {
+      m.faces.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+      m.faces.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+    }
+  }
+}
+
+}  // namespace
+
+ShapeMesh shape_mesh(const response::Shape& shape, const Vec3& centre, Scalar extent) {
+  ShapeMesh m;
+  std::visit(
+      [&](const auto& s) {
+        using T = std::decay_t<decltype(s)>;
+        if constexpr (std::is_same_v<T, response::Sphere>) {
+          grid(m, 32, 16, [&](int i, int j) {
+            const double phi = 2 * std::numbers::pi * i / 32, theta = std::numbers::pi * j / 16;
+            return Vec3(s.center + s.radius * Vec3(std::sin(theta) * std::cos(phi), std::cos(theta),
+                                                   std::sin(theta) * std::sin(phi)));
+          });
+        } else if constexpr (std::is_same_v<T, response::Box>) {
+          // Each face: a 1 × 1 grid on the side at ±1 along axis a, spanned by the two others.
+          for (int a = 0; a < 3; ++a) {
+            for (const double side : {-1.0, 1.0}) {
+              const int b = (a + 1) % 3, c = (a + 2) % 3;
+              grid(m, 1, 1, [&](int i, int j) {
+                Vec3 local = Vec3::Zero();
+                local[a] = side;
+                local[b] = 2.0 * i - 1;
+                local[c] = 2.0 * j - 1;
+                return Vec3(s.center + s.rotation * local.cwiseProduct(s.half_extents));
+              });
+            }
+          }
+        } else {
+          const Vec3 n = s.normal.normalized();
+          const Vec3 u = (std::abs(n.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY()).cross(n).normalized();
+          const Vec3 v = n.cross(u);
+          const Vec3 o = centre - (centre - s.point).dot(n) * n;
+          grid(m, 16, 16, [&](int i, int j) { return Vec3(o + extent * ((i / 16.0 - 0.5) * u + (j / 16.0 - 0.5) * v)); });
+        }
+      },
+      shape);
+  return m;
+}
+
 Picture render_frame(const Frame& frame, const Camera& camera, int width, int height,
                      const DrawOptions& options, int supersample) {
   CRUMPLE_CHECK(frame.topology != nullptr, "a frame needs its topology");
@@ -43,6 +104,16 @@ Picture render_frame(const Frame& frame, const Camera& camera, int width, int he
     return frame.positions[static_cast<std::size_t>(i)];
   };
 
+  if (!frame.obstacles.empty()) {
+    const Bounds box = compute_bounds(frame.positions);
+    for (const response::Shape& shape : frame.obstacles) {
+      const ShapeMesh m = shape_mesh(shape, (box.min + box.max) / 2, 3 * box.diagonal());
+      for (const Face& f : m.faces) {
+        r.triangle(m.positions[static_cast<std::size_t>(f[0])], m.positions[static_cast<std::size_t>(f[1])],
+                   m.positions[static_cast<std::size_t>(f[2])], pal.obstacle, pal.obstacle);
+      }
+    }
+  }
   if (options.masses_springs) {
     if (frame.springs.empty()) {
       for (const Edge& e : topo.edges()) r.line(x(e[0]), x(e[1]), pal.spring, options.edge_width);

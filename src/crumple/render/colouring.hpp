@@ -6,12 +6,14 @@
 ///  - optionally its edges (wireframe), or only the masses and springs (as in the thesis);
 ///  - edges in collision in red: both edges of every EE contact and the three sides of the face
 ///    of every VF contact (the rule of `sim::collision_share`);
-///  - every VF contact as a short segment from the vertex to its closest point on the face.
+///  - every VF contact as a short segment from the vertex to its closest point on the face;
+///  - the rigid obstacles (sphere, box, floor) in grey.
 
 #include <crumple/detect/contact.hpp>
 #include <crumple/mesh/mesh.hpp>
 #include <crumple/render/camera.hpp>
 #include <crumple/render/picture.hpp>
+#include <crumple/response/obstacle.hpp>
 
 #include <span>
 #include <vector>
@@ -29,6 +31,7 @@ struct Palette {
   Rgb mass{30, 30, 30};        ///< particles (masses-and-springs mode)
   Rgb pinned{200, 30, 200};    ///< pinned particles
   Rgb spring{90, 110, 140};    ///< springs (masses-and-springs mode)
+  Rgb obstacle{185, 185, 180};  ///< rigid obstacles
 };
 
 /// What to draw.
@@ -52,7 +55,17 @@ struct Frame {
   const ContactSet* contacts = nullptr;  ///< may be null: nothing in collision
   std::span<const Edge> springs;         ///< particle pairs; empty = the mesh edges
   std::span<const bool> pinned;          ///< #V flags or empty
+  std::span<const response::Shape> obstacles;  ///< rigid obstacles at the frame's time
 };
+
+/// A triangle mesh of an obstacle's surface, for drawing: a sphere as a 32 × 16 UV sphere, a
+/// box as 12 triangles, a plane as a 16 × 16 grid `extent` wide around the point of the plane
+/// nearest `centre` (a floor under the cloth).
+struct ShapeMesh {
+  std::vector<Vec3> positions;
+  std::vector<Face> faces;
+};
+ShapeMesh shape_mesh(const response::Shape& shape, const Vec3& centre, Scalar extent);
 
 /// Per mesh edge: true when the edge is in collision (see the file comment).
 std::vector<bool> colliding_edges(const Topology& topology, const ContactSet& contacts);
