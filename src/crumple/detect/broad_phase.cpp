@@ -322,6 +322,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   });
 
   // 2. Orphan sub-pairs of faces that share a vertex.
+  const auto orphans_start = std::chrono::steady_clock::now();
   if (kinds.vf) {
     parallel_for_chunks(orphan_vf_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
       LocalContacts local;
@@ -350,6 +351,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
       merge(local);
     });
   }
+  stats_.set("orphan_ms", ms_since(orphans_start));
   stats_.set("orphan_vf", static_cast<double>(orphan_vf_.size()));
   stats_.set("orphan_ee", static_cast<double>(orphan_ee_.size()));
   stats_.set("isolated_vertices", static_cast<double>(isolated_.size()));
