@@ -8,6 +8,8 @@
 #include <chrono>
 #include <cmath>
 #include <string>
+#include <tuple>
+#include <vector>
 
 namespace crumple {
 
@@ -33,7 +35,53 @@ void inflate(Box& b, Scalar r) {
   }
 }
 
-/// Contacts found by one chunk of work, merged into the frame's set under a lock.
+/// Gathers the records of every list in `parts` into `dest` in the order `less`, whose first
+/// criterion is `key(x)` in [0, keys): counted per key, then scattered and each key's few
+/// records sorted, on `threads` threads that each own a range of keys holding about the same
+/// number of records (each reads every part, writes only its range). No global sort, no
+/// intermediate copy: the frame's 100k-600k contacts (72-byte records) go from the per-chunk
+/// lists to their final place once.
+template <class T, class Key, class Less>
+void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*>& parts, Index keys, Key key,
+                   Less less, int threads) {
+  std::size_t total = 0;
+  for (const auto* p : parts) total += p->size();
+  dest.resize(total);
+  if (total == 0) return;
+  std::vector<std::size_t> start(static_cast<std::size_t>(keys) + 1, 0);
+  for (const auto* p : parts) {
+    for (const T& x : *p) ++start[static_cast<std::size_t>(key(x)) + 1];
+  }
+  for (std::size_t k = 1; k < start.size(); ++k) start[k] += start[k - 1];
+  const auto ranges = static_cast<std::size_t>(resolve_threads(threads));
+  std::vector<std::size_t> bound{0};  // key ranges of about total / ranges records each
+  for (std::size_t r = 1; r < ranges; ++r) {
+    const auto it = std::lower_bound(start.begin(), start.end(), total * r / ranges);
+    bound.push_back(std::max(bound.back(), static_cast<std::size_t>(it - start.begin())));
+  }
+  bound.push_back(static_cast<std::size_t>(keys));
+  parallel_for_chunks(ranges, threads, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t r = begin; r < end; ++r) {
+      const std::size_t lo = bound[r], hi = std::max(lo, bound[r + 1]);
+      std::vector<std::size_t> next(start.begin() + static_cast<std::ptrdiff_t>(lo),
+                                    start.begin() + static_cast<std::ptrdiff_t>(hi));
+      for (const auto* p : parts) {
+        for (const T& x : *p) {
+          const auto k = static_cast<std::size_t>(key(x));
+          if (k >= lo && k < hi) dest[next[k - lo]++] = x;
+        }
+      }
+      for (std::size_t k = lo; k < hi; ++k) {
+        if (start[k + 1] - start[k] > 1) {
+          std::sort(dest.begin() + static_cast<std::ptrdiff_t>(start[k]),
+                    dest.begin() + static_cast<std::ptrdiff_t>(start[k + 1]), less);
+        }
+      }
+    }
+  });
+}
+
+/// Contacts found by one chunk of work, kept until the frame's set is gathered.
 struct LocalContacts {
   ContactSet set;
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
@@ -159,14 +207,8 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
   stats_.set("candidates", static_cast<double>(candidates_.total()));
   stats_.set("broad_ms", ms_since(t0));
 
-  const auto t1 = std::chrono::steady_clock::now();
-  narrow_phase(x, pad, candidates_, out);
-  stats_.set("narrow_ms", ms_since(t1));
+  narrow_phase(x, pad, candidates_, out);  // sets narrow_ms and sort_ms
   candidates_.clear();
-  // The canonical order (the base class then finds the set sorted), timed here with the rest.
-  const auto t2 = std::chrono::steady_clock::now();
-  out.sort();
-  stats_.set("sort_ms", ms_since(t2));
 
   const std::size_t total = out.size();
   stats_.set("contacts", static_cast<double>(total));
@@ -203,6 +245,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   const ContactKinds kinds = options().kinds;
   const std::size_t nf = static_cast<std::size_t>(topo.num_faces());
   const Scalar half = pad / 2;
+  const auto narrow_start = std::chrono::steady_clock::now();
 
   parallel_for_chunks(nf, threads, 4096, [&](std::size_t begin, std::size_t end) {
     for (std::size_t f = begin; f < end; ++f) {
@@ -213,11 +256,10 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
 
   std::mutex mutex;
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
+  std::vector<ContactSet> parts;  // each chunk's contacts, gathered in order at the end
   const auto merge = [&](LocalContacts& local) {
     const std::lock_guard lock(mutex);
-    out.vf.insert(out.vf.end(), local.set.vf.begin(), local.set.vf.end());
-    out.ee.insert(out.ee.end(), local.set.ee.begin(), local.set.ee.end());
-    out.tt.insert(out.tt.end(), local.set.tt.begin(), local.set.tt.end());
+    if (!local.set.empty()) parts.push_back(std::move(local.set));
     vf_tests += local.vf_tests;
     ee_tests += local.ee_tests;
     tt_tests += local.tt_tests;
@@ -352,6 +394,30 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     });
   }
   stats_.set("orphan_ms", ms_since(orphans_start));
+  stats_.set("narrow_ms", ms_since(narrow_start));
+
+  // The frame's set in canonical order (the base class then finds it sorted).
+  const auto gather_start = std::chrono::steady_clock::now();
+  std::vector<const std::vector<VertexFaceContact>*> vf_parts;
+  std::vector<const std::vector<EdgeEdgeContact>*> ee_parts;
+  out.tt.clear();
+  for (const ContactSet& p : parts) {
+    vf_parts.push_back(&p.vf);
+    ee_parts.push_back(&p.ee);
+    out.tt.insert(out.tt.end(), p.tt.begin(), p.tt.end());
+  }
+  const Index nv = topo.num_vertices();
+  gather_sorted(
+      out.vf, vf_parts, nv, [](const VertexFaceContact& c) { return c.vertex; },
+      [](const VertexFaceContact& a, const VertexFaceContact& b) { return a.face < b.face; }, threads);
+  gather_sorted(
+      out.ee, ee_parts, nv, [](const EdgeEdgeContact& c) { return c.a[0]; },
+      [](const EdgeEdgeContact& a, const EdgeEdgeContact& b) { return std::tie(a.a, a.b) < std::tie(b.a, b.b); },
+      threads);
+  std::sort(out.tt.begin(), out.tt.end(), [](const auto& a, const auto& b) {
+    return std::tie(a.face0, a.face1) < std::tie(b.face0, b.face1);
+  });
+  stats_.set("sort_ms", ms_since(gather_start));
   stats_.set("orphan_vf", static_cast<double>(orphan_vf_.size()));
   stats_.set("orphan_ee", static_cast<double>(orphan_ee_.size()));
   stats_.set("isolated_vertices", static_cast<double>(isolated_.size()));
