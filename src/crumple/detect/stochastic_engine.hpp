@@ -366,10 +366,14 @@ class PairEngine {
       ++stats_.duplicates;
       return;
     }
-    const Verdict v = classify(ctx, r.pair, r.distance);
     if (r.status == Walk::Capped) {
+      // Where a walk stops is no minimum: record its collision when that is free (the
+      // distance is known), but do not run a costly classification (VV zone tests) on it.
+      if constexpr (Traits::kSideEffect) classify(ctx, r.pair, r.distance);
       walking_.push_back(r.pair);
-    } else if (v.near) {
+      return;
+    }
+    if (classify(ctx, r.pair, r.distance).near) {
       near_.push_back(r.pair);
     } else {
       ++stats_.deleted;
