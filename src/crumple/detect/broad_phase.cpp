@@ -108,8 +108,8 @@ void ExactDetector::on_topology() {
   const Index nv = topo.num_vertices();
   // Ownership: each vertex and edge belongs to one of its faces (bit k of the masks: corner k,
   // side k), so that a candidate face pair tests each feature pair once.
-  std::vector<std::uint8_t> vertex_mask_(static_cast<std::size_t>(nf), 0);
-  std::vector<std::uint8_t> edge_mask_(static_cast<std::size_t>(nf), 0);
+  std::vector<std::uint8_t> vertex_mask(static_cast<std::size_t>(nf), 0);
+  std::vector<std::uint8_t> edge_mask(static_cast<std::size_t>(nf), 0);
   isolated_.clear();
   for (Index v = 0; v < nv; ++v) {
     const auto faces = topo.vertex_faces()[v];
@@ -120,14 +120,14 @@ void ExactDetector::on_topology() {
     const Index f = faces[0];
     const Face& t = topo.face(f);
     for (int k = 0; k < 3; ++k) {
-      if (t[k] == v) vertex_mask_[static_cast<std::size_t>(f)] |= static_cast<std::uint8_t>(1u << k);
+      if (t[k] == v) vertex_mask[static_cast<std::size_t>(f)] |= static_cast<std::uint8_t>(1u << k);
     }
   }
   for (Index e = 0; e < topo.num_edges(); ++e) {
     const Index f = topo.edge_faces()[e][0];
     const auto& fe = topo.face_edges(f);
     for (int k = 0; k < 3; ++k) {
-      if (fe[k] == e) edge_mask_[static_cast<std::size_t>(f)] |= static_cast<std::uint8_t>(1u << k);
+      if (fe[k] == e) edge_mask[static_cast<std::size_t>(f)] |= static_cast<std::uint8_t>(1u << k);
     }
   }
   // Orphan sub-pairs: owned features of face pairs that share a vertex, not excluded.
@@ -141,15 +141,15 @@ void ExactDetector::on_topology() {
       const Face& b = topo.face(g);
       const auto& fb = topo.face_edges(g);
       for (int k = 0; k < 3; ++k) {
-        if ((vertex_mask_[static_cast<std::size_t>(f)] >> k & 1u) && !topo.face_has_vertex(g, a[k]))
+        if ((vertex_mask[static_cast<std::size_t>(f)] >> k & 1u) && !topo.face_has_vertex(g, a[k]))
           orphan_vf_.push_back({a[k], g});
-        if ((vertex_mask_[static_cast<std::size_t>(g)] >> k & 1u) && !topo.face_has_vertex(f, b[k]))
+        if ((vertex_mask[static_cast<std::size_t>(g)] >> k & 1u) && !topo.face_has_vertex(f, b[k]))
           orphan_vf_.push_back({b[k], f});
       }
       for (int i = 0; i < 3; ++i) {
-        if (!(edge_mask_[static_cast<std::size_t>(f)] >> i & 1u)) continue;
+        if (!(edge_mask[static_cast<std::size_t>(f)] >> i & 1u)) continue;
         for (int j = 0; j < 3; ++j) {
-          if (!(edge_mask_[static_cast<std::size_t>(g)] >> j & 1u)) continue;
+          if (!(edge_mask[static_cast<std::size_t>(g)] >> j & 1u)) continue;
           if (topo.edges_adjacent(fa[i], fb[j])) continue;
           orphan_ee_.push_back({std::min(fa[i], fb[j]), std::max(fa[i], fb[j])});
         }
@@ -161,8 +161,8 @@ void ExactDetector::on_topology() {
     PackedFace& pf = packed_[static_cast<std::size_t>(f)];
     pf.v = topo.face(f);
     pf.e = topo.face_edges(f);
-    pf.vertex_mask = vertex_mask_[static_cast<std::size_t>(f)];
-    pf.edge_mask = edge_mask_[static_cast<std::size_t>(f)];
+    pf.vertex_mask = vertex_mask[static_cast<std::size_t>(f)];
+    pf.edge_mask = edge_mask[static_cast<std::size_t>(f)];
   }
   on_exact_topology();
 }

@@ -8,10 +8,11 @@
 ///    by centroid along the largest extent and cut into `arity` equal parts, down to leaves of
 ///    at most `leaf` faces. Nodes are stored breadth-first, so every depth is one index range.
 ///  - Refit (every frame), bottom-up and level by level in parallel: a face's k-DOP holds its
-///    corners at the current positions and, when previous positions are given, at the
-///    previous ones (the projection of a linearly moving point is linear in time, so this
+///    corners at the current positions and, with `sweep=on` and previous positions given, at
+///    the previous ones (the projection of a linearly moving point is linear in time, so this
 ///    bounds the whole motion: oriented inflation along the displacement), grown by half the
-///    padded thickness along the unit directions.
+///    padded thickness along the unit directions. Swept leaf pairs are also checked with the
+///    faces' boxes at the current positions, where the contacts are.
 ///  - Quality: the sum over nodes of the three coordinate extents, relative to the root's, is
 ///    recorded at build; when a refit makes it exceed `rebuild` times that value, the tree is
 ///    rebuilt from the current positions (counted in the `rebuilds` stat).

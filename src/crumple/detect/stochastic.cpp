@@ -479,6 +479,18 @@ struct StochasticDetector::Impl {
   std::mt19937_64 saved_rng;
   std::array<std::vector<PrimitivePair>, 4> saved_near, saved_walking;
   bool saved = false;
+
+  /// `get(engine)` of the engine of `type`: one of its pair lists.
+  template <class Get>
+  std::span<const PrimitivePair> list(PairType type, Get get) const {
+    switch (type) {
+      case PairType::VV: return get(vv);
+      case PairType::EE: return get(ee);
+      case PairType::VF: return get(vf);
+      case PairType::EF: return get(ef);
+    }
+    return {};
+  }
 };
 
 StochasticDetector::StochasticDetector(DetectorOptions options, StochasticParams params)
@@ -505,33 +517,15 @@ bool StochasticDetector::runs(PairType type) const {
 }
 
 std::span<const PrimitivePair> StochasticDetector::near_pairs(PairType type) const {
-  switch (type) {
-    case PairType::VV: return impl_->vv.near_pairs();
-    case PairType::EE: return impl_->ee.near_pairs();
-    case PairType::VF: return impl_->vf.near_pairs();
-    case PairType::EF: return impl_->ef.near_pairs();
-  }
-  return {};
+  return impl_->list(type, [](const auto& engine) { return std::span(engine.near_pairs()); });
 }
 
 std::span<const PrimitivePair> StochasticDetector::walking_pairs(PairType type) const {
-  switch (type) {
-    case PairType::VV: return impl_->vv.walking_pairs();
-    case PairType::EE: return impl_->ee.walking_pairs();
-    case PairType::VF: return impl_->vf.walking_pairs();
-    case PairType::EF: return impl_->ef.walking_pairs();
-  }
-  return {};
+  return impl_->list(type, [](const auto& engine) { return std::span(engine.walking_pairs()); });
 }
 
 std::span<const PrimitivePair> StochasticDetector::colliding_pairs(PairType type) const {
-  switch (type) {
-    case PairType::VV: return impl_->vv.colliding_pairs();
-    case PairType::EE: return impl_->ee.colliding_pairs();
-    case PairType::VF: return impl_->vf.colliding_pairs();
-    case PairType::EF: return impl_->ef.colliding_pairs();
-  }
-  return {};
+  return impl_->list(type, [](const auto& engine) { return std::span(engine.colliding_pairs()); });
 }
 
 void StochasticDetector::on_topology() {

@@ -398,7 +398,7 @@ Recording record_scene(const std::string& spec, std::int64_t frames, std::uint64
   const auto faces = scene.model.topology().faces();
   r.mesh = TriMesh::create(scene.state.x, std::vector<Face>(faces.begin(), faces.end()));
   Simulation simulation(std::move(scene.model), std::move(scene.state), scene.field,
-                             std::move(scene.obstacles), std::move(scene.kinematics), settings);
+                        std::move(scene.obstacles), std::move(scene.kinematics), settings);
   r.frames.push_back(simulation.state().x);
   r.share.push_back(simulation.current_stats().collision_share);
   for (std::int64_t k = 0; k < frames; ++k) {
