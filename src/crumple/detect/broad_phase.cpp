@@ -8,7 +8,6 @@
 #include <chrono>
 #include <cmath>
 #include <string>
-#include <tuple>
 #include <vector>
 
 namespace crumple {
@@ -35,15 +34,15 @@ void inflate(Box& b, Scalar r) {
   }
 }
 
-/// Gathers the records of every list in `parts` into `dest` in the order `less`, whose first
-/// criterion is `key(x)` in [0, keys): counted per key, then scattered and each key's few
-/// records sorted, on `threads` threads that each own a range of keys holding about the same
+/// Gathers the records of every list in `parts` into `dest` in canonical order (`CanonicalLess`),
+/// whose first criterion is `key(x)` in [0, keys): counted per key, then scattered and each
+/// key's few records sorted, on `threads` threads that each own a range of keys holding about the same
 /// number of records (each reads every part, writes only its range). No global sort, no
 /// intermediate copy: the frame's 100k-600k contacts (72-byte records) go from the per-chunk
 /// lists to their final place once.
-template <class T, class Key, class Less>
+template <class T, class Key>
 void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*>& parts, Index keys, Key key,
-                   Less less, int threads) {
+                   int threads) {
   std::size_t total = 0;
   for (const auto* p : parts) total += p->size();
   dest.resize(total);
@@ -74,7 +73,7 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
       for (std::size_t k = lo; k < hi; ++k) {
         if (start[k + 1] - start[k] > 1) {
           std::sort(dest.begin() + static_cast<std::ptrdiff_t>(start[k]),
-                    dest.begin() + static_cast<std::ptrdiff_t>(start[k + 1]), less);
+                    dest.begin() + static_cast<std::ptrdiff_t>(start[k + 1]), CanonicalLess{});
         }
       }
     }
@@ -408,15 +407,10 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   }
   const Index nv = topo.num_vertices();
   gather_sorted(
-      out.vf, vf_parts, nv, [](const VertexFaceContact& c) { return c.vertex; },
-      [](const VertexFaceContact& a, const VertexFaceContact& b) { return a.face < b.face; }, threads);
+      out.vf, vf_parts, nv, [](const VertexFaceContact& c) { return c.vertex; }, threads);
   gather_sorted(
-      out.ee, ee_parts, nv, [](const EdgeEdgeContact& c) { return c.a[0]; },
-      [](const EdgeEdgeContact& a, const EdgeEdgeContact& b) { return std::tie(a.a, a.b) < std::tie(b.a, b.b); },
-      threads);
-  std::sort(out.tt.begin(), out.tt.end(), [](const auto& a, const auto& b) {
-    return std::tie(a.face0, a.face1) < std::tie(b.face0, b.face1);
-  });
+      out.ee, ee_parts, nv, [](const EdgeEdgeContact& c) { return c.a[0]; }, threads);
+  std::sort(out.tt.begin(), out.tt.end(), CanonicalLess{});
   stats_.set("sort_ms", ms_since(gather_start));
   stats_.set("orphan_vf", static_cast<double>(orphan_vf_.size()));
   stats_.set("orphan_ee", static_cast<double>(orphan_ee_.size()));

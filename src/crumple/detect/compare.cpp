@@ -7,7 +7,6 @@
 #include <cmath>
 #include <numbers>
 #include <random>
-#include <tuple>
 
 namespace crumple {
 
@@ -104,15 +103,9 @@ ContactMatch match_contacts(const ContactSet& got, const ContactSet& reference) 
     m.reported += a.size();
     m.reference += b.size();
   };
-  merge(got.vf, reference.vf, [](const VertexFaceContact& x, const VertexFaceContact& y) {
-    return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face);
-  });
-  merge(got.ee, reference.ee, [](const EdgeEdgeContact& x, const EdgeEdgeContact& y) {
-    return std::tie(x.a, x.b) < std::tie(y.a, y.b);
-  });
-  merge(got.tt, reference.tt, [](const TriangleTriangleContact& x, const TriangleTriangleContact& y) {
-    return std::tie(x.face0, x.face1) < std::tie(y.face0, y.face1);
-  });
+  merge(got.vf, reference.vf, CanonicalLess{});
+  merge(got.ee, reference.ee, CanonicalLess{});
+  merge(got.tt, reference.tt, CanonicalLess{});
   return m;
 }
 

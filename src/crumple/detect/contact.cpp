@@ -4,9 +4,6 @@
 
 #include <algorithm>
 #include <charconv>
-#include <cstddef>
-#include <vector>
-#include <tuple>
 
 namespace crumple {
 
@@ -44,57 +41,13 @@ std::string ContactKinds::to_string() const {
   return out;
 }
 
-namespace {
-
-/// Sorts `v` by `less`, whose first criterion is the non-negative id `first(x)`: a counting
-/// sort on that id (one pass to count, one to scatter), then each bucket — a vertex's few
-/// contacts — sorted by `less`. The exact detectors return 100k-600k contacts per frame on the
-/// real meshes, where std::sort moving 72-byte records took 60 ms.
-template <class T, class First, class Less>
-void sort_by_first(std::vector<T>& v, First first, Less less) {
-  if (std::is_sorted(v.begin(), v.end(), less)) return;
-  Index top = 0;
-  for (const T& x : v) top = std::max(top, first(x));
-  if (v.size() < 4096 || static_cast<std::size_t>(top) > 4 * v.size() + 4096) {
-    std::sort(v.begin(), v.end(), less);
-    return;
-  }
-  std::vector<std::size_t> end(static_cast<std::size_t>(top) + 1, 0);  // then: end of each bucket
-  for (const T& x : v) ++end[static_cast<std::size_t>(first(x))];
-  std::size_t sum = 0;
-  for (std::size_t& e : end) {
-    sum += e;
-    e = sum - e;  // start of the bucket, advanced to its end by the scatter
-  }
-  // Scatter into the upper half of the list itself, then copy back: the caller's ContactSet
-  // keeps that capacity from frame to frame, where a fresh 30 MB buffer per frame would cost
-  // as much in page faults as the sort.
-  const std::size_t n = v.size();
-  v.resize(2 * n);
-  for (std::size_t i = 0; i < n; ++i) v[n + end[static_cast<std::size_t>(first(v[i]))]++] = v[i];
-  std::copy(v.begin() + static_cast<std::ptrdiff_t>(n), v.end(), v.begin());
-  v.resize(n);
-  std::size_t begin = 0;
-  for (const std::size_t e : end) {
-    if (e - begin > 1) {
-      std::sort(v.begin() + static_cast<std::ptrdiff_t>(begin), v.begin() + static_cast<std::ptrdiff_t>(e), less);
-    }
-    begin = e;
-  }
-}
-
-}  // namespace
-
 void ContactSet::sort() {
-  sort_by_first(
-      vf, [](const VertexFaceContact& c) { return c.vertex; },
-      [](const auto& x, const auto& y) { return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face); });
-  sort_by_first(
-      ee, [](const EdgeEdgeContact& c) { return c.a[0]; },
-      [](const auto& x, const auto& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); });
-  sort_by_first(
-      tt, [](const TriangleTriangleContact& c) { return c.face0; },
-      [](const auto& x, const auto& y) { return std::tie(x.face0, x.face1) < std::tie(y.face0, y.face1); });
+  const auto sort_list = [](auto& v) {
+    if (!std::is_sorted(v.begin(), v.end(), CanonicalLess{})) std::sort(v.begin(), v.end(), CanonicalLess{});
+  };
+  sort_list(vf);
+  sort_list(ee);
+  sort_list(tt);
 }
 
 namespace {

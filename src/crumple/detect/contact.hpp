@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <filesystem>
 #include <ostream>
+#include <tuple>
 #include <vector>
 
 namespace crumple {
@@ -54,6 +55,20 @@ struct ContactKinds {
   std::string to_string() const;
 };
 
+/// The canonical order of contacts: VF by (vertex, face), EE by (a, b) vertex ids, TT by
+/// (face0, face1).
+struct CanonicalLess {
+  bool operator()(const VertexFaceContact& x, const VertexFaceContact& y) const {
+    return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face);
+  }
+  bool operator()(const EdgeEdgeContact& x, const EdgeEdgeContact& y) const {
+    return std::tie(x.a, x.b) < std::tie(y.a, y.b);
+  }
+  bool operator()(const TriangleTriangleContact& x, const TriangleTriangleContact& y) const {
+    return std::tie(x.face0, x.face1) < std::tie(y.face0, y.face1);
+  }
+};
+
 /// The contacts of one frame, in typed vectors.
 struct ContactSet {
   std::vector<VertexFaceContact> vf;
@@ -67,8 +82,8 @@ struct ContactSet {
   }
   std::size_t size() const { return vf.size() + ee.size() + tt.size(); }
   bool empty() const { return size() == 0; }
-  /// Sorts every vector into the canonical order: VF by (vertex, face), EE by (a, b) vertex
-  /// ids, TT by (face0, face1). Detectors return sorted sets.
+  /// Sorts every vector into the canonical order (`CanonicalLess`); a vector already in order
+  /// costs one pass. Detectors return sorted sets.
   void sort();
 };
 
