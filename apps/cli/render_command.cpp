@@ -158,7 +158,7 @@ class Painter {
 
   render::Picture paint(const Topology& topology, PositionsView x, const ContactSet& contacts,
                         std::span<const Edge> springs, std::span<const bool> pinned,
-                        std::span<const response::Shape> obstacles) const {
+                        std::span<const render::ShapeMesh> obstacles) const {
     render::Camera cam;
     cam.yaw_deg = camera_.yaw;
     cam.pitch_deg = camera_.pitch;
@@ -191,7 +191,7 @@ struct Output {
 
   void frame(long long index, const Topology& topology, PositionsView x, const ContactSet& contacts,
              std::span<const Edge> springs = {}, std::span<const bool> pinned = {},
-             std::span<const response::Shape> obstacles = {}) {
+             std::span<const render::ShapeMesh> obstacles = {}) {
     const bool video_frame = !args.video.empty() && index % args.every == 0;
     const bool is_last = index == last;
     if (!video_frame && !(is_last && !args.out.empty())) return;
@@ -253,12 +253,9 @@ void render_scene(const RenderArgs& args, Output& output) {
                                      static_cast<std::size_t>(simulation.model().num_particles()));
   const long long last = args.frame.value_or(0);
   output.last = last;
-  std::vector<response::Shape> shapes;
   for (long long f = 0;; ++f) {
-    shapes.clear();
-    for (const response::Obstacle& o : simulation.obstacles()) shapes.push_back(o.at_time(simulation.state().time));
-    output.frame(f, simulation.model().topology(), simulation.state().x, simulation.contacts(),
-                 springs, pinned, shapes);
+    output.frame(f, simulation.model().topology(), simulation.state().x, simulation.contacts(), springs, pinned,
+                 render::obstacle_meshes(simulation.obstacles(), simulation.state().time, simulation.state().x));
     if (f >= last) break;
     simulation.advance_frame();
   }

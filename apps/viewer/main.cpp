@@ -247,10 +247,7 @@ class App {
     if (sim_) {  // the rigid obstacles, in one grey, where they are at the simulation's time
       render::Palette grey = pal;
       grey.front = grey.back = pal.obstacle;
-      const Bounds box = compute_bounds(x);
-      for (const response::Obstacle& o : sim_->obstacles()) {
-        const render::ShapeMesh m =
-            render::shape_mesh(o.at_time(sim_->state().time), (box.min + box.max) / 2, 3 * box.diagonal());
+      for (const render::ShapeMesh& m : render::obstacle_meshes(sim_->obstacles(), sim_->state().time, x)) {
         gl.surface(m.faces, m.positions, grey, lighting);
       }
     }

@@ -315,13 +315,21 @@ TEST(Colouring, ObstacleMeshesLieOnTheirShapes) {
     mean += p / static_cast<double>(f.positions.size());
   }
   EXPECT_NEAR((mean - Vec3(5, -1, -2)).norm(), 0, 1e-12);
+  // Obstacles are drawn where they are at the frame's time.
+  response::Obstacle moving{sphere};
+  moving.velocity = Vec3(2, 0, 0);
+  const Positions cloth{Vec3(0, 0, 0), Vec3(1, 0, 0)};
+  const std::vector<ShapeMesh> at_1 = obstacle_meshes({&moving, 1}, 1.0, cloth);
+  ASSERT_EQ(at_1.size(), 1u);
+  for (const Vec3& p : at_1[0].positions) EXPECT_NEAR((p - Vec3(3, 2, 3)).norm(), 0.5, 1e-12);
 }
 
 TEST(Colouring, ObstaclesAreDrawnBehindTheCloth) {
   // A strip in z = 0 in front of a sphere centred behind it: the sphere shows around the strip,
   // the strip hides it where they overlap.
   const TriMesh mesh = strip(2);
-  const response::Shape shapes[] = {response::Sphere{Vec3(0, 0, -1.2), 1}};
+  const response::Obstacle sphere{response::Sphere{Vec3(0, 0, -1.2), 1}};
+  const std::vector<ShapeMesh> shapes = obstacle_meshes({&sphere, 1}, 0, mesh.positions());
   DrawOptions options;
   options.colliding_edges = false;
   const Picture p = render_frame(Frame{&mesh.topology(), mesh.positions(), nullptr, {}, {}, shapes},

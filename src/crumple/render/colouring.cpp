@@ -92,6 +92,17 @@ ShapeMesh shape_mesh(const response::Shape& shape, const Vec3& centre, Scalar ex
   return m;
 }
 
+std::vector<ShapeMesh> obstacle_meshes(std::span<const response::Obstacle> obstacles, Scalar t,
+                                       PositionsView cloth) {
+  std::vector<ShapeMesh> out;
+  if (obstacles.empty()) return out;
+  const Bounds box = compute_bounds(cloth);
+  for (const response::Obstacle& o : obstacles) {
+    out.push_back(shape_mesh(o.at_time(t), (box.min + box.max) / 2, 3 * box.diagonal()));
+  }
+  return out;
+}
+
 Picture render_frame(const Frame& frame, const Camera& camera, int width, int height,
                      const DrawOptions& options, int supersample) {
   CRUMPLE_CHECK(frame.topology != nullptr, "a frame needs its topology");
@@ -104,14 +115,10 @@ Picture render_frame(const Frame& frame, const Camera& camera, int width, int he
     return frame.positions[static_cast<std::size_t>(i)];
   };
 
-  if (!frame.obstacles.empty()) {
-    const Bounds box = compute_bounds(frame.positions);
-    for (const response::Shape& shape : frame.obstacles) {
-      const ShapeMesh m = shape_mesh(shape, (box.min + box.max) / 2, 3 * box.diagonal());
-      for (const Face& f : m.faces) {
-        r.triangle(m.positions[static_cast<std::size_t>(f[0])], m.positions[static_cast<std::size_t>(f[1])],
-                   m.positions[static_cast<std::size_t>(f[2])], pal.obstacle, pal.obstacle);
-      }
+  for (const ShapeMesh& m : frame.obstacles) {
+    for (const Face& f : m.faces) {
+      r.triangle(m.positions[static_cast<std::size_t>(f[0])], m.positions[static_cast<std::size_t>(f[1])],
+                 m.positions[static_cast<std::size_t>(f[2])], pal.obstacle, pal.obstacle);
     }
   }
   if (options.masses_springs) {

@@ -47,6 +47,14 @@ struct DrawOptions {
   Palette palette;
 };
 
+/// A triangle mesh of an obstacle's surface, for drawing: a sphere as a 32 × 16 UV sphere, a
+/// box as 12 triangles, a plane as a 16 × 16 grid `extent` wide around the point of the plane
+/// nearest `centre` (a floor under the cloth).
+struct ShapeMesh {
+  std::vector<Vec3> positions;
+  std::vector<Face> faces;
+};
+
 /// A frame to draw: connectivity, positions (#V), its contacts, and optionally springs and
 /// pinned flags (masses-and-springs mode; springs default to the mesh edges).
 struct Frame {
@@ -55,17 +63,14 @@ struct Frame {
   const ContactSet* contacts = nullptr;  ///< may be null: nothing in collision
   std::span<const Edge> springs;         ///< particle pairs; empty = the mesh edges
   std::span<const bool> pinned;          ///< #V flags or empty
-  std::span<const response::Shape> obstacles;  ///< rigid obstacles at the frame's time
+  std::span<const ShapeMesh> obstacles;  ///< rigid obstacles (`obstacle_meshes`)
 };
 
-/// A triangle mesh of an obstacle's surface, for drawing: a sphere as a 32 × 16 UV sphere, a
-/// box as 12 triangles, a plane as a 16 × 16 grid `extent` wide around the point of the plane
-/// nearest `centre` (a floor under the cloth).
-struct ShapeMesh {
-  std::vector<Vec3> positions;
-  std::vector<Face> faces;
-};
 ShapeMesh shape_mesh(const response::Shape& shape, const Vec3& centre, Scalar extent);
+/// The meshes of `obstacles` at time `t`, drawn around a cloth at `cloth` (a floor spans three
+/// times the cloth's bounding-box diagonal around its centre): what both front ends draw.
+std::vector<ShapeMesh> obstacle_meshes(std::span<const response::Obstacle> obstacles, Scalar t,
+                                       PositionsView cloth);
 
 /// Per mesh edge: true when the edge is in collision (see the file comment).
 std::vector<bool> colliding_edges(const Topology& topology, const ContactSet& contacts);
