@@ -1,4 +1,5 @@
 #include <crumple/core/error.hpp>
+#include <crumple/detect/compare.hpp>
 #include <crumple/detect/detector.hpp>
 
 #include <gtest/gtest.h>
@@ -59,6 +60,48 @@ TEST(Factory, MakesEveryMethodWithItsCapabilities) {
     EXPECT_EQ(d->capabilities().exact, m.capabilities.exact);
   }
   EXPECT_TRUE(method_info(Method::Naive).capabilities.exact);
+}
+
+// The defaults printed by --help (`MethodInfo::params`) are the ones the detectors use: a spec
+// naming every documented default explicitly behaves exactly like the bare method name (same
+// contacts and same counters on a folding sequence where the stochastic walks are long).
+TEST(MethodSpec, DocumentedDefaultsAreTheDefaults) {
+  const FoldingSequence frames({.n = 20, .frames = 12, .seed = 3});
+  const auto topo = frames.mesh().topology_ptr();
+  for (const MethodInfo& m : all_methods()) {
+    std::string text(m.name);
+    char sep = ':';
+    for (const ParamInfo& p : m.params) {
+      text += sep + std::string(p.key) + "=" + std::string(p.default_value);
+      sep = ',';
+    }
+    SCOPED_TRACE(text);
+    const DetectorOptions options{.thickness = frames.thickness(), .kinds = ContactKinds::parse("vf,ee,tt")};
+    auto bare = make_detector(MethodSpec(m.method), options);
+    auto named = make_detector(MethodSpec::parse(text), options);
+    bare->set_topology(topo);
+    named->set_topology(topo);
+    Positions previous;
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      const Positions x = frames.positions(i);
+      ContactSet a, b;
+      if (previous.empty()) {
+        bare->update(x, a);
+        named->update(x, b);
+      } else {
+        bare->update(previous, x, a);
+        named->update(previous, x, b);
+      }
+      const ContactMatch match = match_contacts(b, a);
+      EXPECT_EQ(match.missed + match.false_contacts, 0u) << "frame " << i;
+      for (const auto& [key, value] : bare->stats().items()) {
+        if (!key.ends_with("_ms")) {
+          EXPECT_EQ(named->stats().get(key), value) << key << ", frame " << i;
+        }
+      }
+      previous = x;
+    }
+  }
 }
 
 TEST(Detector, RejectsBadOptionsAndMisuse) {

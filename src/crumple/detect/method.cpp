@@ -20,7 +20,7 @@ constexpr std::array<ParamInfo, 10> kStochasticParams{{
     {"propagation", "auto",
      "none | linear | full | auto (full for simple, linear otherwise; none with setting=2)"},
     {"near", "2", "near distance as a multiple of the thickness (>= 1): farther pairs are dropped"},
-    {"steps", "64", "maximum convergence moves per pair and frame"},
+    {"steps", "16", "convergence moves per walk and frame; an unfinished walk goes on next frame"},
     {"ef", "off", "also track edge-face pairs (on by itself when tt contacts are asked)"},
     {"seed", "1", "random seed (same seed and frames: same contacts)"},
     {"budget", "0",
