@@ -10,6 +10,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <limits>
 #include <numbers>
 #include <numeric>
 #include <string>
@@ -59,9 +61,32 @@ class KdopDetector::Tree {
 
 namespace {
 
+/// Four floats / four lane masks (GCC and Clang vector extensions: SSE on x86-64, NEON on Arm).
+using F4 = float __attribute__((vector_size(16)));
+using I4 = std::int32_t __attribute__((vector_size(16)));
+
+/// A float at or below / above d (so a float slab holds the double one): d is moved away by more
+/// than the conversion can round back (2^-24 relative, or the spacing of subnormal floats).
+/// Infinite or NaN d gives NaN, which never separates.
+float round_down(double d) { return static_cast<float>(d - (std::abs(d) * 0x1p-22 + 1e-37)); }
+float round_up(double d) { return static_cast<float>(d + (std::abs(d) * 0x1p-22 + 1e-37)); }
+
 template <int K>
 class KdopTree final : public KdopDetector::Tree {
   using Dop = geometry::Kdop<K>;
+  static constexpr int kAxes = Dop::kAxes;
+  /// Up to four sibling nodes' k-DOPs side by side, one lane each, in float rounded outwards,
+  /// so that one node is tested against four children with a few vector compares (no branch
+  /// per slab). Unused lanes are empty (min +inf, max -inf). Conservative: a pair of nodes
+  /// whose double k-DOPs overlap always overlaps here; the leaves' faces are then tested in
+  /// double.
+  struct alignas(16) Lanes {
+    std::array<F4, kAxes> lo, hi;
+  };
+  /// A node's k-DOP in float rounded outwards (the query side of a lane test).
+  struct FloatDop {
+    std::array<float, kAxes> lo, hi;
+  };
 
   /// Leaf: `first`/`count` index slots of `order_`; internal: child node ids.
   struct Node {
@@ -70,6 +95,7 @@ class KdopTree final : public KdopDetector::Tree {
     Index faces = 0;  ///< faces below the node
     bool leaf = false;
     Index slot_begin = 0, slot_end = 0;  ///< the node's faces: slots [slot_begin, slot_end)
+    Index lanes = 0;  ///< internal: children c..c+3 are in lanes_[lanes + (c - first) / 4]
   };
 
  public:
@@ -178,6 +204,14 @@ class KdopTree final : public KdopDetector::Tree {
         prev = cut;
       }
     }
+    Index groups = 0;
+    for (Node& node : nodes_) {
+      if (node.leaf) continue;
+      node.lanes = groups;
+      groups += (node.count + 3) / 4;
+    }
+    lanes_.assign(static_cast<std::size_t>(groups), Lanes{});
+    float_dops_.assign(nodes_.size(), FloatDop{});
     slot_faces_.resize(order_.size());
     for (std::size_t s = 0; s < order_.size(); ++s) slot_faces_[s] = topo.face(order_[s]);
     dops_.assign(nodes_.size(), Dop());
@@ -369,9 +403,42 @@ class KdopTree final : public KdopDetector::Tree {
                                   d.merge(dops_[static_cast<std::size_t>(c)]);
                               }
                               dops_[n] = d;
+                              FloatDop& f = float_dops_[n];
+                              for (int j = 0; j < kAxes; ++j) {
+                                f.lo[static_cast<std::size_t>(j)] = round_down(d.min(j));
+                                f.hi[static_cast<std::size_t>(j)] = round_up(d.max(j));
+                              }
                             }
                           });
     }
+    parallel_for_chunks(nodes_.size(), in.threads, 4096, [&](std::size_t begin, std::size_t end) {
+      constexpr float inf = std::numeric_limits<float>::infinity();
+      for (std::size_t n = begin; n < end; ++n) {
+        const Node& node = nodes_[n];
+        if (node.leaf) continue;
+        for (Index g = 0; g < (node.count + 3) / 4; ++g) {
+          std::array<std::array<float, 4>, kAxes> lo, hi;
+          for (std::size_t l = 0; l < 4; ++l) {
+            const Index c = node.first + 4 * g + static_cast<Index>(l);
+            if (c < node.first + node.count) {
+              const FloatDop& f = float_dops_[static_cast<std::size_t>(c)];
+              for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
+                lo[j][l] = f.lo[j];
+                hi[j][l] = f.hi[j];
+              }
+            } else {
+              for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
+                lo[j][l] = inf;
+                hi[j][l] = -inf;
+              }
+            }
+          }
+          Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
+          std::memcpy(&lanes.lo, &lo, sizeof lo);
+          std::memcpy(&lanes.hi, &hi, sizeof hi);
+        }
+      }
+    });
     if (built_quality_ == 0) built_quality_ = std::max(quality(), 1e-300);
   }
 
@@ -412,6 +479,24 @@ class KdopTree final : public KdopDetector::Tree {
     }
   }
 
+  /// Bit i set: child `first + i` of internal node n may overlap node q (float, conservative;
+  /// NaN never separates, as in `Kdop::overlaps`).
+  std::uint32_t overlapping_children(const Node& node, Index q) const {
+    const FloatDop& f = float_dops_[static_cast<std::size_t>(q)];
+    std::uint32_t mask = 0;
+    for (Index g = 0; g < (node.count + 3) / 4; ++g) {
+      const Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
+      I4 apart = {0, 0, 0, 0};
+      for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
+        const F4 lo = {f.lo[j], f.lo[j], f.lo[j], f.lo[j]};
+        const F4 hi = {f.hi[j], f.hi[j], f.hi[j], f.hi[j]};
+        apart |= (lanes.lo[j] > hi) | (lo > lanes.hi[j]);
+      }
+      for (int l = 0; l < 4; ++l) mask |= static_cast<std::uint32_t>(apart[l] == 0) << (4 * g + l);
+    }
+    return mask & ((1u << node.count) - 1);
+  }
+
   void self(Index n, std::vector<FacePair>& out) const {
     if (culled(n)) return;
     const Node& node = nodes_[static_cast<std::size_t>(n)];
@@ -424,21 +509,28 @@ class KdopTree final : public KdopDetector::Tree {
       return;
     }
     for (Index c = node.first; c < node.first + node.count; ++c) self(c, out);
-    for (Index c = node.first; c < node.first + node.count; ++c) {
-      for (Index d = c + 1; d < node.first + node.count; ++d) pair(c, d, out);
+    for (Index i = 0; i + 1 < node.count; ++i) {
+      const Index c = node.first + i;
+      for (std::uint32_t m = overlapping_children(node, c) >> (i + 1); m != 0; m &= m - 1) {
+        pair(c, c + 1 + std::countr_zero(m), out);
+      }
     }
   }
 
+  /// Nodes a and b, whose k-DOPs may overlap.
   void pair(Index a, Index b, std::vector<FacePair>& out) const {
-    if (!dops_[static_cast<std::size_t>(a)].overlaps(dops_[static_cast<std::size_t>(b)])) return;
     const Node& na = nodes_[static_cast<std::size_t>(a)];
     const Node& nb = nodes_[static_cast<std::size_t>(b)];
     if (na.leaf && nb.leaf) {
       emit_leaf_pair(na, nb, out);
     } else if (na.leaf || (!nb.leaf && nb.faces > na.faces)) {
-      for (Index c = nb.first; c < nb.first + nb.count; ++c) pair(a, c, out);
+      for (std::uint32_t m = overlapping_children(nb, a); m != 0; m &= m - 1) {
+        pair(a, nb.first + std::countr_zero(m), out);
+      }
     } else {
-      for (Index c = na.first; c < na.first + na.count; ++c) pair(c, b, out);
+      for (std::uint32_t m = overlapping_children(na, b); m != 0; m &= m - 1) {
+        pair(na.first + std::countr_zero(m), b, out);
+      }
     }
   }
 
@@ -505,6 +597,8 @@ class KdopTree final : public KdopDetector::Tree {
   const KdopParams& params_;
   std::vector<Node> nodes_;
   std::vector<Dop> dops_;
+  std::vector<FloatDop> float_dops_;  ///< per node
+  std::vector<Lanes> lanes_;          ///< per internal node, its children by four
   std::vector<Index> order_;     ///< face of each leaf slot
   std::vector<Face> slot_faces_;  ///< corners of each slot's face (adjacency test locality)
   std::vector<Dop> face_dops_;    ///< per slot
