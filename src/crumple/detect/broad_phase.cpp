@@ -273,12 +273,14 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   };
   // Vertex v at p against face g: cheap rejections, then the shared kernel.
   const auto test_vf = [&](const Vec3& p, Index v, const PackedFace& t, Index g, LocalContacts& local) {
-    // Box of the face padded by pad.
+    // Box of the face padded by pad (branch-free: one unpredictable branch, not six).
+    bool outside = false;
     for (int i = 0; i < 3; ++i) {
       const Scalar lo = std::min({t.p[0][i], t.p[1][i], t.p[2][i]}) - pad;
       const Scalar hi = std::max({t.p[0][i], t.p[1][i], t.p[2][i]}) + pad;
-      if (!(lo <= p[i] && p[i] <= hi)) return;
+      outside |= !(lo <= p[i]) | !(p[i] <= hi);
     }
+    if (outside) return;
     // Plane rejection: dist(p, triangle) >= dist(p, plane) = |(p - a) . n| / |n|. Rejected only
     // beyond pad plus a bound on the rounding of the dot product (degenerate n: never).
     const Vec3& a = t.p[0];
@@ -291,13 +293,13 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   // Edges e0 = (p0, p1) and e1 = (q0, q1), any order.
   const auto test_ee = [&](const Vec3& p0, const Vec3& p1, Index e0, const Vec3& q0, const Vec3& q1, Index e1,
                            LocalContacts& local) {
-    // Boxes of the edges padded by pad / 2 overlap.
+    // Boxes of the edges padded by pad / 2 overlap (branch-free, as above).
+    bool apart = false;
     for (int i = 0; i < 3; ++i) {
-      if (!(std::min(p0[i], p1[i]) - half <= std::max(q0[i], q1[i]) + half &&
-            std::min(q0[i], q1[i]) - half <= std::max(p0[i], p1[i]) + half)) {
-        return;
-      }
+      apart |= !(std::min(p0[i], p1[i]) - half <= std::max(q0[i], q1[i]) + half) |
+               !(std::min(q0[i], q1[i]) - half <= std::max(p0[i], p1[i]) + half);
     }
+    if (apart) return;
     // Line rejection: dist(segments) >= dist(lines) = |w . (d0 x d1)| / |d0 x d1|, with the
     // same rounding guard (parallel edges: never rejected here).
     const Vec3 d0 = p1 - p0, d1 = q1 - q0, w = q0 - p0;

@@ -34,7 +34,7 @@ KdopParams KdopParams::from_spec(const MethodSpec& spec) {
   static constexpr std::array<std::string_view, 3> kArity{"2", "4", "8"};
   p.k = std::stoi(spec.get_choice("k", "18", kK));
   p.arity = std::stoi(spec.get_choice("arity", "4", kArity));
-  const long long leaf = spec.get_int("leaf", 4);
+  const long long leaf = spec.get_int("leaf", 16);
   if (leaf < 1 || leaf > 64) {
     throw InputError("method " + spec.to_string() + ": leaf must be in 1..64, got " + std::to_string(leaf));
   }
@@ -75,11 +75,11 @@ template <int K>
 class KdopTree final : public KdopDetector::Tree {
   using Dop = geometry::Kdop<K>;
   static constexpr int kAxes = Dop::kAxes;
-  /// Up to four sibling nodes' k-DOPs side by side, one lane each, in float rounded outwards,
-  /// so that one node is tested against four children with a few vector compares (no branch
-  /// per slab). Unused lanes are empty (min +inf, max -inf). Conservative: a pair of nodes
-  /// whose double k-DOPs overlap always overlaps here; the leaves' faces are then tested in
-  /// double.
+  /// Up to four k-DOPs of a node's members (an internal node's children, a leaf's faces) side
+  /// by side, one lane each, in float rounded outwards, so that a k-DOP is tested against four
+  /// members with a few vector compares (no branch per slab). Unused lanes are empty (min +inf,
+  /// max -inf). Conservative: k-DOPs that overlap in double always overlap here; the face
+  /// pairs that pass are then tested in double.
   struct alignas(16) Lanes {
     std::array<F4, kAxes> lo, hi;
   };
@@ -95,7 +95,7 @@ class KdopTree final : public KdopDetector::Tree {
     Index faces = 0;  ///< faces below the node
     bool leaf = false;
     Index slot_begin = 0, slot_end = 0;  ///< the node's faces: slots [slot_begin, slot_end)
-    Index lanes = 0;  ///< internal: children c..c+3 are in lanes_[lanes + (c - first) / 4]
+    Index lanes = 0;  ///< members first + 4g .. first + 4g + 3 are in lanes_[lanes + g]
   };
 
  public:
@@ -206,7 +206,6 @@ class KdopTree final : public KdopDetector::Tree {
     }
     Index groups = 0;
     for (Node& node : nodes_) {
-      if (node.leaf) continue;
       node.lanes = groups;
       groups += (node.count + 3) / 4;
     }
@@ -216,6 +215,7 @@ class KdopTree final : public KdopDetector::Tree {
     for (std::size_t s = 0; s < order_.size(); ++s) slot_faces_[s] = topo.face(order_[s]);
     dops_.assign(nodes_.size(), Dop());
     face_dops_.assign(order_.size(), Dop());
+    face_float_.assign(order_.size(), FloatDop{});
     built_quality_ = 0;  // set by the first refit
     contours_valid_ = false;
     stats.add("rebuilds", 1);
@@ -378,6 +378,7 @@ class KdopTree final : public KdopDetector::Tree {
         d.merge(vertex_dops_[static_cast<std::size_t>(t[1])]);
         d.merge(vertex_dops_[static_cast<std::size_t>(t[2])]);
         face_dops_[s] = d;
+        face_float_[s] = to_float(d);
         if (swept) {
           Dop now;
           for (const Index v : t) now.extend(in.positions[static_cast<std::size_t>(v)]);
@@ -403,11 +404,7 @@ class KdopTree final : public KdopDetector::Tree {
                                   d.merge(dops_[static_cast<std::size_t>(c)]);
                               }
                               dops_[n] = d;
-                              FloatDop& f = float_dops_[n];
-                              for (int j = 0; j < kAxes; ++j) {
-                                f.lo[static_cast<std::size_t>(j)] = round_down(d.min(j));
-                                f.hi[static_cast<std::size_t>(j)] = round_up(d.max(j));
-                              }
+                              float_dops_[n] = to_float(d);
                             }
                           });
     }
@@ -415,13 +412,13 @@ class KdopTree final : public KdopDetector::Tree {
       constexpr float inf = std::numeric_limits<float>::infinity();
       for (std::size_t n = begin; n < end; ++n) {
         const Node& node = nodes_[n];
-        if (node.leaf) continue;
+        const std::vector<FloatDop>& members = node.leaf ? face_float_ : float_dops_;
         for (Index g = 0; g < (node.count + 3) / 4; ++g) {
           std::array<std::array<float, 4>, kAxes> lo, hi;
           for (std::size_t l = 0; l < 4; ++l) {
             const Index c = node.first + 4 * g + static_cast<Index>(l);
             if (c < node.first + node.count) {
-              const FloatDop& f = float_dops_[static_cast<std::size_t>(c)];
+              const FloatDop& f = members[static_cast<std::size_t>(c)];
               for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
                 lo[j][l] = f.lo[j];
                 hi[j][l] = f.hi[j];
@@ -440,6 +437,15 @@ class KdopTree final : public KdopDetector::Tree {
       }
     });
     if (built_quality_ == 0) built_quality_ = std::max(quality(), 1e-300);
+  }
+
+  static FloatDop to_float(const Dop& d) {
+    FloatDop f;
+    for (int j = 0; j < kAxes; ++j) {
+      f.lo[static_cast<std::size_t>(j)] = round_down(d.min(j));
+      f.hi[static_cast<std::size_t>(j)] = round_up(d.max(j));
+    }
+    return f;
   }
 
   static Scalar extent(const Dop& d) {
@@ -473,17 +479,17 @@ class KdopTree final : public KdopDetector::Tree {
 
   void emit_leaf_pair(const Node& a, const Node& b, std::vector<FacePair>& out) const {
     for (Index i = a.first; i < a.first + a.count; ++i) {
-      for (Index j = b.first; j < b.first + b.count; ++j) {
+      for (std::uint64_t m = overlapping_members(b, face_float_[static_cast<std::size_t>(i)]); m != 0; m &= m - 1) {
+        const Index j = b.first + std::countr_zero(m);
         if (candidate(i, j)) emit(i, j, out);
       }
     }
   }
 
-  /// Bit i set: child `first + i` of internal node n may overlap node q (float, conservative;
-  /// NaN never separates, as in `Kdop::overlaps`).
-  std::uint32_t overlapping_children(const Node& node, Index q) const {
-    const FloatDop& f = float_dops_[static_cast<std::size_t>(q)];
-    std::uint32_t mask = 0;
+  /// Bit i set: member `first + i` of the node (child or face slot) may overlap the k-DOP f
+  /// (float, conservative; NaN never separates, as in `Kdop::overlaps`).
+  std::uint64_t overlapping_members(const Node& node, const FloatDop& f) const {
+    std::uint64_t mask = 0;
     for (Index g = 0; g < (node.count + 3) / 4; ++g) {
       const Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
       I4 apart = {0, 0, 0, 0};
@@ -492,18 +498,25 @@ class KdopTree final : public KdopDetector::Tree {
         const F4 hi = {f.hi[j], f.hi[j], f.hi[j], f.hi[j]};
         apart |= (lanes.lo[j] > hi) | (lo > lanes.hi[j]);
       }
-      for (int l = 0; l < 4; ++l) mask |= static_cast<std::uint32_t>(apart[l] == 0) << (4 * g + l);
+      for (int l = 0; l < 4; ++l) mask |= static_cast<std::uint64_t>(apart[l] == 0) << (4 * g + l);
     }
-    return mask & ((1u << node.count) - 1);
+    // The empty lanes past `count` overlap nothing but a NaN k-DOP: masked.
+    return node.count >= 64 ? mask : mask & ((std::uint64_t{1} << node.count) - 1);
+  }
+  std::uint64_t overlapping_children(const Node& node, Index q) const {
+    return overlapping_members(node, float_dops_[static_cast<std::size_t>(q)]);
   }
 
   void self(Index n, std::vector<FacePair>& out) const {
     if (culled(n)) return;
     const Node& node = nodes_[static_cast<std::size_t>(n)];
     if (node.leaf) {
-      for (Index i = node.first; i < node.first + node.count; ++i) {
-        for (Index j = i + 1; j < node.first + node.count; ++j) {
-          if (candidate(i, j)) emit(i, j, out);
+      for (Index i = 0; i + 1 < node.count; ++i) {
+        const Index a = node.first + i;
+        const std::uint64_t m0 = overlapping_members(node, face_float_[static_cast<std::size_t>(a)]) >> (i + 1);
+        for (std::uint64_t m = m0; m != 0; m &= m - 1) {
+          const Index b = a + 1 + std::countr_zero(m);
+          if (candidate(a, b)) emit(a, b, out);
         }
       }
       return;
@@ -511,7 +524,7 @@ class KdopTree final : public KdopDetector::Tree {
     for (Index c = node.first; c < node.first + node.count; ++c) self(c, out);
     for (Index i = 0; i + 1 < node.count; ++i) {
       const Index c = node.first + i;
-      for (std::uint32_t m = overlapping_children(node, c) >> (i + 1); m != 0; m &= m - 1) {
+      for (std::uint64_t m = overlapping_children(node, c) >> (i + 1); m != 0; m &= m - 1) {
         pair(c, c + 1 + std::countr_zero(m), out);
       }
     }
@@ -524,11 +537,11 @@ class KdopTree final : public KdopDetector::Tree {
     if (na.leaf && nb.leaf) {
       emit_leaf_pair(na, nb, out);
     } else if (na.leaf || (!nb.leaf && nb.faces > na.faces)) {
-      for (std::uint32_t m = overlapping_children(nb, a); m != 0; m &= m - 1) {
+      for (std::uint64_t m = overlapping_children(nb, a); m != 0; m &= m - 1) {
         pair(a, nb.first + std::countr_zero(m), out);
       }
     } else {
-      for (std::uint32_t m = overlapping_children(na, b); m != 0; m &= m - 1) {
+      for (std::uint64_t m = overlapping_children(na, b); m != 0; m &= m - 1) {
         pair(na.first + std::countr_zero(m), b, out);
       }
     }
@@ -602,6 +615,7 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<Index> order_;     ///< face of each leaf slot
   std::vector<Face> slot_faces_;  ///< corners of each slot's face (adjacency test locality)
   std::vector<Dop> face_dops_;    ///< per slot
+  std::vector<FloatDop> face_float_;  ///< per slot, float rounded outwards
   std::vector<Dop> vertex_dops_;  ///< per vertex, swept and inflated
   std::vector<Dop> now_dops_;     ///< per slot, current positions only, inflated (when swept)
   bool swept_ = false;            ///< this frame's boxes cover the motion
