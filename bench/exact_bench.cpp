@@ -303,6 +303,14 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  for (const std::string& name : split(scenes)) {
+    if (std::none_of(std::begin(kScenes), std::end(kScenes), [&](const Scene& s) { return name == s.name; })) {
+      std::cerr << "error: unknown scene '" << name << "'; scenes:";
+      for (const Scene& s : kScenes) std::cerr << " " << s.name;
+      std::cerr << "\n";
+      return 2;
+    }
+  }
   try {
     if (!ref.empty()) return reference(data, ref, threads, split(scenes), !small_only);
     return bench(data, split(methods), thread_counts, repeat, tt, json, md, split(scenes));
