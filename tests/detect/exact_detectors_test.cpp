@@ -257,6 +257,50 @@ TEST(ExactDetectors, AdversarialCrumpledSheet) {
   }
 }
 
+// The k-DOP traversal tests its nodes in float: a scene far beyond the float
+// range, one in its subnormal range and one far from the origin with a tiny thickness must
+// give exactly naive's contacts all the same.
+TEST(ExactDetectors, CoordinatesBeyondFloatPrecisionAndRange) {
+  const TriMesh sheet = shapes::lattice(12, 12);
+  const Positions crumpled = testing::crumple_lattice(sheet, 0.35, 5);
+  struct Case {
+    Scalar scale;
+    Vec3 offset;
+  };
+  for (const Case& c : {Case{1e45, Vec3::Zero()}, Case{1e-42, Vec3::Zero()}, Case{1, Vec3(3e7, -3e7, 1e8)}}) {
+    SCOPED_TRACE("scale " + std::to_string(c.scale) + " offset " + std::to_string(c.offset.z()));
+    std::vector<Positions> frames;
+    for (const Positions& x : {crumpled, testing::jitter(crumpled, 0.01, 6)}) {
+      Positions y(x.size());
+      for (std::size_t i = 0; i < x.size(); ++i) y[i] = c.scale * x[i] + c.offset;
+      frames.push_back(std::move(y));
+    }
+    const std::size_t n = expect_sequence_exact(sheet, frames, 0.03 * c.scale, {"kdop", "kdop:sweep=on", "kdop:k=6"});
+    if (HasFatalFailure()) return;
+    EXPECT_GT(n, 20u);
+  }
+}
+
+// A vertex just under h above a face, far from the origin: the faces' padded slabs overlap by
+// about 1e-6 h + 1e-9 |x|, far less than a float's spacing there, so the float lane test keeps
+// the pair only because its conversion is monotone (a rounding towards the inside of the slabs
+// loses the contact in these placements).
+TEST(ExactDetectors, FloatLanesKeepPairsJustUnderTheThickness) {
+  const Scalar h = 0.01;
+  for (int k = 0; k < 40; ++k) {
+    const Vec3 o = Vec3(1, 1.3, 0.7) * (1000 + 37.1 * k);
+    const Scalar gap = h * (1 - 1e-9);
+    const Vec3 v = o + Vec3(0.25, 0.25, gap);
+    const TriMesh m = TriMesh::create({o, o + Vec3(1, 0, 0), o + Vec3(0, 1, 0), v, v + Vec3(1, 0, 1), v + Vec3(0, 1, 1)},
+                                      {{0, 1, 2}, {3, 4, 5}});
+    SCOPED_TRACE("placement " + std::to_string(k));
+    const std::size_t n = expect_sequence_exact(m, {m.positions()}, h, {"kdop", "kdop:k=6", "kdop:leaf=1"},
+                                                ContactKinds::parse("vf"));
+    if (HasFatalFailure()) return;
+    EXPECT_EQ(n, 1u);
+  }
+}
+
 TEST(ExactDetectors, IsolatedVerticesAndDegenerateFaces) {
   // Vertex 3 is used by no face and hovers over face 0; vertex 7 is isolated and far; face 2 is
   // degenerate (collinear corners) and close to face 0; vertex 8 duplicates vertex 0's position.

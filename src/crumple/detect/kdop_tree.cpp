@@ -65,25 +65,30 @@ namespace {
 using F4 = float __attribute__((vector_size(16)));
 using I4 = std::int32_t __attribute__((vector_size(16)));
 
-/// A float at or below / above d (so a float slab holds the double one): d is moved away by more
-/// than the conversion can round back (2^-24 relative, or the spacing of subnormal floats).
-/// Infinite or NaN d gives NaN, which never separates.
-float round_down(double d) { return static_cast<float>(d - (std::abs(d) * 0x1p-22 + 1e-37)); }
-float round_up(double d) { return static_cast<float>(d + (std::abs(d) * 0x1p-22 + 1e-37)); }
+/// d as a float, by a non-decreasing map (round to nearest inside the float range, infinity
+/// beyond it; NaN stays NaN). Non-decreasing is all the overlap tests need: slabs that overlap
+/// in double (lo <= hi') still overlap in float (to_float(lo) <= to_float(hi')), so the float
+/// lanes never separate k-DOPs that the double test keeps.
+float to_float(double d) {
+  constexpr double kMax = std::numeric_limits<float>::max();
+  if (d > kMax) return std::numeric_limits<float>::infinity();
+  if (d < -kMax) return -std::numeric_limits<float>::infinity();
+  return static_cast<float>(d);
+}
 
 template <int K>
 class KdopTree final : public KdopDetector::Tree {
   using Dop = geometry::Kdop<K>;
   static constexpr int kAxes = Dop::kAxes;
   /// Up to four k-DOPs of a node's members (an internal node's children, a leaf's faces) side
-  /// by side, one lane each, in float rounded outwards, so that a k-DOP is tested against four
+  /// by side, one lane each, in float (`to_float`), so that a k-DOP is tested against four
   /// members with a few vector compares (no branch per slab). Unused lanes are empty (min +inf,
   /// max -inf). Conservative: k-DOPs that overlap in double always overlap here; the face
   /// pairs that pass are then tested in double.
   struct alignas(16) Lanes {
     std::array<F4, kAxes> lo, hi;
   };
-  /// A node's k-DOP in float rounded outwards (the query side of a lane test).
+  /// A node's or face's k-DOP in float (the query side of a lane test).
   struct FloatDop {
     std::array<float, kAxes> lo, hi;
   };
@@ -378,7 +383,7 @@ class KdopTree final : public KdopDetector::Tree {
         d.merge(vertex_dops_[static_cast<std::size_t>(t[1])]);
         d.merge(vertex_dops_[static_cast<std::size_t>(t[2])]);
         face_dops_[s] = d;
-        face_float_[s] = to_float(d);
+        face_float_[s] = float_dop(d);
         if (swept) {
           Dop now;
           for (const Index v : t) now.extend(in.positions[static_cast<std::size_t>(v)]);
@@ -404,7 +409,7 @@ class KdopTree final : public KdopDetector::Tree {
                                   d.merge(dops_[static_cast<std::size_t>(c)]);
                               }
                               dops_[n] = d;
-                              float_dops_[n] = to_float(d);
+                              float_dops_[n] = float_dop(d);
                             }
                           });
     }
@@ -439,11 +444,11 @@ class KdopTree final : public KdopDetector::Tree {
     if (built_quality_ == 0) built_quality_ = std::max(quality(), 1e-300);
   }
 
-  static FloatDop to_float(const Dop& d) {
+  static FloatDop float_dop(const Dop& d) {
     FloatDop f;
     for (int j = 0; j < kAxes; ++j) {
-      f.lo[static_cast<std::size_t>(j)] = round_down(d.min(j));
-      f.hi[static_cast<std::size_t>(j)] = round_up(d.max(j));
+      f.lo[static_cast<std::size_t>(j)] = to_float(d.min(j));
+      f.hi[static_cast<std::size_t>(j)] = to_float(d.max(j));
     }
     return f;
   }
@@ -615,7 +620,7 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<Index> order_;     ///< face of each leaf slot
   std::vector<Face> slot_faces_;  ///< corners of each slot's face (adjacency test locality)
   std::vector<Dop> face_dops_;    ///< per slot
-  std::vector<FloatDop> face_float_;  ///< per slot, float rounded outwards
+  std::vector<FloatDop> face_float_;  ///< per slot
   std::vector<Dop> vertex_dops_;  ///< per vertex, swept and inflated
   std::vector<Dop> now_dops_;     ///< per slot, current positions only, inflated (when swept)
   bool swept_ = false;            ///< this frame's boxes cover the motion
