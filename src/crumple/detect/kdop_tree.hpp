@@ -17,9 +17,11 @@
 ///    recorded at build; when a refit makes it exceed `rebuild` times that value, the tree is
 ///    rebuilt from the current positions (counted in the `rebuilds` stat).
 ///  - Self-traversal (node against itself, then its children pairwise; descend the larger of
-///    two overlapping nodes), expanded into many independent tasks run in parallel. Faces that
-///    share a vertex are skipped at the leaves (their orphan sub-pairs are handled by the
-///    pipeline).
+///    two overlapping nodes), expanded into many independent tasks run in parallel. A k-DOP is
+///    tested against four of a node's members (children, or a leaf's faces) at once, in float
+///    (a monotone conversion, so never less than the double test keeps); face pairs that pass
+///    are tested in double. Faces that share a vertex are skipped at the leaves (their orphan
+///    sub-pairs are handled by the pipeline).
 /// Spec: `kdop:k=6|14|18|26,arity=2|4|8,leaf=N,rebuild=R,sweep=on|off,cones=on|off` plus `max_contacts`,
 /// `overflow`.
 ///  - Normal-cone culling (ALGORITHMS.md §3; Volino & Magnenat-Thalmann), for intersection-only
