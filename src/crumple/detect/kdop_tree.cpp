@@ -220,7 +220,6 @@ class KdopTree final : public KdopDetector::Tree {
     for (std::size_t s = 0; s < order_.size(); ++s) slot_faces_[s] = topo.face(order_[s]);
     dops_.assign(nodes_.size(), Dop());
     face_dops_.assign(order_.size(), Dop());
-    face_float_.assign(order_.size(), FloatDop{});
     built_quality_ = 0;  // set by the first refit
     contours_valid_ = false;
     stats.add("rebuilds", 1);
@@ -383,7 +382,6 @@ class KdopTree final : public KdopDetector::Tree {
         d.merge(vertex_dops_[static_cast<std::size_t>(t[1])]);
         d.merge(vertex_dops_[static_cast<std::size_t>(t[2])]);
         face_dops_[s] = d;
-        face_float_[s] = float_dop(d);
         if (swept) {
           Dop now;
           for (const Index v : t) now.extend(in.positions[static_cast<std::size_t>(v)]);
@@ -417,13 +415,18 @@ class KdopTree final : public KdopDetector::Tree {
       constexpr float inf = std::numeric_limits<float>::infinity();
       for (std::size_t n = begin; n < end; ++n) {
         const Node& node = nodes_[n];
-        const std::vector<FloatDop>& members = node.leaf ? face_float_ : float_dops_;
         for (Index g = 0; g < (node.count + 3) / 4; ++g) {
           std::array<std::array<float, 4>, kAxes> lo, hi;
           for (std::size_t l = 0; l < 4; ++l) {
             const Index c = node.first + 4 * g + static_cast<Index>(l);
-            if (c < node.first + node.count) {
-              const FloatDop& f = members[static_cast<std::size_t>(c)];
+            if (c < node.first + node.count && node.leaf) {  // a face slot
+              const Dop& d = face_dops_[static_cast<std::size_t>(c)];
+              for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
+                lo[j][l] = to_float(d.min(static_cast<int>(j)));
+                hi[j][l] = to_float(d.max(static_cast<int>(j)));
+              }
+            } else if (c < node.first + node.count) {  // a child node
+              const FloatDop& f = float_dops_[static_cast<std::size_t>(c)];
               for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
                 lo[j][l] = f.lo[j];
                 hi[j][l] = f.hi[j];
@@ -482,9 +485,21 @@ class KdopTree final : public KdopDetector::Tree {
     out.push_back({std::min(f, g), std::max(f, g)});
   }
 
+  /// The float k-DOP of member i (0-based) of a node, read back from its lanes.
+  FloatDop member(const Node& node, Index i) const {
+    const Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + i / 4)];
+    const int l = i % 4;
+    FloatDop f;
+    for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
+      f.lo[j] = lanes.lo[j][l];
+      f.hi[j] = lanes.hi[j][l];
+    }
+    return f;
+  }
+
   void emit_leaf_pair(const Node& a, const Node& b, std::vector<FacePair>& out) const {
     for (Index i = a.first; i < a.first + a.count; ++i) {
-      for (std::uint64_t m = overlapping_members(b, face_float_[static_cast<std::size_t>(i)]); m != 0; m &= m - 1) {
+      for (std::uint64_t m = overlapping_members(b, member(a, i - a.first)); m != 0; m &= m - 1) {
         const Index j = b.first + std::countr_zero(m);
         if (candidate(i, j)) emit(i, j, out);
       }
@@ -518,7 +533,7 @@ class KdopTree final : public KdopDetector::Tree {
     if (node.leaf) {
       for (Index i = 0; i + 1 < node.count; ++i) {
         const Index a = node.first + i;
-        const std::uint64_t m0 = overlapping_members(node, face_float_[static_cast<std::size_t>(a)]) >> (i + 1);
+        const std::uint64_t m0 = overlapping_members(node, member(node, i)) >> (i + 1);
         for (std::uint64_t m = m0; m != 0; m &= m - 1) {
           const Index b = a + 1 + std::countr_zero(m);
           if (candidate(a, b)) emit(a, b, out);
@@ -620,7 +635,6 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<Index> order_;     ///< face of each leaf slot
   std::vector<Face> slot_faces_;  ///< corners of each slot's face (adjacency test locality)
   std::vector<Dop> face_dops_;    ///< per slot
-  std::vector<FloatDop> face_float_;  ///< per slot
   std::vector<Dop> vertex_dops_;  ///< per vertex, swept and inflated
   std::vector<Dop> now_dops_;     ///< per slot, current positions only, inflated (when swept)
   bool swept_ = false;            ///< this frame's boxes cover the motion
