@@ -154,6 +154,7 @@ class ExactDetector : public Detector {
   std::vector<std::array<Index, 2>> orphan_vf_;  ///< (vertex, face) sub-pairs of adjacent faces
   std::vector<std::array<Index, 2>> orphan_ee_;  ///< (edge, edge), first < second
   std::vector<Index> isolated_;                  ///< vertices used by no face
+  std::vector<ContactSet> spare_sets_;           ///< cleared per-chunk contact sets, for reuse
   /// What the narrow phase reads of one face, packed so that a candidate pair touches two
   /// records (the corners' positions are copied in every frame).
   struct PackedFace {
