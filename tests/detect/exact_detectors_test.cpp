@@ -257,9 +257,9 @@ TEST(ExactDetectors, AdversarialCrumpledSheet) {
   }
 }
 
-// The k-DOP traversal tests its nodes in float: a scene far beyond the float
-// range, one in its subnormal range and one far from the origin with a tiny thickness must
-// give exactly naive's contacts all the same.
+// The k-DOP traversal tests its nodes in float: a scene far beyond the float range, one in its
+// subnormal range and one far from the origin with a small thickness must give exactly naive's
+// contacts all the same.
 TEST(ExactDetectors, CoordinatesBeyondFloatPrecisionAndRange) {
   const TriMesh sheet = shapes::lattice(12, 12);
   const Positions crumpled = testing::crumple_lattice(sheet, 0.35, 5);
