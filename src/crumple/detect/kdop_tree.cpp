@@ -408,42 +408,10 @@ class KdopTree final : public KdopDetector::Tree {
                               }
                               dops_[n] = d;
                               float_dops_[n] = float_dop(d);
+                              fill_lanes(node);  // its members are refitted: levels go bottom-up
                             }
                           });
     }
-    parallel_for_chunks(nodes_.size(), in.threads, 4096, [&](std::size_t begin, std::size_t end) {
-      constexpr float inf = std::numeric_limits<float>::infinity();
-      for (std::size_t n = begin; n < end; ++n) {
-        const Node& node = nodes_[n];
-        for (Index g = 0; g < (node.count + 3) / 4; ++g) {
-          std::array<std::array<float, 4>, kAxes> lo, hi;
-          for (std::size_t l = 0; l < 4; ++l) {
-            const Index c = node.first + 4 * g + static_cast<Index>(l);
-            if (c < node.first + node.count && node.leaf) {  // a face slot
-              const Dop& d = face_dops_[static_cast<std::size_t>(c)];
-              for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
-                lo[j][l] = to_float(d.min(static_cast<int>(j)));
-                hi[j][l] = to_float(d.max(static_cast<int>(j)));
-              }
-            } else if (c < node.first + node.count) {  // a child node
-              const FloatDop& f = float_dops_[static_cast<std::size_t>(c)];
-              for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
-                lo[j][l] = f.lo[j];
-                hi[j][l] = f.hi[j];
-              }
-            } else {
-              for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
-                lo[j][l] = inf;
-                hi[j][l] = -inf;
-              }
-            }
-          }
-          Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
-          std::memcpy(&lanes.lo, &lo, sizeof lo);
-          std::memcpy(&lanes.hi, &hi, sizeof hi);
-        }
-      }
-    });
     if (built_quality_ == 0) built_quality_ = std::max(quality(), 1e-300);
   }
 
@@ -454,6 +422,30 @@ class KdopTree final : public KdopDetector::Tree {
       f.hi[static_cast<std::size_t>(j)] = to_float(d.max(j));
     }
     return f;
+  }
+
+  /// Writes the float k-DOPs of the node's members (faces of a leaf, children otherwise) into
+  /// its lanes, four per group; lanes past `count` are empty.
+  void fill_lanes(const Node& node) {
+    FloatDop empty;
+    empty.lo.fill(std::numeric_limits<float>::infinity());
+    empty.hi.fill(-std::numeric_limits<float>::infinity());
+    for (Index g = 0; g < (node.count + 3) / 4; ++g) {
+      std::array<std::array<float, 4>, kAxes> lo, hi;
+      for (std::size_t l = 0; l < 4; ++l) {
+        const auto c = static_cast<std::size_t>(node.first + 4 * g) + l;
+        const FloatDop f = c >= static_cast<std::size_t>(node.first + node.count) ? empty
+                           : node.leaf                                             ? float_dop(face_dops_[c])
+                                                                                   : float_dops_[c];
+        for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
+          lo[j][l] = f.lo[j];
+          hi[j][l] = f.hi[j];
+        }
+      }
+      Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
+      std::memcpy(&lanes.lo, &lo, sizeof lo);
+      std::memcpy(&lanes.hi, &hi, sizeof hi);
+    }
   }
 
   static Scalar extent(const Dop& d) {
