@@ -256,21 +256,12 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   std::mutex mutex;
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
   std::vector<ContactSet> parts;  // each chunk's contacts, gathered in order at the end
-  // Each chunk fills a set taken from the previous frames' (cleared, storage kept: a frame
-  // writes tens of MB of contacts, and fresh allocations of that size cost page faults).
-  const auto take_set = [&] {
-    const std::lock_guard lock(mutex);
-    if (spare_sets_.empty()) return ContactSet{};
-    ContactSet set = std::move(spare_sets_.back());
-    spare_sets_.pop_back();
-    return set;
-  };
   const auto merge = [&](LocalContacts& local) {
     const std::lock_guard lock(mutex);
     if (!local.set.empty()) {
       parts.push_back(std::move(local.set));
     } else {
-      spare_sets_.push_back(std::move(local.set));
+      spare_sets_.give(std::move(local.set));
     }
     vf_tests += local.vf_tests;
     ee_tests += local.ee_tests;
@@ -333,7 +324,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   for (std::size_t i = 0; i < chunks.size(); ++i) offsets[i + 1] = offsets[i] + chunks[i].size();
   const std::size_t total = offsets.back();
   parallel_for_chunks(total, threads, 2048, [&](std::size_t begin, std::size_t end) {
-    LocalContacts local{take_set()};
+    LocalContacts local{spare_sets_.take()};
     std::size_t c = static_cast<std::size_t>(
         std::upper_bound(offsets.begin(), offsets.end(), begin) - offsets.begin() - 1);
     for (std::size_t i = begin; i < end; ++i) {
@@ -381,7 +372,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   const auto orphans_start = std::chrono::steady_clock::now();
   if (kinds.vf) {
     parallel_for_chunks(orphan_vf_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-      LocalContacts local{take_set()};
+      LocalContacts local{spare_sets_.take()};
       for (std::size_t i = begin; i < end; ++i) {
         const auto [v, g] = orphan_vf_[i];
         test_vf(narrow::at(x, v), v, packed_[static_cast<std::size_t>(g)], g, local);
@@ -390,7 +381,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     });
     // 3. Isolated vertices against every face.
     parallel_for_chunks(isolated_.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
-      LocalContacts local{take_set()};
+      LocalContacts local{spare_sets_.take()};
       for (std::size_t i = begin; i < end; ++i) {
         const Index v = isolated_[i];
         for (Index g = 0; g < static_cast<Index>(nf); ++g) {
@@ -402,7 +393,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   }
   if (kinds.ee) {
     parallel_for_chunks(orphan_ee_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-      LocalContacts local{take_set()};
+      LocalContacts local{spare_sets_.take()};
       for (std::size_t i = begin; i < end; ++i) test_edge_ids(orphan_ee_[i][0], orphan_ee_[i][1], local);
       merge(local);
     });
@@ -426,10 +417,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   gather_sorted(
       out.ee, ee_parts, nv, [](const EdgeEdgeContact& c) { return c.a[0]; }, threads);
   std::sort(out.tt.begin(), out.tt.end(), CanonicalLess{});
-  for (ContactSet& p : parts) {
-    p.clear();
-    spare_sets_.push_back(std::move(p));
-  }
+  for (ContactSet& p : parts) spare_sets_.give(std::move(p));
   stats_.set("sort_ms", ms_since(gather_start));
   stats_.set("orphan_vf", static_cast<double>(orphan_vf_.size()));
   stats_.set("orphan_ee", static_cast<double>(orphan_ee_.size()));

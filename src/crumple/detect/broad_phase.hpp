@@ -30,6 +30,7 @@
 #include <array>
 #include <cstddef>
 #include <mutex>
+#include <utility>
 #include <vector>
 
 namespace crumple {
@@ -62,24 +63,43 @@ struct FrameInput {
   bool intersection_only = false;
 };
 
+/// Cleared containers (anything with `clear()`) kept for reuse, thread-safe: a frame fills
+/// millions of candidates and tens of MB of contacts, and fresh allocations of that size cost
+/// page faults.
+template <class T>
+class Spares {
+ public:
+  /// An empty container, with the storage of one given back earlier when there is one.
+  T take() {
+    const std::lock_guard lock(mutex_);
+    if (spare_.empty()) return {};
+    T x = std::move(spare_.back());
+    spare_.pop_back();
+    return x;
+  }
+  /// Keeps x's storage for `take` (x is cleared).
+  void give(T&& x) {
+    x.clear();
+    const std::lock_guard lock(mutex_);
+    spare_.push_back(std::move(x));
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<T> spare_;
+};
+
 /// Thread-safe sink of candidate chunks (each task appends its own vector once).
 class CandidateBuffer {
  public:
-  /// An empty chunk to fill, reusing the storage of a cleared one when there is some (a frame
-  /// holds up to millions of candidates: fresh allocations of that size cost page faults).
-  std::vector<FacePair> take() {
-    const std::lock_guard lock(mutex_);
-    if (spare_.empty()) return {};
-    std::vector<FacePair> chunk = std::move(spare_.back());
-    spare_.pop_back();
-    return chunk;
-  }
+  /// An empty chunk to fill, reusing the storage of a cleared one when there is some.
+  std::vector<FacePair> take() { return spares_.take(); }
   void add(std::vector<FacePair>&& chunk) {
-    const std::lock_guard lock(mutex_);
     if (chunk.empty()) {
-      if (chunk.capacity() > 0) spare_.push_back(std::move(chunk));
+      if (chunk.capacity() > 0) spares_.give(std::move(chunk));
       return;
     }
+    const std::lock_guard lock(mutex_);
     total_ += chunk.size();
     chunks_.push_back(std::move(chunk));
   }
@@ -87,17 +107,15 @@ class CandidateBuffer {
   const std::vector<std::vector<FacePair>>& chunks() const { return chunks_; }
   /// Forgets the candidates, keeping the chunks' storage for `take`.
   void clear() {
-    for (auto& chunk : chunks_) {
-      chunk.clear();
-      spare_.push_back(std::move(chunk));
-    }
+    for (auto& chunk : chunks_) spares_.give(std::move(chunk));
     chunks_.clear();
     total_ = 0;
   }
 
  private:
   std::mutex mutex_;
-  std::vector<std::vector<FacePair>> chunks_, spare_;
+  std::vector<std::vector<FacePair>> chunks_;
+  Spares<std::vector<FacePair>> spares_;
   std::size_t total_ = 0;
 };
 
@@ -154,7 +172,7 @@ class ExactDetector : public Detector {
   std::vector<std::array<Index, 2>> orphan_vf_;  ///< (vertex, face) sub-pairs of adjacent faces
   std::vector<std::array<Index, 2>> orphan_ee_;  ///< (edge, edge), first < second
   std::vector<Index> isolated_;                  ///< vertices used by no face
-  std::vector<ContactSet> spare_sets_;           ///< cleared per-chunk contact sets, for reuse
+  Spares<ContactSet> spare_sets_;                ///< per-chunk contact sets, for reuse
   /// What the narrow phase reads of one face, packed so that a candidate pair touches two
   /// records (the corners' positions are copied in every frame).
   struct PackedFace {
