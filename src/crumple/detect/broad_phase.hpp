@@ -4,7 +4,8 @@
 ///
 ///  1. broad phase (per method): every unordered pair of faces that share no vertex and whose
 ///     boxes, inflated by `FrameInput::radius` (half the padded thickness) on every side,
-///     overlap — emitted exactly once;
+///     overlap — emitted exactly once (a broad phase may also emit pairs whose boxes are
+///     apart by less than a float rounding: the narrow phase rejects them);
 ///  2. orphans: pairs of faces that share a vertex are never emitted by a broad phase; their
 ///     vertex–face and edge–edge sub-pairs that are *not* excluded (the vertex opposite a
 ///     shared edge, edges around a shared vertex) are listed once per topology and tested

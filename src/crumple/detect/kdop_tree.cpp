@@ -181,32 +181,17 @@ class KdopTree final : public KdopDetector::Tree {
         node = {item.begin, size, size, true, item.begin, item.end};
         continue;
       }
-      Vec3 lo = Vec3::Constant(std::numeric_limits<Scalar>::infinity());
-      Vec3 hi = -lo;
-      for (Index i = item.begin; i < item.end; ++i) {
-        const Vec3& c = centroid[static_cast<std::size_t>(order_[static_cast<std::size_t>(i)])];
-        lo = lo.cwiseMin(c);
-        hi = hi.cwiseMax(c);
-      }
-      int axis = 0;
-      (hi - lo).maxCoeff(&axis);
-      const auto less = [&](Index a, Index b) {
-        const Scalar ca = centroid[static_cast<std::size_t>(a)][axis];
-        const Scalar cb = centroid[static_cast<std::size_t>(b)][axis];
-        return ca < cb || (ca == cb && a < b);
-      };
       const Index parts = std::min<Index>(params_.arity, size);
       const Index first = static_cast<Index>(nodes_.size());
       node = {first, parts, size, false, item.begin, item.end};
-      Index prev = item.begin;
+      // The children come from recursive halving, each half cut across its own longest
+      // centroid extent: a 4-ary node gets roughly square children, not four parallel slabs,
+      // so fewer sibling pairs overlap along long shared boundaries.
+      std::vector<Index> cuts{item.begin};
+      split(centroid, item.begin, item.end, parts, cuts);
       for (Index i = 0; i < parts; ++i) {
-        const Index cut = item.begin + static_cast<Index>(static_cast<long long>(size) * (i + 1) / parts);
-        if (i + 1 < parts) {
-          std::nth_element(order_.begin() + prev, order_.begin() + cut, order_.begin() + item.end, less);
-        }
-        queue.push_back({prev, cut, item.depth + 1});
+        queue.push_back({cuts[static_cast<std::size_t>(i)], cuts[static_cast<std::size_t>(i) + 1], item.depth + 1});
         nodes_.push_back(Node{});
-        prev = cut;
       }
     }
     Index groups = 0;
@@ -223,6 +208,34 @@ class KdopTree final : public KdopDetector::Tree {
     built_quality_ = 0;  // set by the first refit
     contours_valid_ = false;
     stats.add("rebuilds", 1);
+  }
+
+  /// Cuts the slots [begin, end) into `parts` ranges of near-equal size by recursive halving at
+  /// the median centroid along the longest extent of each half; appends the ends to `cuts`.
+  void split(const std::vector<Vec3>& centroid, Index begin, Index end, Index parts, std::vector<Index>& cuts) {
+    if (parts <= 1) {
+      cuts.push_back(end);
+      return;
+    }
+    Vec3 lo = Vec3::Constant(std::numeric_limits<Scalar>::infinity());
+    Vec3 hi = -lo;
+    for (Index i = begin; i < end; ++i) {
+      const Vec3& c = centroid[static_cast<std::size_t>(order_[static_cast<std::size_t>(i)])];
+      lo = lo.cwiseMin(c);
+      hi = hi.cwiseMax(c);
+    }
+    int axis = 0;
+    (hi - lo).maxCoeff(&axis);
+    const auto less = [&](Index a, Index b) {
+      const Scalar ca = centroid[static_cast<std::size_t>(a)][axis];
+      const Scalar cb = centroid[static_cast<std::size_t>(b)][axis];
+      return ca < cb || (ca == cb && a < b);
+    };
+    const Index left = parts / 2;
+    const Index mid = begin + static_cast<Index>(static_cast<long long>(end - begin) * left / parts);
+    std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end, less);
+    split(centroid, begin, mid, left, cuts);
+    split(centroid, mid, end, parts - left, cuts);
   }
 
   // ---- normal-cone culling -------------------------------------------------------------------
@@ -461,13 +474,14 @@ class KdopTree final : public KdopDetector::Tree {
   }
 
   // ---- traversal ---------------------------------------------------------------------------
-  /// Slots i, j are a candidate face pair: their boxes overlap and they share no corner. The
-  /// tree's boxes cover the motion (the hierarchy serves swept queries); contacts are proximity
+  /// Slots i, j, whose float k-DOPs overlap, are a candidate face pair: they share no corner.
+  /// The float test is conservative (`to_float`), and the narrow phase is exact, so the double
+  /// k-DOPs are not tested again: that would only drop pairs within a float rounding of touching,
+  /// which the narrow phase rejects anyway. The tree's boxes cover the motion (the hierarchy serves swept queries); contacts are proximity
   /// at the current positions, so a pair whose boxes of the current positions are apart (each
   /// inflated by half the pad, like the swept ones) has none and is not a candidate.
   bool candidate(Index i, Index j) const {
     const auto si = static_cast<std::size_t>(i), sj = static_cast<std::size_t>(j);
-    if (!face_dops_[si].overlaps(face_dops_[sj])) return false;
     if (swept_ && !now_dops_[si].overlaps(now_dops_[sj])) return false;
     return !faces_share_vertex(slot_faces_[si], slot_faces_[sj]);
   }
@@ -489,8 +503,13 @@ class KdopTree final : public KdopDetector::Tree {
     return f;
   }
 
-  void emit_leaf_pair(const Node& a, const Node& b, std::vector<FacePair>& out) const {
-    for (Index i = a.first; i < a.first + a.count; ++i) {
+  /// Leaves a and b (node ids); only a's faces that overlap b's k-DOP are tested against b's
+  /// faces (adjacent leaves overlap along their shared boundary only).
+  void emit_leaf_pair(Index ia, Index ib, std::vector<FacePair>& out) const {
+    const Node& a = nodes_[static_cast<std::size_t>(ia)];
+    const Node& b = nodes_[static_cast<std::size_t>(ib)];
+    for (std::uint64_t near = overlapping_node(a, ib); near != 0; near &= near - 1) {
+      const Index i = a.first + std::countr_zero(near);
       for (std::uint64_t m = overlapping_members(b, member(a, i - a.first)); m != 0; m &= m - 1) {
         const Index j = b.first + std::countr_zero(m);
         if (candidate(i, j)) emit(i, j, out);
@@ -515,7 +534,8 @@ class KdopTree final : public KdopDetector::Tree {
     // The empty lanes past `count` overlap nothing but a NaN k-DOP: masked.
     return node.count >= 64 ? mask : mask & ((std::uint64_t{1} << node.count) - 1);
   }
-  std::uint64_t overlapping_children(const Node& node, Index q) const {
+  /// Members of `node` that may overlap node q's k-DOP.
+  std::uint64_t overlapping_node(const Node& node, Index q) const {
     return overlapping_members(node, float_dops_[static_cast<std::size_t>(q)]);
   }
 
@@ -536,7 +556,7 @@ class KdopTree final : public KdopDetector::Tree {
     for (Index c = node.first; c < node.first + node.count; ++c) self(c, out);
     for (Index i = 0; i + 1 < node.count; ++i) {
       const Index c = node.first + i;
-      for (std::uint64_t m = overlapping_children(node, c) >> (i + 1); m != 0; m &= m - 1) {
+      for (std::uint64_t m = overlapping_node(node, c) >> (i + 1); m != 0; m &= m - 1) {
         pair(c, c + 1 + std::countr_zero(m), out);
       }
     }
@@ -547,13 +567,13 @@ class KdopTree final : public KdopDetector::Tree {
     const Node& na = nodes_[static_cast<std::size_t>(a)];
     const Node& nb = nodes_[static_cast<std::size_t>(b)];
     if (na.leaf && nb.leaf) {
-      emit_leaf_pair(na, nb, out);
+      emit_leaf_pair(a, b, out);
     } else if (na.leaf || (!nb.leaf && nb.faces > na.faces)) {
-      for (std::uint64_t m = overlapping_children(nb, a); m != 0; m &= m - 1) {
+      for (std::uint64_t m = overlapping_node(nb, a); m != 0; m &= m - 1) {
         pair(a, nb.first + std::countr_zero(m), out);
       }
     } else {
-      for (std::uint64_t m = overlapping_children(na, b); m != 0; m &= m - 1) {
+      for (std::uint64_t m = overlapping_node(na, b); m != 0; m &= m - 1) {
         pair(na.first + std::countr_zero(m), b, out);
       }
     }
