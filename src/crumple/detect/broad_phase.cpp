@@ -7,6 +7,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <numeric>
 #include <string>
 #include <vector>
 
@@ -130,6 +131,13 @@ void ExactDetector::on_topology() {
     }
   }
   // Orphan sub-pairs: owned features of face pairs that share a vertex, not excluded.
+  edge_rank_.resize(static_cast<std::size_t>(topo.num_edges()));
+  {
+    std::vector<Index> by_vertices(edge_rank_.size());
+    std::iota(by_vertices.begin(), by_vertices.end(), 0);
+    std::sort(by_vertices.begin(), by_vertices.end(), [&](Index a, Index b) { return topo.edge(a) < topo.edge(b); });
+    for (std::size_t r = 0; r < by_vertices.size(); ++r) edge_rank_[static_cast<std::size_t>(by_vertices[r])] = static_cast<Index>(r);
+  }
   orphan_vf_.clear();
   orphan_ee_.clear();
   for (Index f = 0; f < nf; ++f) {
@@ -414,8 +422,12 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   const Index nv = topo.num_vertices();
   gather_sorted(
       out.vf, vf_parts, nv, [](const VertexFaceContact& c) { return c.vertex; }, threads);
+  // Edge-edge contacts are ordered by their first edge's vertices, then the second's: keyed by
+  // the rank of the first edge, each key holds a few records to sort (by the vertex of `a`
+  // alone, each would hold ten times more on cloth-ball).
   gather_sorted(
-      out.ee, ee_parts, nv, [](const EdgeEdgeContact& c) { return c.a[0]; }, threads);
+      out.ee, ee_parts, topo.num_edges(),
+      [this](const EdgeEdgeContact& c) { return edge_rank_[static_cast<std::size_t>(c.edge0)]; }, threads);
   std::sort(out.tt.begin(), out.tt.end(), CanonicalLess{});
   for (ContactSet& p : parts) spare_sets_.give(std::move(p));
   stats_.set("sort_ms", ms_since(gather_start));

@@ -173,6 +173,7 @@ class ExactDetector : public Detector {
   std::vector<std::array<Index, 2>> orphan_vf_;  ///< (vertex, face) sub-pairs of adjacent faces
   std::vector<std::array<Index, 2>> orphan_ee_;  ///< (edge, edge), first < second
   std::vector<Index> isolated_;                  ///< vertices used by no face
+  std::vector<Index> edge_rank_;                 ///< each edge's rank in (first, second vertex) order
   Spares<ContactSet> spare_sets_;                ///< per-chunk contact sets, for reuse
   /// What the narrow phase reads of one face, packed so that a candidate pair touches two
   /// records (the corners' positions are copied in every frame).
