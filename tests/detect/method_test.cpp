@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <sstream>
+
 namespace crumple {
 namespace {
 
@@ -102,6 +104,54 @@ TEST(MethodSpec, DocumentedDefaultsAreTheDefaults) {
       previous = x;
     }
   }
+}
+
+std::string text_of(const ContactSet& set) {
+  std::ostringstream out;
+  write_contacts(out, set);
+  return out.str();
+}
+
+// `update` replaces whatever `out` held: a set reused from frame to frame (whose size the exact
+// methods keep and rewrite in place) and one that starts with junk give exactly the contacts of
+// a fresh set, as the counts rise and fall; and a throwing update leaves `out` empty.
+TEST(Detector, UpdateReplacesWhateverOutHeld) {
+  const FoldingSequence frames({.n = 20, .frames = 12, .seed = 3});
+  const auto topo = frames.mesh().topology_ptr();
+  const DetectorOptions options{.thickness = frames.thickness(), .kinds = ContactKinds::parse("vf,ee,tt")};
+  for (const MethodInfo& m : all_methods()) {
+    SCOPED_TRACE(m.name);
+    auto fresh = make_detector(MethodSpec(m.method), options);
+    auto reused = make_detector(MethodSpec(m.method), options);
+    fresh->set_topology(topo);
+    reused->set_topology(topo);
+    ContactSet kept;
+    kept.vf.assign(5000, VertexFaceContact{.vertex = 7, .face = 3, .distance = -1});
+    kept.ee.assign(5000, EdgeEdgeContact{.edge0 = 1, .edge1 = 2, .a = {9, 8}, .b = {7, 6}});
+    kept.tt.assign(5000, TriangleTriangleContact{.face0 = 4, .face1 = 4});
+    std::size_t smallest = 5000, largest = 0;
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      const Positions x = frames.positions(i);
+      ContactSet a;
+      fresh->update(x, a);
+      reused->update(x, kept);
+      EXPECT_EQ(text_of(kept), text_of(a)) << "frame " << i;
+      smallest = std::min(smallest, a.size());
+      largest = std::max(largest, a.size());
+    }
+    EXPECT_LT(smallest, largest);  // the sequence did make the set shrink and grow
+  }
+  // A throwing update (an exact method's cap) empties the set it was given.
+  const Positions last = frames.positions(frames.size() - 1);
+  auto uncapped = make_detector(MethodSpec::parse("kdop"), options);
+  auto capped = make_detector(MethodSpec::parse("kdop:max_contacts=1"), options);
+  uncapped->set_topology(topo);
+  capped->set_topology(topo);
+  ContactSet out;
+  uncapped->update(last, out);
+  ASSERT_GT(out.size(), 1u);
+  EXPECT_THROW(capped->update(last, out), Error);
+  EXPECT_TRUE(out.empty());
 }
 
 TEST(Detector, RejectsBadOptionsAndMisuse) {

@@ -68,9 +68,13 @@ void Detector::update(PositionsView previous, PositionsView positions, ContactSe
                     " entries, the topology " + std::to_string(topo.num_vertices()) + " vertices");
   CRUMPLE_CHECK(previous.empty() || previous.size() == positions.size(),
                 "update: previous positions count differs from current");
-  out.clear();
   stats_.clear();
-  detect(previous, positions, out);
+  try {
+    detect(previous, positions, out);
+  } catch (...) {
+    out.clear();
+    throw;
+  }
   out.sort();
 }
 

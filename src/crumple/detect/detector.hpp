@@ -60,8 +60,8 @@ class Detector {
   void set_topology(std::shared_ptr<const Topology> topology);
   const Topology& topology() const;
 
-  /// Detects the contacts at `positions` (#V entries). `out` is cleared, filled and sorted
-  /// canonically (see `ContactSet::sort`).
+  /// Detects the contacts at `positions` (#V entries). `out`'s contents are replaced by them,
+  /// sorted canonically (see `ContactSet::sort`); if it throws, `out` is left empty.
   void update(PositionsView positions, ContactSet& out);
   /// Same, with the previous frame's positions for methods that use motion (others ignore them).
   void update(PositionsView previous, PositionsView positions, ContactSet& out);
@@ -82,7 +82,10 @@ class Detector {
  protected:
   /// Called after a new topology is set; detectors build their per-mesh structures here.
   virtual void on_topology() {}
-  /// Fills `out` (already empty). `previous` is empty when no motion is given.
+  /// Replaces the contents of `out` by this frame's contacts. `out` holds whatever the caller
+  /// passed (typically the set of an earlier frame): its storage, and its size, may be reused
+  /// — rewriting records in place avoids constructing tens of MB of them every frame.
+  /// `previous` is empty when no motion is given.
   virtual void detect(PositionsView previous, PositionsView positions, ContactSet& out) = 0;
 
   DetectorStats stats_;

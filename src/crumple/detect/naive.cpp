@@ -25,6 +25,7 @@ void collect(std::size_t n, int threads, std::vector<T>& out, const PerRow& per_
 }  // namespace
 
 void NaiveDetector::detect(PositionsView /*previous*/, PositionsView x, ContactSet& out) {
+  out.clear();
   const Topology& topo = topology();
   const Scalar h = options().thickness;
   const Scalar h2 = h * h;

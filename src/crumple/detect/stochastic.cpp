@@ -618,6 +618,7 @@ void StochasticDetector::load_state(std::string_view text) {
 }
 
 void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, ContactSet& out) {
+  out.clear();
   const auto start = std::chrono::steady_clock::now();
   const Topology& topo = topology();
   const Scalar h = options().thickness;
