@@ -204,7 +204,6 @@ class KdopTree final : public KdopDetector::Tree {
     slot_faces_.resize(order_.size());
     for (std::size_t s = 0; s < order_.size(); ++s) slot_faces_[s] = topo.face(order_[s]);
     dops_.assign(nodes_.size(), Dop());
-    face_dops_.assign(order_.size(), Dop());
     built_quality_ = 0;  // set by the first refit
     contours_valid_ = false;
     stats.add("rebuilds", 1);
@@ -374,56 +373,46 @@ class KdopTree final : public KdopDetector::Tree {
 
   // ---- refit -------------------------------------------------------------------------------
   void refit(const Topology& topo, const FrameInput& in) {
-    const std::size_t nv = in.positions.size();
+    (void)topo;
     const bool swept = params_.sweep && !in.previous.empty();
-    vertex_dops_.resize(nv);
-    parallel_for_chunks(nv, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t v = begin; v < end; ++v) {
-        Dop d;
-        d.extend(in.positions[v]);
-        if (swept) d.extend(in.previous[v]);
-        d.inflate(in.radius);
-        vertex_dops_[v] = d;
-      }
-    });
     swept_ = swept;
     if (swept) now_dops_.resize(order_.size());
-    parallel_for_chunks(order_.size(), in.threads, 4096, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t s = begin; s < end; ++s) {
-        const Face& t = slot_faces_[s];
-        Dop d = vertex_dops_[static_cast<std::size_t>(t[0])];
-        d.merge(vertex_dops_[static_cast<std::size_t>(t[1])]);
-        d.merge(vertex_dops_[static_cast<std::size_t>(t[2])]);
-        face_dops_[s] = d;
-        if (swept) {
-          Dop now;
-          for (const Index v : t) now.extend(in.positions[static_cast<std::size_t>(v)]);
-          now.inflate(in.radius);
-          now_dops_[s] = now;
-        }
-      }
-    });
-    (void)topo;
     for (std::size_t l = levels_.size(); l-- > 0;) {
       const auto [lb, le] = levels_[l];
-      parallel_for_chunks(static_cast<std::size_t>(le - lb), in.threads, 1024,
-                          [&](std::size_t begin, std::size_t end) {
-                            for (std::size_t i = begin; i < end; ++i) {
-                              const std::size_t n = static_cast<std::size_t>(lb) + i;
-                              const Node& node = nodes_[n];
-                              Dop d;
-                              if (node.leaf) {
-                                for (Index s = node.first; s < node.first + node.count; ++s)
-                                  d.merge(face_dops_[static_cast<std::size_t>(s)]);
-                              } else {
-                                for (Index c = node.first; c < node.first + node.count; ++c)
-                                  d.merge(dops_[static_cast<std::size_t>(c)]);
-                              }
-                              dops_[n] = d;
-                              float_dops_[n] = float_dop(d);
-                              fill_lanes(node);  // its members are refitted: levels go bottom-up
-                            }
-                          });
+      parallel_for_chunks(static_cast<std::size_t>(le - lb), in.threads, 1024, [&](std::size_t begin, std::size_t end) {
+        std::array<FloatDop, 64> faces;  // a leaf's face k-DOPs, for its lanes
+        for (std::size_t i = begin; i < end; ++i) {
+          const std::size_t n = static_cast<std::size_t>(lb) + i;
+          const Node& node = nodes_[n];
+          Dop d;
+          if (node.leaf) {
+            // Each face's k-DOP straight from its corners (and their previous positions when
+            // swept), inflated: the same slabs as merging per-vertex k-DOPs, since rounding
+            // is monotone, without writing and re-reading those.
+            for (Index s = node.first; s < node.first + node.count; ++s) {
+              const Face& t = slot_faces_[static_cast<std::size_t>(s)];
+              Dop f;
+              for (const Index v : t) f.extend(in.positions[static_cast<std::size_t>(v)]);
+              if (swept) {
+                Dop now = f;
+                now.inflate(in.radius);
+                now_dops_[static_cast<std::size_t>(s)] = now;
+                for (const Index v : t) f.extend(in.previous[static_cast<std::size_t>(v)]);
+              }
+              f.inflate(in.radius);
+              d.merge(f);
+              faces[static_cast<std::size_t>(s - node.first)] = float_dop(f);
+            }
+            fill_lanes(node, faces.data());
+          } else {
+            for (Index c = node.first; c < node.first + node.count; ++c) d.merge(dops_[static_cast<std::size_t>(c)]);
+            // Its children are refitted: levels go bottom-up.
+            fill_lanes(node, &float_dops_[static_cast<std::size_t>(node.first)]);
+          }
+          dops_[n] = d;
+          float_dops_[n] = float_dop(d);
+        }
+      });
     }
     if (built_quality_ == 0) built_quality_ = std::max(quality(), 1e-300);
   }
@@ -437,19 +426,17 @@ class KdopTree final : public KdopDetector::Tree {
     return f;
   }
 
-  /// Writes the float k-DOPs of the node's members (faces of a leaf, children otherwise) into
-  /// its lanes, four per group; lanes past `count` are empty.
-  void fill_lanes(const Node& node) {
+  /// Writes the float k-DOPs of the node's members (faces of a leaf, children otherwise),
+  /// `members[0, count)`, into its lanes, four per group; lanes past `count` are empty.
+  void fill_lanes(const Node& node, const FloatDop* members) {
     FloatDop empty;
     empty.lo.fill(std::numeric_limits<float>::infinity());
     empty.hi.fill(-std::numeric_limits<float>::infinity());
     for (Index g = 0; g < (node.count + 3) / 4; ++g) {
       std::array<std::array<float, 4>, kAxes> lo, hi;
       for (std::size_t l = 0; l < 4; ++l) {
-        const auto c = static_cast<std::size_t>(node.first + 4 * g) + l;
-        const FloatDop f = c >= static_cast<std::size_t>(node.first + node.count) ? empty
-                           : node.leaf                                             ? float_dop(face_dops_[c])
-                                                                                   : float_dops_[c];
+        const auto m = static_cast<std::size_t>(4 * g) + l;
+        const FloatDop& f = m < static_cast<std::size_t>(node.count) ? members[m] : empty;
         for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
           lo[j][l] = f.lo[j];
           hi[j][l] = f.hi[j];
@@ -646,8 +633,6 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<Lanes> lanes_;          ///< per node, its members (children or faces) by four
   std::vector<Index> order_;     ///< face of each leaf slot
   std::vector<Face> slot_faces_;  ///< corners of each slot's face (adjacency test locality)
-  std::vector<Dop> face_dops_;    ///< per slot
-  std::vector<Dop> vertex_dops_;  ///< per vertex, swept and inflated
   std::vector<Dop> now_dops_;     ///< per slot, current positions only, inflated (when swept)
   bool swept_ = false;            ///< this frame's boxes cover the motion
   std::vector<std::array<Index, 2>> levels_;  ///< node range of each depth
