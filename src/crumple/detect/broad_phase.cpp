@@ -158,7 +158,8 @@ void ExactDetector::on_topology() {
         for (int j = 0; j < 3; ++j) {
           if (!(edge_mask[static_cast<std::size_t>(g)] >> j & 1u)) continue;
           if (topo.edges_adjacent(fa[i], fb[j])) continue;
-          orphan_ee_.push_back({std::min(fa[i], fb[j]), std::max(fa[i], fb[j])});
+          const Index e0 = std::min(fa[i], fb[j]), e1 = std::max(fa[i], fb[j]);
+          orphan_ee_.push_back({{e0, e1}, topo.edge(e0), topo.edge(e1)});
         }
       }
     }
@@ -320,11 +321,6 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     ++local.ee_tests;
     if (auto c = narrow::edge_edge(x, topo, std::min(e0, e1), std::max(e0, e1), h2)) local.set.ee.push_back(*c);
   };
-  const auto test_edge_ids = [&](Index e0, Index e1, LocalContacts& local) {
-    const Edge& a = topo.edge(e0);
-    const Edge& b = topo.edge(e1);
-    test_ee(narrow::at(x, a[0]), narrow::at(x, a[1]), e0, narrow::at(x, b[0]), narrow::at(x, b[1]), e1, local);
-  };
 
   // 1. Broad-phase candidates (faces sharing no vertex).
   const auto& chunks = candidates.chunks();
@@ -402,7 +398,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   if (kinds.ee) {
     parallel_for_chunks(orphan_ee_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
       LocalContacts local{spare_sets_.take()};
-      for (std::size_t i = begin; i < end; ++i) test_edge_ids(orphan_ee_[i][0], orphan_ee_[i][1], local);
+      for (std::size_t i = begin; i < end; ++i) {
+        const OrphanEdges& o = orphan_ee_[i];
+        test_ee(narrow::at(x, o.a[0]), narrow::at(x, o.a[1]), o.e[0], narrow::at(x, o.b[0]), narrow::at(x, o.b[1]),
+                o.e[1], local);
+      }
       merge(local);
     });
   }
