@@ -7,6 +7,7 @@
 // size, sweep axis or thread count.
 #include <crumple/detect/broad_phase.hpp>
 #include <crumple/detect/detector.hpp>
+#include <crumple/detect/kdop_tree.hpp>
 #include <crumple/io/mesh_io.hpp>
 #include <support/meshes.hpp>
 
@@ -329,6 +330,22 @@ TEST(ExactDetectors, ContactKindsSubsetsAndZeroThickness) {
 }
 
 // ---- contact buffer cap --------------------------------------------------------------------
+
+// KdopParams built in code (not through a method spec) get the same range checks: a leaf of
+// more than 64 faces would overrun the 64-bit member masks.
+TEST(ExactDetectors, KdopParamsOutOfRangeAreRejected) {
+  const auto make_with = [](auto set) {
+    KdopParams p;
+    set(p);
+    return KdopDetector({.thickness = 0.1}, p);
+  };
+  EXPECT_NO_THROW(make_with([](KdopParams& p) { p.leaf = 64; }));
+  EXPECT_THROW(make_with([](KdopParams& p) { p.leaf = 65; }), InputError);
+  EXPECT_THROW(make_with([](KdopParams& p) { p.leaf = 0; }), InputError);
+  EXPECT_THROW(make_with([](KdopParams& p) { p.arity = 3; }), InputError);
+  EXPECT_THROW(make_with([](KdopParams& p) { p.k = 10; }), InputError);
+  EXPECT_THROW(make_with([](KdopParams& p) { p.rebuild = 0.5; }), InputError);
+}
 
 TEST(ExactDetectors, OverflowIsReportedNeverSilent) {
   const shapes::FoldedClothParams params{.n = 16};

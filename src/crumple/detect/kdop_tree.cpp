@@ -111,11 +111,11 @@ class KdopTree final : public KdopDetector::Tree {
     if (topo.num_faces() == 0) return;
     const auto t0 = std::chrono::steady_clock::now();
     if (nodes_.empty()) build(topo, in.positions, stats);
-    refit(topo, in);
+    refit(in);
     double q = quality();
     if (q > params_.rebuild * built_quality_) {
       build(topo, in.positions, stats);
-      refit(topo, in);
+      refit(in);
       q = quality();
     }
     stats.set("refit_ms", ms_since(t0));
@@ -372,8 +372,7 @@ class KdopTree final : public KdopDetector::Tree {
   }
 
   // ---- refit -------------------------------------------------------------------------------
-  void refit(const Topology& topo, const FrameInput& in) {
-    (void)topo;
+  void refit(const FrameInput& in) {
     const bool swept = params_.sweep && !in.previous.empty();
     swept_ = swept;
     if (swept) now_dops_.resize(order_.size());
@@ -463,10 +462,11 @@ class KdopTree final : public KdopDetector::Tree {
   // ---- traversal ---------------------------------------------------------------------------
   /// Slots i, j, whose float k-DOPs overlap, are a candidate face pair: they share no corner.
   /// The float test is conservative (`to_float`), and the narrow phase is exact, so the double
-  /// k-DOPs are not tested again: that would only drop pairs within a float rounding of touching,
-  /// which the narrow phase rejects anyway. The tree's boxes cover the motion (the hierarchy serves swept queries); contacts are proximity
-  /// at the current positions, so a pair whose boxes of the current positions are apart (each
-  /// inflated by half the pad, like the swept ones) has none and is not a candidate.
+  /// k-DOPs are not tested again: that would only drop pairs within a float rounding of
+  /// touching, which the narrow phase rejects anyway. The tree's boxes cover the motion (the
+  /// hierarchy serves swept queries); contacts are proximity at the current positions, so a
+  /// pair whose boxes of the current positions are apart (each inflated by half the pad, like
+  /// the swept ones) has none and is not a candidate.
   bool candidate(Index i, Index j) const {
     const auto si = static_cast<std::size_t>(i), sj = static_cast<std::size_t>(j);
     if (swept_ && !now_dops_[si].overlaps(now_dops_[sj])) return false;
@@ -651,7 +651,15 @@ class KdopTree final : public KdopDetector::Tree {
 }  // namespace
 
 KdopDetector::KdopDetector(DetectorOptions options, KdopParams params)
-    : ExactDetector(options, params.exact), params_(params) {}
+    : ExactDetector(options, params.exact), params_(params) {
+  // A node's members are bits of one 64-bit mask, a leaf's faces one stack array of 64.
+  if (params_.leaf < 1 || params_.leaf > 64 || (params_.arity != 2 && params_.arity != 4 && params_.arity != 8) ||
+      (params_.k != 6 && params_.k != 14 && params_.k != 18 && params_.k != 26) || !(params_.rebuild >= 1)) {
+    throw InputError("kdop: parameters out of range (k " + std::to_string(params_.k) + ", arity " +
+                     std::to_string(params_.arity) + ", leaf " + std::to_string(params_.leaf) +
+                     "; k in 6|14|18|26, arity in 2|4|8, leaf in 1..64, rebuild >= 1)");
+  }
+}
 
 KdopDetector::~KdopDetector() = default;
 
