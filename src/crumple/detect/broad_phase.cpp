@@ -40,7 +40,7 @@ void inflate(Box& b, Scalar r) {
 /// key's few records sorted, on `threads` threads that each own a range of keys holding about the same
 /// number of records (each reads every part, writes only its range). No global sort, no
 /// intermediate copy: the frame's 100k-600k contacts (72-byte records) go from the per-chunk
-/// lists to their final place once.
+/// lists to their final place once. Fewer records than keys / 8 are copied and sorted instead.
 template <class T, class Key>
 void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*>& parts, Index keys, Key key,
                    int threads) {
@@ -48,6 +48,16 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
   for (const auto* p : parts) total += p->size();
   dest.resize(total);
   if (total == 0) return;
+  if (total < static_cast<std::size_t>(keys) / 8) {
+    // Few records for many keys: one sort costs less than counting over every key.
+    std::size_t at = 0;
+    for (const auto* p : parts) {
+      std::copy(p->begin(), p->end(), dest.begin() + static_cast<std::ptrdiff_t>(at));
+      at += p->size();
+    }
+    std::sort(dest.begin(), dest.end(), CanonicalLess{});
+    return;
+  }
   std::vector<std::size_t> start(static_cast<std::size_t>(keys) + 1, 0);
   for (const auto* p : parts) {
     for (const T& x : *p) ++start[static_cast<std::size_t>(key(x)) + 1];
@@ -413,11 +423,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   const auto gather_start = std::chrono::steady_clock::now();
   std::vector<const std::vector<VertexFaceContact>*> vf_parts;
   std::vector<const std::vector<EdgeEdgeContact>*> ee_parts;
-  out.tt.clear();
+  std::vector<const std::vector<TriangleTriangleContact>*> tt_parts;
   for (const ContactSet& p : parts) {
     vf_parts.push_back(&p.vf);
     ee_parts.push_back(&p.ee);
-    out.tt.insert(out.tt.end(), p.tt.begin(), p.tt.end());
+    tt_parts.push_back(&p.tt);
   }
   const Index nv = topo.num_vertices();
   gather_sorted(
@@ -428,7 +438,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   gather_sorted(
       out.ee, ee_parts, topo.num_edges(),
       [this](const EdgeEdgeContact& c) { return edge_rank_[static_cast<std::size_t>(c.edge0)]; }, threads);
-  std::sort(out.tt.begin(), out.tt.end(), CanonicalLess{});
+  gather_sorted(
+      out.tt, tt_parts, static_cast<Index>(nf), [](const TriangleTriangleContact& c) { return c.face0; }, threads);
   for (ContactSet& p : parts) spare_sets_.give(std::move(p));
   stats_.set("sort_ms", ms_since(gather_start));
   stats_.set("orphan_vf", static_cast<double>(orphan_vf_.size()));
