@@ -140,14 +140,18 @@ void ExactDetector::on_topology() {
       if (fe[k] == e) edge_mask[static_cast<std::size_t>(f)] |= static_cast<std::uint8_t>(1u << k);
     }
   }
-  // Orphan sub-pairs: owned features of face pairs that share a vertex, not excluded.
+  // Rank of each edge in (first vertex, second vertex) order: the key of the edge-edge gather.
   edge_rank_.resize(static_cast<std::size_t>(topo.num_edges()));
   {
     std::vector<Index> by_vertices(edge_rank_.size());
     std::iota(by_vertices.begin(), by_vertices.end(), 0);
-    std::sort(by_vertices.begin(), by_vertices.end(), [&](Index a, Index b) { return topo.edge(a) < topo.edge(b); });
-    for (std::size_t r = 0; r < by_vertices.size(); ++r) edge_rank_[static_cast<std::size_t>(by_vertices[r])] = static_cast<Index>(r);
+    std::sort(by_vertices.begin(), by_vertices.end(),
+              [&](Index a, Index b) { return topo.edge(a) < topo.edge(b); });
+    for (std::size_t r = 0; r < by_vertices.size(); ++r) {
+      edge_rank_[static_cast<std::size_t>(by_vertices[r])] = static_cast<Index>(r);
+    }
   }
+  // Orphan sub-pairs: owned features of face pairs that share a vertex, not excluded.
   orphan_vf_.clear();
   orphan_ee_.clear();
   for (Index f = 0; f < nf; ++f) {
