@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <numbers>
 #include <set>
@@ -345,6 +346,22 @@ TEST(ExactDetectors, KdopParamsOutOfRangeAreRejected) {
   EXPECT_THROW(make_with([](KdopParams& p) { p.arity = 3; }), InputError);
   EXPECT_THROW(make_with([](KdopParams& p) { p.k = 10; }), InputError);
   EXPECT_THROW(make_with([](KdopParams& p) { p.rebuild = 0.5; }), InputError);
+  // One rule, two callers: each names itself and the offending value.
+  const auto message = [](const std::function<void()>& f) -> std::string {
+    try {
+      f();
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "no error";
+  };
+  EXPECT_NE(message([&] { make_with([](KdopParams& p) { p.leaf = 65; }); }).find("kdop: leaf must be in 1..64, got 65"),
+            std::string::npos);
+  EXPECT_NE(message([] { KdopParams::from_spec(MethodSpec::parse("kdop:leaf=65")); })
+                .find("method kdop:leaf=65: leaf must be in 1..64, got 65"),
+            std::string::npos);
+  EXPECT_NE(message([] { KdopParams::from_spec(MethodSpec::parse("kdop:leaf=99999999999")); }).find("leaf must be in 1..64"),
+            std::string::npos);
 }
 
 TEST(ExactDetectors, OverflowIsReportedNeverSilent) {

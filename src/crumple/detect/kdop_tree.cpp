@@ -35,18 +35,26 @@ KdopParams KdopParams::from_spec(const MethodSpec& spec) {
   p.k = std::stoi(spec.get_choice("k", "18", kK));
   p.arity = std::stoi(spec.get_choice("arity", "4", kArity));
   const long long leaf = spec.get_int("leaf", 16);
-  if (leaf < 1 || leaf > 64) {
-    throw InputError("method " + spec.to_string() + ": leaf must be in 1..64, got " + std::to_string(leaf));
-  }
-  p.leaf = static_cast<int>(leaf);
+  // Saturated to int (a value past it is out of range all the same): `validate` reports it.
+  p.leaf = static_cast<int>(
+      std::clamp<long long>(leaf, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
   p.rebuild = spec.get_double("rebuild", 2.0);
-  if (!(p.rebuild >= 1)) {
-    throw InputError("method " + spec.to_string() + ": rebuild must be >= 1");
-  }
   p.sweep = spec.get_bool("sweep", false);
   p.cones = spec.get_bool("cones", false);
   p.exact = ExactParams::from_spec(spec);
+  p.validate("method " + spec.to_string());
   return p;
+}
+
+void KdopParams::validate(const std::string& who) const {
+  if (k != 6 && k != 14 && k != 18 && k != 26) {
+    throw InputError(who + ": k must be 6, 14, 18 or 26, got " + std::to_string(k));
+  }
+  if (arity != 2 && arity != 4 && arity != 8) {
+    throw InputError(who + ": arity must be 2, 4 or 8, got " + std::to_string(arity));
+  }
+  if (leaf < 1 || leaf > 64) throw InputError(who + ": leaf must be in 1..64, got " + std::to_string(leaf));
+  if (!(rebuild >= 1)) throw InputError(who + ": rebuild must be >= 1");
 }
 
 /// Type-erased hierarchy: one implementation per k.
@@ -652,13 +660,7 @@ class KdopTree final : public KdopDetector::Tree {
 
 KdopDetector::KdopDetector(DetectorOptions options, KdopParams params)
     : ExactDetector(options, params.exact), params_(params) {
-  // A node's members are bits of one 64-bit mask, a leaf's faces one stack array of 64.
-  if (params_.leaf < 1 || params_.leaf > 64 || (params_.arity != 2 && params_.arity != 4 && params_.arity != 8) ||
-      (params_.k != 6 && params_.k != 14 && params_.k != 18 && params_.k != 26) || !(params_.rebuild >= 1)) {
-    throw InputError("kdop: parameters out of range (k " + std::to_string(params_.k) + ", arity " +
-                     std::to_string(params_.arity) + ", leaf " + std::to_string(params_.leaf) +
-                     "; k in 6|14|18|26, arity in 2|4|8, leaf in 1..64, rebuild >= 1)");
-  }
+  params_.validate("kdop");  // also for parameters built in code, not through a spec
 }
 
 KdopDetector::~KdopDetector() = default;

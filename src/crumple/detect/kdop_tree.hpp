@@ -57,6 +57,9 @@ struct KdopParams {
   bool cones = false;
   ExactParams exact;
   static KdopParams from_spec(const MethodSpec& spec);
+  /// Throws `InputError` ("<who>: leaf must be in 1..64, got 65", ...) when a field is out of
+  /// its range: a node's members are bits of one 64-bit mask.
+  void validate(const std::string& who) const;
 };
 
 class KdopDetector final : public ExactDetector {
