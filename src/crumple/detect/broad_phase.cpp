@@ -298,16 +298,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     if (!(wn * wn > pad * pad * nn)) return false;
     return std::abs(wn) > pad * std::sqrt(nn) + 1e-13 * std::sqrt(scale);
   };
-  // Vertex v at p against face g: cheap rejections, then the shared kernel.
-  const auto test_vf = [&](const Vec3& p, Index v, const PackedFace& t, Index g, LocalContacts& local) {
-    // Box of the face padded by pad (branch-free: one unpredictable branch, not six).
-    bool outside = false;
-    for (int i = 0; i < 3; ++i) {
-      const Scalar lo = std::min({t.p[0][i], t.p[1][i], t.p[2][i]}) - pad;
-      const Scalar hi = std::max({t.p[0][i], t.p[1][i], t.p[2][i]}) + pad;
-      outside |= !(lo <= p[i]) | !(p[i] <= hi);
-    }
-    if (outside) return;
+  // Vertex v at p against face g: cheap rejections, then the shared kernel. The box test is
+  // inlined into the loops; what follows it, reached by a minority of the sub-pairs, is not
+  // (a call per sub-pair with the whole test's stack frame cost more than the box test).
+  const auto vf_past_box = [&](const Vec3& p, Index v, const PackedFace& t, Index g,
+                               LocalContacts& local) __attribute__((noinline)) {
     // Plane rejection: dist(p, triangle) >= dist(p, plane) = |(p - a) . n| / |n|. Rejected only
     // beyond pad plus a bound on the rounding of the dot product (degenerate n: never).
     const Vec3& a = t.p[0];
@@ -317,16 +312,20 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     ++local.vf_tests;
     if (auto c = narrow::vertex_face(x, topo, v, g, h2)) local.set.vf.push_back(*c);
   };
-  // Edges e0 = (p0, p1) and e1 = (q0, q1), any order.
-  const auto test_ee = [&](const Vec3& p0, const Vec3& p1, Index e0, const Vec3& q0, const Vec3& q1, Index e1,
-                           LocalContacts& local) {
-    // Boxes of the edges padded by pad / 2 overlap (branch-free, as above).
-    bool apart = false;
+  const auto test_vf = [&](const Vec3& p, Index v, const PackedFace& t, Index g,
+                           LocalContacts& local) __attribute__((always_inline)) {
+    // Box of the face padded by pad (branch-free: one unpredictable branch, not six).
+    bool outside = false;
     for (int i = 0; i < 3; ++i) {
-      apart |= !(std::min(p0[i], p1[i]) - half <= std::max(q0[i], q1[i]) + half) |
-               !(std::min(q0[i], q1[i]) - half <= std::max(p0[i], p1[i]) + half);
+      const Scalar lo = std::min({t.p[0][i], t.p[1][i], t.p[2][i]}) - pad;
+      const Scalar hi = std::max({t.p[0][i], t.p[1][i], t.p[2][i]}) + pad;
+      outside |= !(lo <= p[i]) | !(p[i] <= hi);
     }
-    if (apart) return;
+    if (!outside) vf_past_box(p, v, t, g, local);
+  };
+  // Edges e0 = (p0, p1) and e1 = (q0, q1), any order.
+  const auto ee_past_box = [&](const Vec3& p0, const Vec3& p1, Index e0, const Vec3& q0, const Vec3& q1,
+                               Index e1, LocalContacts& local) __attribute__((noinline)) {
     // Line rejection: dist(segments) >= dist(lines) = |w . (d0 x d1)| / |d0 x d1|, with the
     // same rounding guard (parallel edges: never rejected here).
     const Vec3 d0 = p1 - p0, d1 = q1 - q0, w = q0 - p0;
@@ -334,6 +333,16 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     if (beyond(w.dot(n), n, w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm())) return;
     ++local.ee_tests;
     if (auto c = narrow::edge_edge(x, topo, std::min(e0, e1), std::max(e0, e1), h2)) local.set.ee.push_back(*c);
+  };
+  const auto test_ee = [&](const Vec3& p0, const Vec3& p1, Index e0, const Vec3& q0, const Vec3& q1, Index e1,
+                           LocalContacts& local) __attribute__((always_inline)) {
+    // Boxes of the edges padded by pad / 2 overlap (branch-free, as above).
+    bool apart = false;
+    for (int i = 0; i < 3; ++i) {
+      apart |= !(std::min(p0[i], p1[i]) - half <= std::max(q0[i], q1[i]) + half) |
+               !(std::min(q0[i], q1[i]) - half <= std::max(p0[i], p1[i]) + half);
+    }
+    if (!apart) ee_past_box(p0, p1, e0, q0, q1, e1, local);
   };
 
   // 1. Broad-phase candidates (faces sharing no vertex).
