@@ -310,7 +310,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     const Vec3 n = e1.cross(e2);
     if (beyond(w.dot(n), n, w.squaredNorm() * e1.squaredNorm() * e2.squaredNorm())) return;
     ++local.vf_tests;
-    if (auto c = narrow::vertex_face(x, topo, v, g, h2)) local.set.vf.push_back(*c);
+    if (auto c = narrow::vertex_face(v, p, g, t.p[0], t.p[1], t.p[2], h2)) local.set.vf.push_back(*c);
   };
   const auto test_vf = [&](const Vec3& p, Index v, const PackedFace& t, Index g,
                            LocalContacts& local) __attribute__((always_inline)) {
@@ -323,18 +323,30 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     }
     if (!outside) vf_past_box(p, v, t, g, local);
   };
-  // Edges e0 = (p0, p1) and e1 = (q0, q1), any order.
-  const auto ee_past_box = [&](const Vec3& p0, const Vec3& p1, Index e0, const Vec3& q0, const Vec3& q1,
-                               Index e1, LocalContacts& local) __attribute__((noinline)) {
+  // Edge e0 = (p0, p1) of vertices (u0, u1) and edge e1 = (q0, q1) of vertices (w0, w1), each
+  // in any order.
+  const auto ee_past_box = [&](const Vec3& p0, const Vec3& p1, Index u0, Index u1, Index e0, const Vec3& q0,
+                               const Vec3& q1, Index w0, Index w1, Index e1,
+                               LocalContacts& local) __attribute__((noinline)) {
     // Line rejection: dist(segments) >= dist(lines) = |w . (d0 x d1)| / |d0 x d1|, with the
     // same rounding guard (parallel edges: never rejected here).
     const Vec3 d0 = p1 - p0, d1 = q1 - q0, w = q0 - p0;
     const Vec3 n = d0.cross(d1);
     if (beyond(w.dot(n), n, w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm())) return;
     ++local.ee_tests;
-    if (auto c = narrow::edge_edge(x, topo, std::min(e0, e1), std::max(e0, e1), h2)) local.set.ee.push_back(*c);
+    // The shared kernel sees the edges as the mesh stores them (lower id first, each from its
+    // lower vertex), as for every other detector: the same bits.
+    const Edge ea{std::min(u0, u1), std::max(u0, u1)}, eb{std::min(w0, w1), std::max(w0, w1)};
+    const Vec3& a0 = u0 < u1 ? p0 : p1;
+    const Vec3& a1 = u0 < u1 ? p1 : p0;
+    const Vec3& b0 = w0 < w1 ? q0 : q1;
+    const Vec3& b1 = w0 < w1 ? q1 : q0;
+    auto c = e0 < e1 ? narrow::edge_edge(e0, ea, a0, a1, e1, eb, b0, b1, h2)
+                     : narrow::edge_edge(e1, eb, b0, b1, e0, ea, a0, a1, h2);
+    if (c) local.set.ee.push_back(*c);
   };
-  const auto test_ee = [&](const Vec3& p0, const Vec3& p1, Index e0, const Vec3& q0, const Vec3& q1, Index e1,
+  const auto test_ee = [&](const Vec3& p0, const Vec3& p1, Index u0, Index u1, Index e0, const Vec3& q0,
+                           const Vec3& q1, Index w0, Index w1, Index e1,
                            LocalContacts& local) __attribute__((always_inline)) {
     // Boxes of the edges padded by pad / 2 overlap (branch-free, as above).
     bool apart = false;
@@ -342,7 +354,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
       apart |= !(std::min(p0[i], p1[i]) - half <= std::max(q0[i], q1[i]) + half) |
                !(std::min(q0[i], q1[i]) - half <= std::max(p0[i], p1[i]) + half);
     }
-    if (!apart) ee_past_box(p0, p1, e0, q0, q1, e1, local);
+    if (!apart) ee_past_box(p0, p1, u0, u1, e0, q0, q1, w0, w1, e1, local);
   };
 
   // 1. Broad-phase candidates (faces sharing no vertex).
@@ -371,7 +383,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           if (!(a.edge_mask >> i2 & 1u)) continue;
           for (std::size_t j = 0; j < 3; ++j) {
             if (!(b.edge_mask >> j & 1u)) continue;
-            test_ee(a.p[i2], a.p[(i2 + 1) % 3], a.e[i2], b.p[j], b.p[(j + 1) % 3], b.e[j], local);
+            test_ee(a.p[i2], a.p[(i2 + 1) % 3], a.v[i2], a.v[(i2 + 1) % 3], a.e[i2], b.p[j], b.p[(j + 1) % 3],
+                    b.v[j], b.v[(j + 1) % 3], b.e[j], local);
           }
         }
       }
@@ -423,8 +436,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
       LocalContacts local{spare_sets_.take()};
       for (std::size_t i = begin; i < end; ++i) {
         const OrphanEdges& o = orphan_ee_[i];
-        test_ee(narrow::at(x, o.a[0]), narrow::at(x, o.a[1]), o.e[0], narrow::at(x, o.b[0]), narrow::at(x, o.b[1]),
-                o.e[1], local);
+        test_ee(narrow::at(x, o.a[0]), narrow::at(x, o.a[1]), o.a[0], o.a[1], o.e[0], narrow::at(x, o.b[0]),
+                narrow::at(x, o.b[1]), o.b[0], o.b[1], o.e[1], local);
       }
       merge(local);
     });

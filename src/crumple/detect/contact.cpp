@@ -76,28 +76,4 @@ void write_contacts_file(const std::filesystem::path& path, const ContactSet& se
   write_file_atomically(path, [&](std::ostream& out) { write_contacts(out, set); });
 }
 
-EdgeEdgeContact make_edge_edge_contact(Index edge0, const Edge& a, Index edge1, const Edge& b,
-                                       Scalar distance, Scalar s, Scalar t, const Vec3& normal) {
-  EdgeEdgeContact c;
-  if (b < a) {
-    c.edge0 = edge1;
-    c.edge1 = edge0;
-    c.a = b;
-    c.b = a;
-    c.s = t;
-    c.t = s;
-    c.normal = -normal;
-  } else {
-    c.edge0 = edge0;
-    c.edge1 = edge1;
-    c.a = a;
-    c.b = b;
-    c.s = s;
-    c.t = t;
-    c.normal = normal;
-  }
-  c.distance = distance;
-  return c;
-}
-
 }  // namespace crumple

@@ -17,15 +17,11 @@ namespace crumple::narrow {
 
 inline const Vec3& at(PositionsView x, Index i) { return x[static_cast<std::size_t>(i)]; }
 
-/// Vertex v against face f (v not a corner of f); a contact when the distance is < h
-/// (`sqr_thickness` = h^2). The normal points from the face to the vertex.
-inline std::optional<VertexFaceContact> vertex_face(PositionsView x, const Topology& topo, Index v,
-                                                    Index f, Scalar sqr_thickness) {
-  const Face& t = topo.face(f);
-  const Vec3& p = at(x, v);
-  const Vec3& a = at(x, t[0]);
-  const Vec3& b = at(x, t[1]);
-  const Vec3& c = at(x, t[2]);
+/// Vertex v at p against face f with corners a, b, c in face order (v not a corner of f); a
+/// contact when the distance is < h (`sqr_thickness` = h^2). The normal points from the face to
+/// the vertex.
+inline std::optional<VertexFaceContact> vertex_face(Index v, const Vec3& p, Index f, const Vec3& a,
+                                                    const Vec3& b, const Vec3& c, Scalar sqr_thickness) {
   const geometry::PointTriangleResult r = geometry::point_triangle(p, a, b, c);
   if (!(r.sqr_distance < sqr_thickness)) return std::nullopt;
   VertexFaceContact contact;
@@ -45,16 +41,20 @@ inline std::optional<VertexFaceContact> vertex_face(PositionsView x, const Topol
   return contact;
 }
 
-/// Edges e0 and e1 (sharing no vertex); a contact when the distance is < h. The contact is
-/// order-normalised (see `EdgeEdgeContact`).
-inline std::optional<EdgeEdgeContact> edge_edge(PositionsView x, const Topology& topo, Index e0,
-                                                Index e1, Scalar sqr_thickness) {
-  const Edge& ea = topo.edge(e0);
-  const Edge& eb = topo.edge(e1);
-  const Vec3& p0 = at(x, ea[0]);
-  const Vec3& p1 = at(x, ea[1]);
-  const Vec3& q0 = at(x, eb[0]);
-  const Vec3& q1 = at(x, eb[1]);
+/// Same, with the positions read from x.
+inline std::optional<VertexFaceContact> vertex_face(PositionsView x, const Topology& topo, Index v,
+                                                    Index f, Scalar sqr_thickness) {
+  const Face& t = topo.face(f);
+  return vertex_face(v, at(x, v), f, at(x, t[0]), at(x, t[1]), at(x, t[2]), sqr_thickness);
+}
+
+/// Edges e0 = ea and e1 = eb (sharing no vertex) at positions p0, p1 (of ea[0], ea[1]) and q0,
+/// q1 (of eb[0], eb[1]); a contact when the distance is < h. The contact is order-normalised (see
+/// `EdgeEdgeContact`). Callers pass e0 < e1, each edge as the mesh stores it, so that every
+/// detector evaluates a pair in the same order and gets the same bits.
+inline std::optional<EdgeEdgeContact> edge_edge(Index e0, const Edge& ea, const Vec3& p0, const Vec3& p1,
+                                                Index e1, const Edge& eb, const Vec3& q0, const Vec3& q1,
+                                                Scalar sqr_thickness) {
   const geometry::SegmentSegmentResult r = geometry::segment_segment(p0, p1, q0, q1);
   if (!(r.sqr_distance < sqr_thickness)) return std::nullopt;
   const Scalar distance = std::sqrt(r.sqr_distance);
@@ -69,6 +69,14 @@ inline std::optional<EdgeEdgeContact> edge_edge(PositionsView x, const Topology&
     normal = len > 0 ? Vec3(n / len) : Vec3::Zero();
   }
   return make_edge_edge_contact(e0, ea, e1, eb, distance, r.s, r.t, normal);
+}
+
+/// Edges e0 < e1 (sharing no vertex), with the positions read from x.
+inline std::optional<EdgeEdgeContact> edge_edge(PositionsView x, const Topology& topo, Index e0,
+                                                Index e1, Scalar sqr_thickness) {
+  const Edge& ea = topo.edge(e0);
+  const Edge& eb = topo.edge(e1);
+  return edge_edge(e0, ea, at(x, ea[0]), at(x, ea[1]), e1, eb, at(x, eb[0]), at(x, eb[1]), sqr_thickness);
 }
 
 }  // namespace crumple::narrow
