@@ -233,28 +233,23 @@ double mean(const std::vector<double>& v) {
   return s / static_cast<double>(v.size());
 }
 
-/// Times every row on a recording; naive first (its contacts are the reference).
+/// Times every row on a recording, interleaved frame by frame (`time_methods_against_first`);
+/// naive first: its contacts are the reference.
 std::vector<Timing> time_rows(const bench::Recording& rec, const std::vector<Row>& rows, ContactKinds kinds,
                               const Args& args, const Progress& progress, const std::string& section) {
   const DetectorOptions options{.thickness = rec.thickness, .kinds = kinds, .threads = args.threads};
   const TimingPlan plan{.first = 0, .timed_from = 0, .last = rec.frames.size(), .repetitions = args.repeat,
                         .keep_contacts = false};
-  std::vector<Timing> out;
-  TimingPlan naive_plan = plan;
-  naive_plan.keep_contacts = true;
-  progress.show(section, std::string(rows[kNaiveRow].label));
-  out.push_back(bench::time_method(rec.mesh.topology_ptr(), rec.frames, "naive", options, naive_plan, nullptr));
-  const std::vector<ContactSet> reference = std::move(out.back().contacts);
-  out.back().contacts.clear();
-  out.back().match.clear();
-  for (const ContactSet& c : reference) {
-    out.back().match.push_back(match_contacts(c, c));
-  }
-  for (std::size_t r = 1; r < rows.size(); ++r) {
-    progress.show(section, rows[r].label);
-    out.push_back(bench::time_method(rec.mesh.topology_ptr(), rec.frames, rows[r].spec, options, plan, &reference));
-  }
-  return out;
+  std::vector<std::string> specs;
+  for (const Row& row : rows) specs.emplace_back(row.spec);
+  const std::string frames = std::to_string(rec.frames.size());
+  return bench::time_methods_against_first(
+      rec.mesh.topology_ptr(), rec.frames, specs, options, plan, [&](int rep, std::size_t frame) {
+        if (frame % 20 != 0) return;
+        progress.show(section, std::to_string(rows.size()) + " methods interleaved, run " + std::to_string(rep + 1) +
+                                   "/" + std::to_string(args.repeat) + ", frame " + std::to_string(frame) + "/" +
+                                   frames);
+      });
 }
 
 struct Report {
@@ -293,7 +288,8 @@ void thesis_section(Report& report, const Progress& progress) {
         .append("%, ").append(fixed(std::min(100.0, 100 * kBins[b].hi), 0)).append("%): ")
         .append(std::to_string(bin_frames[b])).append(" frames");
   }
-  md.append(". Every method runs on the same frames in order (previous frame = motion), ")
+  md.append(". Every method runs on the same frames in order (previous frame = motion), interleaved: each "
+            "frame goes to every method before the next, so the machine's speed drift weighs on all alike; ")
       .append(std::to_string(a.threads)).append(" thread(s), median of ").append(std::to_string(a.repeat))
       .append(" runs per frame. Cells: detection frames per second and, after ×, the speed-up over `naive` on "
               "the same frames in the same run; the thesis' figure (Pentium 4, 2003) beside it.\n\n");

@@ -13,43 +13,80 @@
 
 namespace crumple::cli::bench {
 
-Timing time_method(std::shared_ptr<const Topology> topology, const std::vector<Positions>& frames,
-                   const std::string& spec, const DetectorOptions& options, const TimingPlan& plan,
-                   const std::vector<ContactSet>* reference) {
+namespace {
+
+/// The timed loop shared by `time_method` and `time_methods_against_first`: frame by frame,
+/// every method in turn. Matches method m's contacts against `reference` (per timed frame) or,
+/// without one and when `first_is_reference`, against method 0's of the same frame.
+std::vector<Timing> time_interleaved(std::shared_ptr<const Topology> topology, const std::vector<Positions>& frames,
+                                     const std::vector<std::string>& specs, const DetectorOptions& options,
+                                     const TimingPlan& plan, const std::vector<ContactSet>* reference,
+                                     bool first_is_reference, const std::function<void(int, std::size_t)>& on_frame) {
   CRUMPLE_CHECK(plan.first <= plan.timed_from && plan.timed_from <= plan.last && plan.last <= frames.size(),
                 "timing plan out of the frame range");
   CRUMPLE_CHECK(plan.repetitions >= 1, "at least one repetition");
+  CRUMPLE_CHECK(!specs.empty(), "at least one method");
   const std::size_t timed = plan.last - plan.timed_from;
   CRUMPLE_CHECK(reference == nullptr || reference->size() == timed, "one reference set per timed frame");
-  const MethodSpec method = MethodSpec::parse(spec);
+  std::vector<MethodSpec> methods;
+  for (const std::string& spec : specs) methods.push_back(MethodSpec::parse(spec));
 
-  Timing t;
-  t.spec = method.to_string();
-  std::vector<std::vector<double>> samples(timed);
-  ContactSet out;
+  const std::size_t n = methods.size();
+  std::vector<Timing> t(n);
+  for (std::size_t m = 0; m < n; ++m) t[m].spec = methods[m].to_string();
+  std::vector<std::vector<std::vector<double>>> samples(n, std::vector<std::vector<double>>(timed));
+  std::vector<ContactSet> out(n);
   for (int rep = 0; rep < plan.repetitions; ++rep) {
-    auto detector = make_detector(method, options);
-    detector->set_topology(topology);
+    std::vector<std::unique_ptr<Detector>> detectors;
+    for (const MethodSpec& method : methods) {
+      detectors.push_back(make_detector(method, options));
+      detectors.back()->set_topology(topology);
+    }
     for (std::size_t i = plan.first; i < plan.last; ++i) {
+      if (on_frame) on_frame(rep, i);
       const Positions& previous = frames[i == plan.first ? i : i - 1];
-      const auto start = std::chrono::steady_clock::now();
-      detector->update(previous, frames[i], out);
-      const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-      if (i < plan.timed_from) continue;
-      const std::size_t k = i - plan.timed_from;
-      samples[k].push_back(ms);
-      if (rep > 0) continue;  // seeded: every repetition finds the same contacts
-      t.distance_evals += detector->stats().get("distance_evals") / static_cast<double>(timed);
-      if (reference != nullptr) t.match.push_back(match_contacts(out, (*reference)[k]));
-      if (plan.keep_contacts) t.contacts.push_back(out);
+      for (std::size_t m = 0; m < n; ++m) {
+        const auto start = std::chrono::steady_clock::now();
+        detectors[m]->update(previous, frames[i], out[m]);
+        const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        if (i < plan.timed_from) continue;
+        const std::size_t k = i - plan.timed_from;
+        samples[m][k].push_back(ms);
+        if (rep > 0) continue;  // seeded: every repetition finds the same contacts
+        t[m].distance_evals += detectors[m]->stats().get("distance_evals") / static_cast<double>(timed);
+        if (reference != nullptr) {
+          t[m].match.push_back(match_contacts(out[m], (*reference)[k]));
+        } else if (first_is_reference) {
+          t[m].match.push_back(match_contacts(out[m], out[0]));
+        }
+        if (plan.keep_contacts) t[m].contacts.push_back(out[m]);
+      }
     }
   }
-  t.ms.reserve(timed);
-  for (auto& s : samples) {
-    std::nth_element(s.begin(), s.begin() + static_cast<std::ptrdiff_t>(s.size() / 2), s.end());
-    t.ms.push_back(s[s.size() / 2]);
+  for (std::size_t m = 0; m < n; ++m) {
+    t[m].ms.reserve(timed);
+    for (auto& s : samples[m]) {
+      std::nth_element(s.begin(), s.begin() + static_cast<std::ptrdiff_t>(s.size() / 2), s.end());
+      t[m].ms.push_back(s[s.size() / 2]);
+    }
   }
   return t;
+}
+
+}  // namespace
+
+Timing time_method(std::shared_ptr<const Topology> topology, const std::vector<Positions>& frames,
+                   const std::string& spec, const DetectorOptions& options, const TimingPlan& plan,
+                   const std::vector<ContactSet>* reference) {
+  return std::move(time_interleaved(std::move(topology), frames, {spec}, options, plan, reference, false, {})[0]);
+}
+
+std::vector<Timing> time_methods_against_first(std::shared_ptr<const Topology> topology,
+                                               const std::vector<Positions>& frames,
+                                               const std::vector<std::string>& specs, const DetectorOptions& options,
+                                               const TimingPlan& plan,
+                                               const std::function<void(int, std::size_t)>& on_frame) {
+  return time_interleaved(std::move(topology), frames, specs, options, plan, nullptr, true, on_frame);
 }
 
 namespace {
