@@ -233,7 +233,7 @@ double mean(const std::vector<double>& v) {
   return s / static_cast<double>(v.size());
 }
 
-/// Times every row on a recording, interleaved frame by frame (`time_methods_against_first`);
+/// Times every row on a recording, interleaved by repetition (`time_methods_against_first`);
 /// naive first: its contacts are the reference.
 std::vector<Timing> time_rows(const bench::Recording& rec, const std::vector<Row>& rows, ContactKinds kinds,
                               const Args& args, const Progress& progress, const std::string& section) {
@@ -242,13 +242,10 @@ std::vector<Timing> time_rows(const bench::Recording& rec, const std::vector<Row
                         .keep_contacts = false};
   std::vector<std::string> specs;
   for (const Row& row : rows) specs.emplace_back(row.spec);
-  const std::string frames = std::to_string(rec.frames.size());
   return bench::time_methods_against_first(
-      rec.mesh.topology_ptr(), rec.frames, specs, options, plan, [&](int rep, std::size_t frame) {
-        if (frame % 20 != 0) return;
-        progress.show(section, std::to_string(rows.size()) + " methods interleaved, run " + std::to_string(rep + 1) +
-                                   "/" + std::to_string(args.repeat) + ", frame " + std::to_string(frame) + "/" +
-                                   frames);
+      rec.mesh.topology_ptr(), rec.frames, specs, options, plan, [&](int rep, std::size_t m) {
+        progress.show(section, "run " + std::to_string(rep + 1) + "/" + std::to_string(args.repeat) + ": " +
+                                   rows[m].label);
       });
 }
 
@@ -288,8 +285,8 @@ void thesis_section(Report& report, const Progress& progress) {
         .append("%, ").append(fixed(std::min(100.0, 100 * kBins[b].hi), 0)).append("%): ")
         .append(std::to_string(bin_frames[b])).append(" frames");
   }
-  md.append(". Every method runs on the same frames in order (previous frame = motion), interleaved: each "
-            "frame goes to every method before the next, so the machine's speed drift weighs on all alike; ")
+  md.append(". Every method runs on the same frames in order (previous frame = motion), the runs interleaved "
+            "(run r of every method before run r + 1 of any, so a drift of the machine's speed weighs on all alike), ")
       .append(std::to_string(a.threads)).append(" thread(s), median of ").append(std::to_string(a.repeat))
       .append(" runs per frame. Cells: detection frames per second and, after ×, the speed-up over `naive` on "
               "the same frames in the same run; the thesis' figure (Pentium 4, 2003) beside it.\n\n");

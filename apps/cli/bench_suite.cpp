@@ -15,13 +15,14 @@ namespace crumple::cli::bench {
 
 namespace {
 
-/// The timed loop shared by `time_method` and `time_methods_against_first`: frame by frame,
-/// every method in turn. Matches method m's contacts against `reference` (per timed frame) or,
-/// without one and when `first_is_reference`, against method 0's of the same frame.
+/// The timed loop shared by `time_method` and `time_methods_against_first`: repetition by
+/// repetition, each method's whole sequence in turn. Matches method m's contacts against
+/// `reference` (per timed frame) or, without one and when `first_is_reference`, against method
+/// 0's of the same frame (kept from the first repetition).
 std::vector<Timing> time_interleaved(std::shared_ptr<const Topology> topology, const std::vector<Positions>& frames,
                                      const std::vector<std::string>& specs, const DetectorOptions& options,
                                      const TimingPlan& plan, const std::vector<ContactSet>* reference,
-                                     bool first_is_reference, const std::function<void(int, std::size_t)>& on_frame) {
+                                     bool first_is_reference, const std::function<void(int, std::size_t)>& on_run) {
   CRUMPLE_CHECK(plan.first <= plan.timed_from && plan.timed_from <= plan.last && plan.last <= frames.size(),
                 "timing plan out of the frame range");
   CRUMPLE_CHECK(plan.repetitions >= 1, "at least one repetition");
@@ -35,31 +36,27 @@ std::vector<Timing> time_interleaved(std::shared_ptr<const Topology> topology, c
   std::vector<Timing> t(n);
   for (std::size_t m = 0; m < n; ++m) t[m].spec = methods[m].to_string();
   std::vector<std::vector<std::vector<double>>> samples(n, std::vector<std::vector<double>>(timed));
-  std::vector<ContactSet> out(n);
+  std::vector<ContactSet> first;  // method 0's contacts per timed frame, when it is the reference
+  ContactSet out;
   for (int rep = 0; rep < plan.repetitions; ++rep) {
-    std::vector<std::unique_ptr<Detector>> detectors;
-    for (const MethodSpec& method : methods) {
-      detectors.push_back(make_detector(method, options));
-      detectors.back()->set_topology(topology);
-    }
-    for (std::size_t i = plan.first; i < plan.last; ++i) {
-      if (on_frame) on_frame(rep, i);
-      const Positions& previous = frames[i == plan.first ? i : i - 1];
-      for (std::size_t m = 0; m < n; ++m) {
+    for (std::size_t m = 0; m < n; ++m) {
+      if (on_run) on_run(rep, m);
+      auto detector = make_detector(methods[m], options);
+      detector->set_topology(topology);
+      for (std::size_t i = plan.first; i < plan.last; ++i) {
+        const Positions& previous = frames[i == plan.first ? i : i - 1];
         const auto start = std::chrono::steady_clock::now();
-        detectors[m]->update(previous, frames[i], out[m]);
+        detector->update(previous, frames[i], out);
         const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
         if (i < plan.timed_from) continue;
         const std::size_t k = i - plan.timed_from;
         samples[m][k].push_back(ms);
         if (rep > 0) continue;  // seeded: every repetition finds the same contacts
-        t[m].distance_evals += detectors[m]->stats().get("distance_evals") / static_cast<double>(timed);
-        if (reference != nullptr) {
-          t[m].match.push_back(match_contacts(out[m], (*reference)[k]));
-        } else if (first_is_reference) {
-          t[m].match.push_back(match_contacts(out[m], out[0]));
-        }
-        if (plan.keep_contacts) t[m].contacts.push_back(out[m]);
+        t[m].distance_evals += detector->stats().get("distance_evals") / static_cast<double>(timed);
+        if (first_is_reference && reference == nullptr && m == 0) first.push_back(out);
+        const ContactSet* want = reference != nullptr ? &(*reference)[k] : first_is_reference ? &first[k] : nullptr;
+        if (want != nullptr) t[m].match.push_back(match_contacts(out, *want));
+        if (plan.keep_contacts) t[m].contacts.push_back(out);
       }
     }
   }
@@ -85,8 +82,8 @@ std::vector<Timing> time_methods_against_first(std::shared_ptr<const Topology> t
                                                const std::vector<Positions>& frames,
                                                const std::vector<std::string>& specs, const DetectorOptions& options,
                                                const TimingPlan& plan,
-                                               const std::function<void(int, std::size_t)>& on_frame) {
-  return time_interleaved(std::move(topology), frames, specs, options, plan, nullptr, true, on_frame);
+                                               const std::function<void(int, std::size_t)>& on_run) {
+  return time_interleaved(std::move(topology), frames, specs, options, plan, nullptr, true, on_run);
 }
 
 namespace {

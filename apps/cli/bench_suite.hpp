@@ -48,17 +48,18 @@ Timing time_method(std::shared_ptr<const Topology> topology, const std::vector<P
                    const DetectorOptions& options, const TimingPlan& plan,
                    const std::vector<ContactSet>* reference);
 
-/// Times several methods on the same frames, interleaved: each frame goes to every method's
-/// detector (one per method and repetition, fed in order) before the next frame, so the
-/// machine's speed drift, minutes long on shared VMs, weighs on all methods alike and their
-/// ratios hold. The first method is the reference: every method's contacts (its own included)
-/// are matched against its contacts of the same frame. `on_frame(repetition, frame)` reports
-/// progress.
+/// Times several methods on the same frames, interleaved by repetition: repetition r of every
+/// method (each a fresh detector fed the whole sequence in order, its caches warm as when it
+/// runs alone) before repetition r + 1 of any. The median per frame then comes from runs spread
+/// over the whole measurement, and a drift of the machine's speed over minutes (shared VMs)
+/// lands on every method's runs alike, so their ratios hold. The first method is the
+/// reference: every method's contacts (its own included) are matched against its contacts of
+/// the same frame. `on_run(repetition, method)` reports progress.
 std::vector<Timing> time_methods_against_first(std::shared_ptr<const Topology> topology,
                                                const std::vector<Positions>& frames,
                                                const std::vector<std::string>& specs, const DetectorOptions& options,
                                                const TimingPlan& plan,
-                                               const std::function<void(int, std::size_t)>& on_frame = {});
+                                               const std::function<void(int, std::size_t)>& on_run = {});
 
 /// Machine description for the report: CPU model, hardware threads, compiler.
 std::string machine_description();
