@@ -6,7 +6,8 @@
 // For each scene: the second frame with motion from the first, h = 1e-3 x the first frame's
 // bounding-box diagonal, VF + EE (and, with --tt, the intersection-only query), 1 and 2
 // threads. Each repetition runs an untimed update on the first frame (so persistent state —
-// tree, sort order — is that of the previous step), then the timed update(first, second).
+// tree, sort order — is that of the previous step), then the timed update(first, second);
+// repetition r of every (method, threads) pair before repetition r + 1 of any.
 // The median wall time is reported with the stats of that run (refit / traversal / narrow ms,
 // candidates).
 //
@@ -35,6 +36,7 @@
 #include <cstring>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -171,41 +173,59 @@ int bench(const std::string& data, const std::vector<std::string>& methods, cons
     std::vector<std::pair<std::string, ContactKinds>> queries{{"vf,ee", ContactKinds::parse("vf,ee")}};
     if (tt) queries.push_back({"tt", ContactKinds::parse("tt")});
     for (const auto& [qname, kinds] : queries) {
+      // Every (method, threads) detector runs repetition r before any runs r + 1: this VM's
+      // speed drifts by 10-40% over minutes, and one method's repetitions back to back could
+      // land in another phase than the next method's. Each timed update follows an untimed one
+      // on the first frame, so caches are warm whatever ran before.
+      struct Combo {
+        std::string method;
+        int threads = 0;
+        std::unique_ptr<Detector> detector;
+        ContactSet out;
+        std::vector<std::pair<double, Row>> runs;
+      };
+      std::vector<Combo> combos;
       for (const std::string& method : methods) {
         for (int threads : thread_counts) {
-          auto d = make_detector(MethodSpec::parse(method), {.thickness = h, .kinds = kinds, .threads = threads});
-          d->set_topology(m0.topology_ptr());
-          ContactSet out;
-          std::vector<std::pair<double, Row>> runs;
-          for (int r = 0; r < repeat; ++r) {
-            d->update(x0, out);
-            const double cpu_start = cpu_ms();
-            const auto start = std::chrono::steady_clock::now();
-            d->update(x0, x1, out);
-            Row row;
-            row.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-            row.cpu_ms = cpu_ms() - cpu_start;
-            row.scene = s.name;
-            row.method = method;
-            row.query = qname;
-            row.threads = threads;
-            row.refit_ms = d->stats().get("refit_ms");
-            row.traversal_ms = d->stats().get("traversal_ms");
-            row.narrow_ms = d->stats().get("narrow_ms");
-            row.sort_ms = d->stats().get("sort_ms");
-            row.candidates = d->stats().get("candidates");
-            row.vf = out.vf.size();
-            row.ee = out.ee.size();
-            row.tt = out.tt.size();
-            runs.emplace_back(row.ms, row);
-          }
-          std::sort(runs.begin(), runs.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-          const Row& med = runs[runs.size() / 2].second;
-          std::fprintf(stderr, "%-18s %-6s %-24s %d thr  %9.2f ms  cpu %9.2f ms  (refit %.2f, traversal %.2f, narrow %.2f, sort %.2f; %.0f candidates; vf %zu ee %zu tt %zu)\n",
-                       s.name, qname.c_str(), method.c_str(), threads, med.ms, med.cpu_ms, med.refit_ms,
-                       med.traversal_ms, med.narrow_ms, med.sort_ms, med.candidates, med.vf, med.ee, med.tt);
-          rows.push_back(med);
+          Combo c{method, threads,
+                  make_detector(MethodSpec::parse(method), {.thickness = h, .kinds = kinds, .threads = threads}),
+                  {}, {}};
+          c.detector->set_topology(m0.topology_ptr());
+          combos.push_back(std::move(c));
         }
+      }
+      for (int r = 0; r < repeat; ++r) {
+        for (Combo& c : combos) {
+          Detector& d = *c.detector;
+          d.update(x0, c.out);
+          const double cpu_start = cpu_ms();
+          const auto start = std::chrono::steady_clock::now();
+          d.update(x0, x1, c.out);
+          Row row;
+          row.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+          row.cpu_ms = cpu_ms() - cpu_start;
+          row.scene = s.name;
+          row.method = c.method;
+          row.query = qname;
+          row.threads = c.threads;
+          row.refit_ms = d.stats().get("refit_ms");
+          row.traversal_ms = d.stats().get("traversal_ms");
+          row.narrow_ms = d.stats().get("narrow_ms");
+          row.sort_ms = d.stats().get("sort_ms");
+          row.candidates = d.stats().get("candidates");
+          row.vf = c.out.vf.size();
+          row.ee = c.out.ee.size();
+          row.tt = c.out.tt.size();
+          c.runs.emplace_back(row.ms, row);
+        }
+      }
+      for (Combo& c : combos) {
+        std::sort(c.runs.begin(), c.runs.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+        const Row& med = c.runs[c.runs.size() / 2].second;
+        std::fprintf(stderr, "%-18s %-6s %-24s %d thr  %9.2f ms  cpu %9.2f ms  (refit %.2f, traversal %.2f, narrow %.2f, sort %.2f; %.0f candidates; vf %zu ee %zu tt %zu)\n",
+                     s.name, qname.c_str(), c.method.c_str(), c.threads, med.ms, med.cpu_ms, med.refit_ms,
+                     med.traversal_ms, med.narrow_ms, med.sort_ms, med.candidates, med.vf, med.ee, med.tt);
+        rows.push_back(med);
       }
     }
   }
