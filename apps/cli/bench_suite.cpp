@@ -13,22 +13,16 @@
 
 namespace crumple::cli::bench {
 
-namespace {
-
-/// The timed loop shared by `time_method` and `time_methods_against_first`: repetition by
-/// repetition, each method's whole sequence in turn. Matches method m's contacts against
-/// `reference` (per timed frame) or, without one and when `first_is_reference`, against method
-/// 0's of the same frame (kept from the first repetition).
-std::vector<Timing> time_interleaved(std::shared_ptr<const Topology> topology, const std::vector<Positions>& frames,
-                                     const std::vector<std::string>& specs, const DetectorOptions& options,
-                                     const TimingPlan& plan, const std::vector<ContactSet>* reference,
-                                     bool first_is_reference, const std::function<void(int, std::size_t)>& on_run) {
+std::vector<Timing> time_methods_against_first(std::shared_ptr<const Topology> topology,
+                                               const std::vector<Positions>& frames,
+                                               const std::vector<std::string>& specs, const DetectorOptions& options,
+                                               const TimingPlan& plan,
+                                               const std::function<void(int, std::size_t)>& on_run) {
   CRUMPLE_CHECK(plan.first <= plan.timed_from && plan.timed_from <= plan.last && plan.last <= frames.size(),
                 "timing plan out of the frame range");
   CRUMPLE_CHECK(plan.repetitions >= 1, "at least one repetition");
   CRUMPLE_CHECK(!specs.empty(), "at least one method");
   const std::size_t timed = plan.last - plan.timed_from;
-  CRUMPLE_CHECK(reference == nullptr || reference->size() == timed, "one reference set per timed frame");
   std::vector<MethodSpec> methods;
   for (const std::string& spec : specs) methods.push_back(MethodSpec::parse(spec));
 
@@ -36,7 +30,7 @@ std::vector<Timing> time_interleaved(std::shared_ptr<const Topology> topology, c
   std::vector<Timing> t(n);
   for (std::size_t m = 0; m < n; ++m) t[m].spec = methods[m].to_string();
   std::vector<std::vector<std::vector<double>>> samples(n, std::vector<std::vector<double>>(timed));
-  std::vector<ContactSet> first;  // method 0's contacts per timed frame, when it is the reference
+  std::vector<ContactSet> reference;  // method 0's contacts per timed frame (first repetition)
   ContactSet out;
   for (int rep = 0; rep < plan.repetitions; ++rep) {
     for (std::size_t m = 0; m < n; ++m) {
@@ -53,10 +47,8 @@ std::vector<Timing> time_interleaved(std::shared_ptr<const Topology> topology, c
         samples[m][k].push_back(ms);
         if (rep > 0) continue;  // seeded: every repetition finds the same contacts
         t[m].distance_evals += detector->stats().get("distance_evals") / static_cast<double>(timed);
-        if (first_is_reference && reference == nullptr && m == 0) first.push_back(out);
-        const ContactSet* want = reference != nullptr ? &(*reference)[k] : first_is_reference ? &first[k] : nullptr;
-        if (want != nullptr) t[m].match.push_back(match_contacts(out, *want));
-        if (plan.keep_contacts) t[m].contacts.push_back(out);
+        if (m == 0) reference.push_back(out);
+        t[m].match.push_back(match_contacts(out, reference[k]));
       }
     }
   }
@@ -68,22 +60,6 @@ std::vector<Timing> time_interleaved(std::shared_ptr<const Topology> topology, c
     }
   }
   return t;
-}
-
-}  // namespace
-
-Timing time_method(std::shared_ptr<const Topology> topology, const std::vector<Positions>& frames,
-                   const std::string& spec, const DetectorOptions& options, const TimingPlan& plan,
-                   const std::vector<ContactSet>* reference) {
-  return std::move(time_interleaved(std::move(topology), frames, {spec}, options, plan, reference, false, {})[0]);
-}
-
-std::vector<Timing> time_methods_against_first(std::shared_ptr<const Topology> topology,
-                                               const std::vector<Positions>& frames,
-                                               const std::vector<std::string>& specs, const DetectorOptions& options,
-                                               const TimingPlan& plan,
-                                               const std::function<void(int, std::size_t)>& on_run) {
-  return time_interleaved(std::move(topology), frames, specs, options, plan, nullptr, true, on_run);
 }
 
 namespace {

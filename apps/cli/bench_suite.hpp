@@ -24,8 +24,7 @@ using sim::record_scene;
 struct Timing {
   std::string spec;
   std::vector<double> ms;           ///< per timed frame: median over the repetitions
-  std::vector<ContactMatch> match;  ///< per timed frame against the reference (if any)
-  std::vector<ContactSet> contacts;  ///< per timed frame (only when asked to keep them)
+  std::vector<ContactMatch> match;  ///< per timed frame against the reference (the first method)
   /// Mean over the timed frames of the detector's `distance_evals` counter (stochastic only).
   double distance_evals = 0;
 };
@@ -39,14 +38,7 @@ struct TimingPlan {
   std::size_t timed_from = 0;
   std::size_t last = 0;
   int repetitions = 3;
-  bool keep_contacts = false;
 };
-
-/// Times `spec` on `frames` (one topology). `reference`, when given, holds the reference's
-/// contacts of each timed frame (index 0 = frame `timed_from`).
-Timing time_method(std::shared_ptr<const Topology> topology, const std::vector<Positions>& frames, const std::string& spec,
-                   const DetectorOptions& options, const TimingPlan& plan,
-                   const std::vector<ContactSet>* reference);
 
 /// Times several methods on the same frames, interleaved by repetition: repetition r of every
 /// method (each a fresh detector fed the whole sequence in order, its caches warm as when it
