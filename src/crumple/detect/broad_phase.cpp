@@ -91,6 +91,35 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
   });
 }
 
+/// The owned sub-pairs of a candidate face pair, indexed by `mask_a | mask_b << 3` (the two
+/// faces' ownership masks): vertex-face codes `side << 2 | k` (side 0: corner k of the first
+/// face against the second face; side 1: the other way round) and edge-edge codes `i << 2 | j`
+/// (side i of the first face, side j of the second), with their counts. Unused codes are 0.
+struct SubPairTable {
+  std::array<std::array<std::uint8_t, 6>, 64> vf{};
+  std::array<std::uint8_t, 64> vf_count{};
+  std::array<std::array<std::uint8_t, 9>, 64> ee{};
+  std::array<std::uint8_t, 64> ee_count{};
+  constexpr SubPairTable() {
+    for (unsigned key = 0; key < 64; ++key) {
+      const unsigned ma = key & 7u, mb = key >> 3;
+      unsigned nv = 0, ne = 0;
+      for (unsigned k = 0; k < 3; ++k) {
+        if (ma >> k & 1u) vf[key][nv++] = static_cast<std::uint8_t>(k);
+        if (mb >> k & 1u) vf[key][nv++] = static_cast<std::uint8_t>(4u | k);
+      }
+      for (unsigned i = 0; i < 3; ++i) {
+        for (unsigned j = 0; j < 3; ++j) {
+          if ((ma >> i & 1u) && (mb >> j & 1u)) ee[key][ne++] = static_cast<std::uint8_t>(i << 2 | j);
+        }
+      }
+      vf_count[key] = static_cast<std::uint8_t>(nv);
+      ee_count[key] = static_cast<std::uint8_t>(ne);
+    }
+  }
+};
+constexpr SubPairTable kSubPairs{};
+
 /// Contacts found by one chunk of work, kept until the frame's set is gathered.
 struct LocalContacts {
   ContactSet set;
@@ -291,48 +320,50 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     tt_tests += local.tt_tests;
   };
   // |wn| / |n| > pad with a margin for the rounding of wn (|wn| <= sqrt(scale)): the distance
-  // to a plane or between two lines exceeds pad. The square roots are taken only when the
-  // squares say it may (most pairs that reach this test are kept).
+  // to a plane or between two lines exceeds pad. Branch-free: it sifts lists of sub-pairs of
+  // which an unpredictable part is rejected (see `sift`).
   const auto beyond = [pad](Scalar wn, const Vec3& n, Scalar scale) {
     const Scalar nn = n.squaredNorm();
-    if (!(wn * wn > pad * pad * nn)) return false;
-    return std::abs(wn) > pad * std::sqrt(nn) + 1e-13 * std::sqrt(scale);
+    return ((wn * wn > pad * pad * nn) & (std::abs(wn) > pad * std::sqrt(nn) + 1e-13 * std::sqrt(scale))) != 0;
   };
-  // Vertex v at p against face g: cheap rejections, then the shared kernel. The box test is
-  // inlined into the loops; what follows it, reached by a minority of the sub-pairs, is not
-  // (a call per sub-pair with the whole test's stack frame cost more than the box test).
-  const auto vf_past_box = [&](const Vec3& p, Index v, const PackedFace& t, Index g,
-                               LocalContacts& local) __attribute__((noinline)) {
-    // Plane rejection: dist(p, triangle) >= dist(p, plane) = |(p - a) . n| / |n|. Rejected only
-    // beyond pad plus a bound on the rounding of the dot product (degenerate n: never).
+  // Plane rejection of vertex p against face t: dist(p, triangle) >= dist(p, plane) =
+  // |(p - a) . n| / |n|. Rejected only beyond pad plus a bound on the rounding of the dot
+  // product (degenerate n: never).
+  const auto off_plane = [&](const Vec3& p, const PackedFace& t) {
     const Vec3& a = t.p[0];
     const Vec3 e1 = t.p[1] - a, e2 = t.p[2] - a, w = p - a;
     const Vec3 n = e1.cross(e2);
-    if (beyond(w.dot(n), n, w.squaredNorm() * e1.squaredNorm() * e2.squaredNorm())) return;
+    return beyond(w.dot(n), n, w.squaredNorm() * e1.squaredNorm() * e2.squaredNorm());
+  };
+  // Line rejection: dist(segments) >= dist(lines) = |w . (d0 x d1)| / |d0 x d1|, with the same
+  // rounding guard (parallel edges: never rejected here).
+  const auto off_line = [&](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
+    const Vec3 d0 = p1 - p0, d1 = q1 - q0, w = q0 - p0;
+    const Vec3 n = d0.cross(d1);
+    return beyond(w.dot(n), n, w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm());
+  };
+  // Vertex v at p against face g, past the cheap rejections: the shared kernel (not inlined:
+  // reached by a minority of the sub-pairs).
+  const auto vf_kernel = [&](const Vec3& p, Index v, const PackedFace& t, Index g,
+                             LocalContacts& local) __attribute__((noinline)) {
     ++local.vf_tests;
     if (auto c = narrow::vertex_face(v, p, g, t.p[0], t.p[1], t.p[2], h2)) local.set.vf.push_back(*c);
   };
-  const auto test_vf = [&](const Vec3& p, Index v, const PackedFace& t, Index g,
-                           LocalContacts& local) __attribute__((always_inline)) {
-    // Box of the face padded by pad (branch-free: one unpredictable branch, not six).
+  // The box of face t padded by pad holds p (branch-free).
+  const auto in_box = [pad](const Vec3& p, const PackedFace& t) {
     bool outside = false;
     for (int i = 0; i < 3; ++i) {
       const Scalar lo = std::min({t.p[0][i], t.p[1][i], t.p[2][i]}) - pad;
       const Scalar hi = std::max({t.p[0][i], t.p[1][i], t.p[2][i]}) + pad;
       outside |= !(lo <= p[i]) | !(p[i] <= hi);
     }
-    if (!outside) vf_past_box(p, v, t, g, local);
+    return !outside;
   };
   // Edge e0 = (p0, p1) of vertices (u0, u1) and edge e1 = (q0, q1) of vertices (w0, w1), each
-  // in any order.
-  const auto ee_past_box = [&](const Vec3& p0, const Vec3& p1, Index u0, Index u1, Index e0, const Vec3& q0,
-                               const Vec3& q1, Index w0, Index w1, Index e1,
-                               LocalContacts& local) __attribute__((noinline)) {
-    // Line rejection: dist(segments) >= dist(lines) = |w . (d0 x d1)| / |d0 x d1|, with the
-    // same rounding guard (parallel edges: never rejected here).
-    const Vec3 d0 = p1 - p0, d1 = q1 - q0, w = q0 - p0;
-    const Vec3 n = d0.cross(d1);
-    if (beyond(w.dot(n), n, w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm())) return;
+  // in any order, past the cheap rejections: the shared kernel.
+  const auto ee_kernel = [&](const Vec3& p0, const Vec3& p1, Index u0, Index u1, Index e0, const Vec3& q0,
+                             const Vec3& q1, Index w0, Index w1, Index e1,
+                             LocalContacts& local) __attribute__((noinline)) {
     ++local.ee_tests;
     // The shared kernel sees the edges as the mesh stores them (lower id first, each from its
     // lower vertex), as for every other detector: the same bits.
@@ -345,62 +376,123 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
                      : narrow::edge_edge(e1, eb, b0, b1, e0, ea, a0, a1, h2);
     if (c) local.set.ee.push_back(*c);
   };
-  const auto test_ee = [&](const Vec3& p0, const Vec3& p1, Index u0, Index u1, Index e0, const Vec3& q0,
-                           const Vec3& q1, Index w0, Index w1, Index e1,
-                           LocalContacts& local) __attribute__((always_inline)) {
-    // Boxes of the edges padded by pad / 2 overlap (branch-free, as above).
+  // The boxes of edges (p0, p1) and (q0, q1) padded by pad / 2 overlap (branch-free).
+  const auto boxes_meet = [half](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
     bool apart = false;
     for (int i = 0; i < 3; ++i) {
       apart |= !(std::min(p0[i], p1[i]) - half <= std::max(q0[i], q1[i]) + half) |
                !(std::min(q0[i], q1[i]) - half <= std::max(p0[i], p1[i]) + half);
     }
-    if (!apart) ee_past_box(p0, p1, u0, u1, e0, q0, q1, w0, w1, e1, local);
+    return !apart;
   };
+  // Keeps, in order, the codes of list[0, n) for which keep(code) holds; returns their number.
+  // Branch-free: which sub-pairs pass a rejection test is unpredictable.
+  const auto sift = [](std::uint16_t* list, std::size_t n, const auto& keep) {
+    std::size_t kept = 0;
+    for (std::size_t s = 0; s < n; ++s) {
+      const std::uint16_t code = list[s];
+      list[kept] = code;
+      kept += keep(code) ? 1u : 0u;
+    }
+    return kept;
+  };
+  // Sub-pairs are taken in blocks: the block's sub-pairs are listed, then each rejection test
+  // sifts the list, and the exact kernels run over what is left.
+  constexpr std::size_t kBlock = 64;
 
   // 1. Broad-phase candidates (faces sharing no vertex).
   const auto& chunks = candidates.chunks();
   std::vector<std::size_t> offsets(chunks.size() + 1, 0);
   for (std::size_t i = 0; i < chunks.size(); ++i) offsets[i + 1] = offsets[i] + chunks[i].size();
   const std::size_t total = offsets.back();
+  // The owned sub-pairs of a block of candidates are listed from the table without a branch.
+  // Code: the candidate's place in the block << 4 | the table's code.
+  static constexpr std::array<std::size_t, 3> kNext{1, 2, 0};
   parallel_for_chunks(total, threads, 2048, [&](std::size_t begin, std::size_t end) {
     LocalContacts local{spare_sets_.take()};
+    std::array<std::array<const PackedFace*, 2>, kBlock> block;
+    std::array<std::uint16_t, kBlock * 6> vf_subs;
+    std::array<std::uint16_t, kBlock * 9> ee_subs;
     std::size_t c = static_cast<std::size_t>(
         std::upper_bound(offsets.begin(), offsets.end(), begin) - offsets.begin() - 1);
-    for (std::size_t i = begin; i < end; ++i) {
-      while (i >= offsets[c + 1]) ++c;
-      const FacePair& pair = chunks[c][i - offsets[c]];
-      const Index f = pair[0], g = pair[1];
-      const PackedFace& a = packed_[static_cast<std::size_t>(f)];
-      const PackedFace& b = packed_[static_cast<std::size_t>(g)];
+    for (std::size_t i = begin; i < end;) {
+      std::size_t n = 0, nvf = 0, nee = 0;
+      for (; i < end && n < kBlock; ++i, ++n) {
+        while (i >= offsets[c + 1]) ++c;
+        const FacePair& pair = chunks[c][i - offsets[c]];
+        const PackedFace& a = packed_[static_cast<std::size_t>(pair[0])];
+        const PackedFace& b = packed_[static_cast<std::size_t>(pair[1])];
+        block[n] = {&a, &b};
+        const auto base = static_cast<std::uint16_t>(n << 4);
+        const unsigned vkey = a.vertex_mask | static_cast<unsigned>(b.vertex_mask) << 3;
+        const unsigned ekey = a.edge_mask | static_cast<unsigned>(b.edge_mask) << 3;
+        for (std::size_t k = 0; k < 6; ++k) vf_subs[nvf + k] = static_cast<std::uint16_t>(base | kSubPairs.vf[vkey][k]);
+        for (std::size_t k = 0; k < 9; ++k) ee_subs[nee + k] = static_cast<std::uint16_t>(base | kSubPairs.ee[ekey][k]);
+        nvf += kSubPairs.vf_count[vkey];
+        nee += kSubPairs.ee_count[ekey];
+      }
       if (kinds.vf) {
-        for (std::size_t k = 0; k < 3; ++k) {
-          if (a.vertex_mask >> k & 1u) test_vf(a.p[k], a.v[k], b, g, local);
-          if (b.vertex_mask >> k & 1u) test_vf(b.p[k], b.v[k], a, f, local);
+        // Corner (code & 3) of one face of the pair, against the other face.
+        const auto sides = [&](std::uint16_t code) {
+          const auto& [a, b] = block[code >> 4];
+          return code & 4u ? std::pair<const PackedFace*, const PackedFace*>{b, a}
+                           : std::pair<const PackedFace*, const PackedFace*>{a, b};
+        };
+        nvf = sift(vf_subs.data(), nvf, [&](std::uint16_t code) {
+          const auto [from, t] = sides(code);
+          return in_box(from->p[code & 3u], *t);
+        });
+        nvf = sift(vf_subs.data(), nvf, [&](std::uint16_t code) {
+          const auto [from, t] = sides(code);
+          return !off_plane(from->p[code & 3u], *t);
+        });
+        for (std::size_t s = 0; s < nvf; ++s) {
+          const auto [from, t] = sides(vf_subs[s]);
+          const std::size_t k = vf_subs[s] & 3u;
+          vf_kernel(from->p[k], from->v[k], *t, static_cast<Index>(t - packed_.data()), local);
         }
       }
-      if (kinds.ee && a.edge_mask != 0 && b.edge_mask != 0) {
-        for (std::size_t i2 = 0; i2 < 3; ++i2) {
-          if (!(a.edge_mask >> i2 & 1u)) continue;
-          for (std::size_t j = 0; j < 3; ++j) {
-            if (!(b.edge_mask >> j & 1u)) continue;
-            test_ee(a.p[i2], a.p[(i2 + 1) % 3], a.v[i2], a.v[(i2 + 1) % 3], a.e[i2], b.p[j], b.p[(j + 1) % 3],
-                    b.v[j], b.v[(j + 1) % 3], b.e[j], local);
-          }
+      if (kinds.ee) {
+        // Side i of the first face and side j of the second: their ends.
+        const auto ends = [](std::uint16_t code) {
+          const std::size_t i2 = code >> 2 & 3u, j = code & 3u;
+          return std::array<std::size_t, 4>{i2, kNext[i2], j, kNext[j]};
+        };
+        nee = sift(ee_subs.data(), nee, [&](std::uint16_t code) {
+          const auto& [a, b] = block[code >> 4];
+          const auto k = ends(code);
+          return boxes_meet(a->p[k[0]], a->p[k[1]], b->p[k[2]], b->p[k[3]]);
+        });
+        nee = sift(ee_subs.data(), nee, [&](std::uint16_t code) {
+          const auto& [a, b] = block[code >> 4];
+          const auto k = ends(code);
+          return !off_line(a->p[k[0]], a->p[k[1]], b->p[k[2]], b->p[k[3]]);
+        });
+        for (std::size_t s = 0; s < nee; ++s) {
+          const auto& [a, b] = block[ee_subs[s] >> 4];
+          const auto k = ends(ee_subs[s]);
+          ee_kernel(a->p[k[0]], a->p[k[1]], a->v[k[0]], a->v[k[1]], a->e[k[0]], b->p[k[2]], b->p[k[3]], b->v[k[2]],
+                    b->v[k[3]], b->e[k[2]], local);
         }
       }
       if (kinds.tt) {
-        // Boxes of the faces padded by pad overlap.
-        bool apart = false;
-        for (int k = 0; k < 3; ++k) {
-          apart |= std::min({a.p[0][k], a.p[1][k], a.p[2][k]}) - pad > std::max({b.p[0][k], b.p[1][k], b.p[2][k]}) + pad;
-          apart |= std::min({b.p[0][k], b.p[1][k], b.p[2][k]}) - pad > std::max({a.p[0][k], a.p[1][k], a.p[2][k]}) + pad;
-        }
-        if (!apart) {
-          ++local.tt_tests;
-          const PackedFace& s = f < g ? a : b;
-          const PackedFace& t = f < g ? b : a;
-          if (geometry::triangles_intersect(s.p[0], s.p[1], s.p[2], t.p[0], t.p[1], t.p[2])) {
-            local.set.tt.push_back({std::min(f, g), std::max(f, g)});
+        for (std::size_t m = 0; m < n; ++m) {
+          const PackedFace& a = *block[m][0];
+          const PackedFace& b = *block[m][1];
+          const auto f = static_cast<Index>(&a - packed_.data()), g = static_cast<Index>(&b - packed_.data());
+          // Boxes of the faces padded by pad overlap.
+          bool apart = false;
+          for (int k = 0; k < 3; ++k) {
+            apart |= std::min({a.p[0][k], a.p[1][k], a.p[2][k]}) - pad > std::max({b.p[0][k], b.p[1][k], b.p[2][k]}) + pad;
+            apart |= std::min({b.p[0][k], b.p[1][k], b.p[2][k]}) - pad > std::max({a.p[0][k], a.p[1][k], a.p[2][k]}) + pad;
+          }
+          if (!apart) {
+            ++local.tt_tests;
+            const PackedFace& s = f < g ? a : b;
+            const PackedFace& t = f < g ? b : a;
+            if (geometry::triangles_intersect(s.p[0], s.p[1], s.p[2], t.p[0], t.p[1], t.p[2])) {
+              local.set.tt.push_back({std::min(f, g), std::max(f, g)});
+            }
           }
         }
       }
@@ -410,12 +502,33 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
 
   // 2. Orphan sub-pairs of faces that share a vertex.
   const auto orphans_start = std::chrono::steady_clock::now();
+  // Code: the sub-pair's place in its block.
+  const auto iota = [](std::array<std::uint16_t, kBlock>& list, std::size_t n) {
+    for (std::size_t k = 0; k < n; ++k) list[k] = static_cast<std::uint16_t>(k);
+  };
   if (kinds.vf) {
     parallel_for_chunks(orphan_vf_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
       LocalContacts local{spare_sets_.take()};
-      for (std::size_t i = begin; i < end; ++i) {
-        const auto [v, g] = orphan_vf_[i];
-        test_vf(narrow::at(x, v), v, packed_[static_cast<std::size_t>(g)], g, local);
+      std::array<std::uint16_t, kBlock> list;
+      for (std::size_t i = begin; i < end; i += kBlock) {
+        std::size_t n = std::min(kBlock, end - i);
+        iota(list, n);
+        const auto sub = [&](std::uint16_t k) {
+          const auto [v, g] = orphan_vf_[i + k];
+          return std::pair<const Vec3&, const PackedFace&>{narrow::at(x, v), packed_[static_cast<std::size_t>(g)]};
+        };
+        n = sift(list.data(), n, [&](std::uint16_t k) {
+          const auto [p, t] = sub(k);
+          return in_box(p, t);
+        });
+        n = sift(list.data(), n, [&](std::uint16_t k) {
+          const auto [p, t] = sub(k);
+          return !off_plane(p, t);
+        });
+        for (std::size_t s = 0; s < n; ++s) {
+          const auto [v, g] = orphan_vf_[i + list[s]];
+          vf_kernel(narrow::at(x, v), v, packed_[static_cast<std::size_t>(g)], g, local);
+        }
       }
       merge(local);
     });
@@ -425,7 +538,9 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
       for (std::size_t i = begin; i < end; ++i) {
         const Index v = isolated_[i];
         for (Index g = 0; g < static_cast<Index>(nf); ++g) {
-          test_vf(narrow::at(x, v), v, packed_[static_cast<std::size_t>(g)], g, local);
+          const Vec3& p = narrow::at(x, v);
+          const PackedFace& t = packed_[static_cast<std::size_t>(g)];
+          if (in_box(p, t) && !off_plane(p, t)) vf_kernel(p, v, t, g, local);
         }
       }
       merge(local);
@@ -434,10 +549,28 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   if (kinds.ee) {
     parallel_for_chunks(orphan_ee_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
       LocalContacts local{spare_sets_.take()};
-      for (std::size_t i = begin; i < end; ++i) {
-        const OrphanEdges& o = orphan_ee_[i];
-        test_ee(narrow::at(x, o.a[0]), narrow::at(x, o.a[1]), o.a[0], o.a[1], o.e[0], narrow::at(x, o.b[0]),
-                narrow::at(x, o.b[1]), o.b[0], o.b[1], o.e[1], local);
+      std::array<std::uint16_t, kBlock> list;
+      for (std::size_t i = begin; i < end; i += kBlock) {
+        std::size_t n = std::min(kBlock, end - i);
+        iota(list, n);
+        const auto ends = [&](std::uint16_t k) {
+          const OrphanEdges& o = orphan_ee_[i + k];
+          return std::array<const Vec3*, 4>{&narrow::at(x, o.a[0]), &narrow::at(x, o.a[1]), &narrow::at(x, o.b[0]),
+                                            &narrow::at(x, o.b[1])};
+        };
+        n = sift(list.data(), n, [&](std::uint16_t k) {
+          const auto p = ends(k);
+          return boxes_meet(*p[0], *p[1], *p[2], *p[3]);
+        });
+        n = sift(list.data(), n, [&](std::uint16_t k) {
+          const auto p = ends(k);
+          return !off_line(*p[0], *p[1], *p[2], *p[3]);
+        });
+        for (std::size_t s = 0; s < n; ++s) {
+          const OrphanEdges& o = orphan_ee_[i + list[s]];
+          const auto p = ends(list[s]);
+          ee_kernel(*p[0], *p[1], o.a[0], o.a[1], o.e[0], *p[2], *p[3], o.b[0], o.b[1], o.e[1], local);
+        }
       }
       merge(local);
     });
