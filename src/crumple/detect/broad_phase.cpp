@@ -420,6 +420,14 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
       for (; i < end && n < kBlock; ++i, ++n) {
         while (i >= offsets[c + 1]) ++c;
         const FacePair& pair = chunks[c][i - offsets[c]];
+        if (const std::size_t ahead = i + kBlock - offsets[c]; ahead < chunks[c].size()) {
+          // The records of the next block's candidates, read while this block is processed.
+          for (const Index f : chunks[c][ahead]) {
+            const auto* r = reinterpret_cast<const char*>(&packed_[static_cast<std::size_t>(f)]);
+            __builtin_prefetch(r);
+            __builtin_prefetch(r + sizeof(PackedFace) - 1);
+          }
+        }
         const PackedFace& a = packed_[static_cast<std::size_t>(pair[0])];
         const PackedFace& b = packed_[static_cast<std::size_t>(pair[1])];
         block[n] = {&a, &b};
