@@ -73,6 +73,18 @@ namespace {
 using F4 = float __attribute__((vector_size(16)));
 using I4 = std::int32_t __attribute__((vector_size(16)));
 
+/// Bit l set when lane l of v is 0 (the lanes of a vector comparison are 0 or -1): one
+/// sign-mask instruction where SSE is there.
+inline std::uint64_t zero_lanes(I4 v) {
+#if defined(__SSE__)
+  return ~static_cast<std::uint64_t>(__builtin_ia32_movmskps(std::bit_cast<F4>(v))) & 0xFu;
+#else
+  std::uint64_t m = 0;
+  for (int l = 0; l < 4; ++l) m |= static_cast<std::uint64_t>(v[l] == 0) << l;
+  return m;
+#endif
+}
+
 /// d as a float, by a non-decreasing map (round to nearest inside the float range, infinity
 /// beyond it; NaN stays NaN). Non-decreasing is all the overlap tests need: slabs that overlap
 /// in double (lo <= hi') still overlap in float (to_float(lo) <= to_float(hi')), so the float
@@ -524,7 +536,7 @@ class KdopTree final : public KdopDetector::Tree {
         const F4 hi = {f.hi[j], f.hi[j], f.hi[j], f.hi[j]};
         apart |= (lanes.lo[j] > hi) | (lo > lanes.hi[j]);
       }
-      for (int l = 0; l < 4; ++l) mask |= static_cast<std::uint64_t>(apart[l] == 0) << (4 * g + l);
+      mask |= zero_lanes(apart) << (4 * g);
     }
     // The empty lanes past `count` overlap nothing but a NaN k-DOP: masked.
     return node.count >= 64 ? mask : mask & ((std::uint64_t{1} << node.count) - 1);
