@@ -223,6 +223,17 @@ class KdopTree final : public KdopDetector::Tree {
     float_dops_.assign(nodes_.size(), FloatDop{});
     slot_faces_.resize(order_.size());
     for (std::size_t s = 0; s < order_.size(); ++s) slot_faces_[s] = topo.face(order_[s]);
+    // Within a leaf, which faces share a vertex: the leaf's self-test skips them by mask.
+    leaf_adjacent_.assign(order_.size(), 0);
+    for (const Node& node : nodes_) {
+      if (!node.leaf) continue;
+      for (Index i = 0; i < node.count; ++i) {
+        for (Index j = 0; j < node.count; ++j) {
+          const auto si = static_cast<std::size_t>(node.first + i), sj = static_cast<std::size_t>(node.first + j);
+          if (i != j && faces_share_vertex(slot_faces_[si], slot_faces_[sj])) leaf_adjacent_[si] |= std::uint64_t{1} << j;
+        }
+      }
+    }
     dops_.assign(nodes_.size(), Dop());
     built_quality_ = 0;  // set by the first refit
     contours_valid_ = false;
@@ -488,9 +499,13 @@ class KdopTree final : public KdopDetector::Tree {
   /// pair whose boxes of the current positions are apart (each inflated by half the pad, like
   /// the swept ones) has none and is not a candidate.
   bool candidate(Index i, Index j) const {
+    if (swept_ && now_apart(i, j)) return false;
     const auto si = static_cast<std::size_t>(i), sj = static_cast<std::size_t>(j);
-    if (swept_ && !now_dops_[si].overlaps(now_dops_[sj])) return false;
     return !faces_share_vertex(slot_faces_[si], slot_faces_[sj]);
+  }
+  /// The current-position k-DOPs of slots i and j are apart (swept trees only).
+  bool now_apart(Index i, Index j) const {
+    return !now_dops_[static_cast<std::size_t>(i)].overlaps(now_dops_[static_cast<std::size_t>(j)]);
   }
 
   void emit(Index i, Index j, std::vector<FacePair>& out) const {
@@ -552,10 +567,11 @@ class KdopTree final : public KdopDetector::Tree {
     if (node.leaf) {
       for (Index i = 0; i + 1 < node.count; ++i) {
         const Index a = node.first + i;
-        const std::uint64_t m0 = overlapping_members(node, member(node, i)) >> (i + 1);
+        const std::uint64_t m0 = (overlapping_members(node, member(node, i)) &
+                                  ~leaf_adjacent_[static_cast<std::size_t>(a)]) >> (i + 1);
         for (std::uint64_t m = m0; m != 0; m &= m - 1) {
           const Index b = a + 1 + std::countr_zero(m);
-          if (candidate(a, b)) emit(a, b, out);
+          if (!(swept_ && now_apart(a, b))) emit(a, b, out);
         }
       }
       return;
@@ -653,6 +669,7 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<Lanes> lanes_;          ///< per node, its members (children or faces) by four
   std::vector<Index> order_;     ///< face of each leaf slot
   std::vector<Face> slot_faces_;  ///< corners of each slot's face (adjacency test locality)
+  std::vector<std::uint64_t> leaf_adjacent_;  ///< per slot: bit j, member j of its leaf shares a vertex
   std::vector<Dop> now_dops_;     ///< per slot, current positions only, inflated (when swept)
   bool swept_ = false;            ///< this frame's boxes cover the motion
   std::vector<std::array<Index, 2>> levels_;  ///< node range of each depth
