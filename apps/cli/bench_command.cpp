@@ -488,11 +488,11 @@ void scaling_section(Report& report, const Progress& progress) {
     in.name = "lattice " + std::to_string(n) + "×" + std::to_string(n);
     in.topology = seq.mesh().topology_ptr();
     in.thickness = seq.thickness();
-    const std::size_t timed = n <= 100 ? 6 : (n <= 300 ? 3 : 2);
-    // Frames 0..5 are never fed (left empty): 6 and 7 warm every detector up (the stochastic
-    // one's kept pairs; the exact ones' tree, table or sort order).
-    for (std::size_t i = 0; i < 8 + timed; ++i) in.frames.push_back(i < 6 ? Positions{} : seq.positions(i));
-    in.plan = {.first = 6, .timed_from = 8, .last = 8 + timed, .repetitions = n <= 100 ? a.repeat : 1};
+    in.plan = bench::lattice_scaling_plan(n <= 100 ? 6 : (n <= 300 ? 3 : 2), n <= 100 ? a.repeat : 1);
+    // The frames before the plan's first are never fed: left empty.
+    for (std::size_t i = 0; i < in.plan.last; ++i) {
+      in.frames.push_back(i < in.plan.first ? Positions{} : seq.positions(i));
+    }
     inputs.push_back(std::move(in));
   }
   struct RealScene {
@@ -528,8 +528,7 @@ void scaling_section(Report& report, const Progress& progress) {
     in.topology = m0.topology_ptr();
     in.thickness = 1e-3 * compute_bounds(m0.positions()).diagonal();
     in.frames = {m0.positions(), m1.positions()};
-    // As in exact_bench: an untimed update on the first frame, then the second with its motion.
-    in.plan = {.first = 0, .timed_from = 1, .last = 2, .repetitions = a.repeat};
+    in.plan = bench::frame_pair_plan(a.repeat);
     inputs.push_back(std::move(in));
   }
 

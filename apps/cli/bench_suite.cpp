@@ -13,6 +13,22 @@
 
 namespace crumple::cli::bench {
 
+std::vector<FeedStep> feed_steps(const TimingPlan& plan) {
+  std::vector<FeedStep> steps;
+  for (std::size_t i = plan.first; i < plan.last; ++i) {
+    steps.push_back({.frame = i, .previous = i == plan.first ? i : i - 1, .timed = i >= plan.timed_from});
+  }
+  return steps;
+}
+
+TimingPlan lattice_scaling_plan(std::size_t timed, int repetitions) {
+  return {.first = 6, .timed_from = 8, .last = 8 + timed, .repetitions = repetitions};
+}
+
+TimingPlan frame_pair_plan(int repetitions) {
+  return {.first = 0, .timed_from = 1, .last = 2, .repetitions = repetitions};
+}
+
 std::vector<Timing> time_methods_against_first(std::shared_ptr<const Topology> topology,
                                                const std::vector<Positions>& frames,
                                                const std::vector<std::string>& specs, const DetectorOptions& options,
@@ -23,6 +39,7 @@ std::vector<Timing> time_methods_against_first(std::shared_ptr<const Topology> t
   CRUMPLE_CHECK(plan.repetitions >= 1, "at least one repetition");
   CRUMPLE_CHECK(!specs.empty(), "at least one method");
   const std::size_t timed = plan.last - plan.timed_from;
+  const std::vector<FeedStep> steps = feed_steps(plan);
   std::vector<MethodSpec> methods;
   for (const std::string& spec : specs) methods.push_back(MethodSpec::parse(spec));
 
@@ -37,13 +54,12 @@ std::vector<Timing> time_methods_against_first(std::shared_ptr<const Topology> t
       if (on_run) on_run(rep, m);
       auto detector = make_detector(methods[m], options);
       detector->set_topology(topology);
-      for (std::size_t i = plan.first; i < plan.last; ++i) {
-        const Positions& previous = frames[i == plan.first ? i : i - 1];
+      for (const FeedStep& step : steps) {
         const auto start = std::chrono::steady_clock::now();
-        detector->update(previous, frames[i], out);
+        detector->update(frames[step.previous], frames[step.frame], out);
         const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-        if (i < plan.timed_from) continue;
-        const std::size_t k = i - plan.timed_from;
+        if (!step.timed) continue;
+        const std::size_t k = step.frame - plan.timed_from;
         samples[m][k].push_back(ms);
         if (rep > 0) continue;  // seeded: every repetition finds the same contacts
         t[m].distance_evals += detector->stats().get("distance_evals") / static_cast<double>(timed);

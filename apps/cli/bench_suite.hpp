@@ -40,6 +40,27 @@ struct TimingPlan {
   int repetitions = 3;
 };
 
+/// One detector update of a timing run: `frame` with the motion from `previous` (the same frame
+/// for the first update of a run: no motion); `timed` or a warm-up.
+struct FeedStep {
+  std::size_t frame = 0;
+  std::size_t previous = 0;
+  bool timed = false;
+  bool operator==(const FeedStep&) const = default;
+};
+
+/// The updates one repetition of `plan` makes, in order.
+std::vector<FeedStep> feed_steps(const TimingPlan& plan);
+
+/// The scaling section's plan for a folding lattice: frames 6 and 7 warm the detector up (the
+/// stochastic one's kept pairs, the exact ones' tree, table or sort order), then `timed` frames
+/// from 8 are timed, each with the motion from the one before. Frames before `first` are never
+/// fed.
+TimingPlan lattice_scaling_plan(std::size_t timed, int repetitions);
+/// The plan for a pair of real frames (0, 1), as in `exact_bench`: an untimed update on frame 0,
+/// then frame 1 timed with the motion from frame 0.
+TimingPlan frame_pair_plan(int repetitions);
+
 /// Times several methods on the same frames, interleaved by repetition: repetition r of every
 /// method (each a fresh detector fed the whole sequence in order, its caches warm as when it
 /// runs alone) before repetition r + 1 of any. The median per frame then comes from runs spread
