@@ -396,9 +396,30 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     }
     return kept;
   };
-  // Sub-pairs are taken in blocks: the block's sub-pairs are listed, then each rejection test
-  // sifts the list, and the exact kernels run over what is left.
+  // The cheap rejections of a list of sub-pairs, in order, leaving those the kernels must test:
+  // vertex-face sub-pairs, point(code) giving the vertex's position and face(code) the face;
+  // edge-edge ones, ends(code) pointers to the four ends (first edge, then second).
+  const auto sift_vertex_face = [&](std::uint16_t* list, std::size_t n, const auto& point, const auto& face) {
+    n = sift(list, n, [&](std::uint16_t code) { return in_box(point(code), face(code)); });
+    return sift(list, n, [&](std::uint16_t code) { return !off_plane(point(code), face(code)); });
+  };
+  const auto sift_edge_edge = [&](std::uint16_t* list, std::size_t n, const auto& ends) {
+    n = sift(list, n, [&](std::uint16_t code) {
+      const auto p = ends(code);
+      return boxes_meet(*p[0], *p[1], *p[2], *p[3]);
+    });
+    return sift(list, n, [&](std::uint16_t code) {
+      const auto p = ends(code);
+      return !off_line(*p[0], *p[1], *p[2], *p[3]);
+    });
+  };
+  // Sub-pairs are taken in blocks: the block's sub-pairs are listed, then the rejections sift
+  // the list, and the exact kernels run over what is left.
   constexpr std::size_t kBlock = 64;
+  // Lists the codes 0 .. n-1 (a sub-pair's place in its block).
+  const auto iota = [](std::array<std::uint16_t, kBlock>& list, std::size_t n) {
+    for (std::size_t k = 0; k < n; ++k) list[k] = static_cast<std::uint16_t>(k);
+  };
 
   // 1. Broad-phase candidates (faces sharing no vertex).
   const auto& chunks = candidates.chunks();
@@ -446,14 +467,9 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           return code & 4u ? std::pair<const PackedFace*, const PackedFace*>{b, a}
                            : std::pair<const PackedFace*, const PackedFace*>{a, b};
         };
-        nvf = sift(vf_subs.data(), nvf, [&](std::uint16_t code) {
-          const auto [from, t] = sides(code);
-          return in_box(from->p[code & 3u], *t);
-        });
-        nvf = sift(vf_subs.data(), nvf, [&](std::uint16_t code) {
-          const auto [from, t] = sides(code);
-          return !off_plane(from->p[code & 3u], *t);
-        });
+        nvf = sift_vertex_face(
+            vf_subs.data(), nvf, [&](std::uint16_t code) -> const Vec3& { return sides(code).first->p[code & 3u]; },
+            [&](std::uint16_t code) -> const PackedFace& { return *sides(code).second; });
         for (std::size_t s = 0; s < nvf; ++s) {
           const auto [from, t] = sides(vf_subs[s]);
           const std::size_t k = vf_subs[s] & 3u;
@@ -461,20 +477,15 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
         }
       }
       if (kinds.ee) {
-        // Side i of the first face and side j of the second: their ends.
+        // Side i of the first face and side j of the second: their ends, as corners of each face.
         const auto ends = [](std::uint16_t code) {
           const std::size_t i2 = code >> 2 & 3u, j = code & 3u;
           return std::array<std::size_t, 4>{i2, kNext[i2], j, kNext[j]};
         };
-        nee = sift(ee_subs.data(), nee, [&](std::uint16_t code) {
+        nee = sift_edge_edge(ee_subs.data(), nee, [&](std::uint16_t code) {
           const auto& [a, b] = block[code >> 4];
           const auto k = ends(code);
-          return boxes_meet(a->p[k[0]], a->p[k[1]], b->p[k[2]], b->p[k[3]]);
-        });
-        nee = sift(ee_subs.data(), nee, [&](std::uint16_t code) {
-          const auto& [a, b] = block[code >> 4];
-          const auto k = ends(code);
-          return !off_line(a->p[k[0]], a->p[k[1]], b->p[k[2]], b->p[k[3]]);
+          return std::array<const Vec3*, 4>{&a->p[k[0]], &a->p[k[1]], &b->p[k[2]], &b->p[k[3]]};
         });
         for (std::size_t s = 0; s < nee; ++s) {
           const auto& [a, b] = block[ee_subs[s] >> 4];
@@ -510,10 +521,6 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
 
   // 2. Orphan sub-pairs of faces that share a vertex.
   const auto orphans_start = std::chrono::steady_clock::now();
-  // Code: the sub-pair's place in its block.
-  const auto iota = [](std::array<std::uint16_t, kBlock>& list, std::size_t n) {
-    for (std::size_t k = 0; k < n; ++k) list[k] = static_cast<std::uint16_t>(k);
-  };
   if (kinds.vf) {
     parallel_for_chunks(orphan_vf_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
       LocalContacts local{spare_sets_.take()};
@@ -521,18 +528,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
       for (std::size_t i = begin; i < end; i += kBlock) {
         std::size_t n = std::min(kBlock, end - i);
         iota(list, n);
-        const auto sub = [&](std::uint16_t k) {
-          const auto [v, g] = orphan_vf_[i + k];
-          return std::pair<const Vec3&, const PackedFace&>{narrow::at(x, v), packed_[static_cast<std::size_t>(g)]};
-        };
-        n = sift(list.data(), n, [&](std::uint16_t k) {
-          const auto [p, t] = sub(k);
-          return in_box(p, t);
-        });
-        n = sift(list.data(), n, [&](std::uint16_t k) {
-          const auto [p, t] = sub(k);
-          return !off_plane(p, t);
-        });
+        n = sift_vertex_face(
+            list.data(), n, [&](std::uint16_t k) -> const Vec3& { return narrow::at(x, orphan_vf_[i + k][0]); },
+            [&](std::uint16_t k) -> const PackedFace& {
+              return packed_[static_cast<std::size_t>(orphan_vf_[i + k][1])];
+            });
         for (std::size_t s = 0; s < n; ++s) {
           const auto [v, g] = orphan_vf_[i + list[s]];
           vf_kernel(narrow::at(x, v), v, packed_[static_cast<std::size_t>(g)], g, local);
@@ -543,12 +543,20 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     // 3. Isolated vertices against every face.
     parallel_for_chunks(isolated_.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
       LocalContacts local{spare_sets_.take()};
+      std::array<std::uint16_t, kBlock> list;
       for (std::size_t i = begin; i < end; ++i) {
         const Index v = isolated_[i];
-        for (Index g = 0; g < static_cast<Index>(nf); ++g) {
-          const Vec3& p = narrow::at(x, v);
-          const PackedFace& t = packed_[static_cast<std::size_t>(g)];
-          if (in_box(p, t) && !off_plane(p, t)) vf_kernel(p, v, t, g, local);
+        const Vec3& p = narrow::at(x, v);
+        for (std::size_t g0 = 0; g0 < nf; g0 += kBlock) {
+          std::size_t n = std::min(kBlock, nf - g0);
+          iota(list, n);
+          n = sift_vertex_face(
+              list.data(), n, [&](std::uint16_t) -> const Vec3& { return p; },
+              [&](std::uint16_t k) -> const PackedFace& { return packed_[g0 + k]; });
+          for (std::size_t s = 0; s < n; ++s) {
+            const std::size_t g = g0 + list[s];
+            vf_kernel(p, v, packed_[g], static_cast<Index>(g), local);
+          }
         }
       }
       merge(local);
@@ -566,14 +574,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           return std::array<const Vec3*, 4>{&narrow::at(x, o.a[0]), &narrow::at(x, o.a[1]), &narrow::at(x, o.b[0]),
                                             &narrow::at(x, o.b[1])};
         };
-        n = sift(list.data(), n, [&](std::uint16_t k) {
-          const auto p = ends(k);
-          return boxes_meet(*p[0], *p[1], *p[2], *p[3]);
-        });
-        n = sift(list.data(), n, [&](std::uint16_t k) {
-          const auto p = ends(k);
-          return !off_line(*p[0], *p[1], *p[2], *p[3]);
-        });
+        n = sift_edge_edge(list.data(), n, ends);
         for (std::size_t s = 0; s < n; ++s) {
           const OrphanEdges& o = orphan_ee_[i + list[s]];
           const auto p = ends(list[s]);
