@@ -199,6 +199,64 @@ TEST(ExactDetectors, CrumplingLatticeSequenceAllSpecsAndThreads) {
   EXPECT_GT(total, 1000u) << "the crumpling lattices should produce contacts";
 }
 
+// The orphan blocks are skipped while their vertices have not moved, relative to one another,
+// by enough to close a block's margin since the last refresh (temporal coherence). A lattice is
+// carried rigidly (blocks asleep), then folded shut along a grid line in small steps: the orphan
+// pairs across the crease come within h one after another and must be found on the frame they
+// do, by every detector and thread count.
+TEST(ExactDetectors, OrphanBlocksSleepOnlyWhileTheyCannotTouch) {
+  const TriMesh lattice = shapes::lattice(16, 16);
+  const Positions& flat = lattice.positions();
+  std::vector<Positions> frames;
+  for (int k = 0; k < 6; ++k) {  // rigid: rotation about z and translation
+    const double a = 0.002 * k;
+    Positions x(flat.size());
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      const Vec3& p = flat[i];
+      x[i] = Vec3(std::cos(a) * p.x() - std::sin(a) * p.y(), std::sin(a) * p.x() + std::cos(a) * p.y(), p.z()) +
+             k * Vec3(5, -3, 2);
+    }
+    frames.push_back(std::move(x));
+  }
+  const Vec3 shift = 5 * Vec3(5, -3, 2);
+  for (int k = 1; k <= 36; ++k) {  // folded about x = 0.5 (lattice frame), up to 175 degrees
+    const double phi = std::numbers::pi * 175.0 / 180.0 * k / 36;
+    Positions x(flat.size());
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      const Vec3& p = flat[i];
+      const Vec3 q = p.x() > 0.5 ? Vec3(0.5 + (p.x() - 0.5) * std::cos(phi), p.y(), (p.x() - 0.5) * std::sin(phi)) : p;
+      const double a = 0.01;
+      x[i] = Vec3(std::cos(a) * q.x() - std::sin(a) * q.y(), std::sin(a) * q.x() + std::cos(a) * q.y(), q.z()) + shift;
+    }
+    frames.push_back(std::move(x));
+  }
+  const Scalar h = 0.02;
+  const std::size_t n = expect_sequence_exact(lattice, frames, h, default_specs(), ContactKinds::parse("vf,ee,tt"), {1, 2});
+  if (HasFatalFailure()) return;
+  EXPECT_GT(n, 1000u);
+
+  // The skipping did happen, and contacts between orphans (a vertex against a face next to one of
+  // its own faces) were found while it did.
+  auto d = make("kdop", h, ContactKinds::parse("vf,ee"), 1);
+  d->set_topology(lattice.topology_ptr());
+  const Topology& topo = lattice.topology();
+  std::size_t asleep_frames = 0, orphan_contacts = 0;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    ContactSet got;
+    d->update(frames[i], got);
+    if (d->stats().get("orphan_blocks_tested") < d->stats().get("orphan_blocks")) ++asleep_frames;
+    for (const auto& c : got.vf) {
+      bool orphan = false;
+      for (Index f : topo.vertex_faces()[c.vertex]) {
+        for (Index w : topo.face(f)) orphan |= topo.face_has_vertex(c.face, w);
+      }
+      orphan_contacts += orphan ? 1u : 0u;
+    }
+  }
+  EXPECT_GE(asleep_frames, 5u) << "the blocks should sleep while the lattice moves rigidly";
+  EXPECT_GT(orphan_contacts, 0u) << "the fold should bring orphan pairs within h";
+}
+
 TEST(ExactDetectors, KdopRebuildsWhenQualityDegrades) {
   const TriMesh lattice = shapes::lattice(24, 24);
   const auto frames = blend(lattice.positions(), testing::crumple_lattice(lattice, 0.3, 5), 4);

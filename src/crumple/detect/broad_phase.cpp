@@ -7,6 +7,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <string>
 #include <vector>
@@ -207,6 +208,34 @@ void ExactDetector::on_topology() {
       }
     }
   }
+  // Orphan blocks and the vertices each uses.
+  const auto cut = [](OrphanBlocks& blocks, std::size_t items, const auto& verts_of) {
+    const std::size_t count = (items + kOrphanBlock - 1) / kOrphanBlock;
+    blocks.begin.assign(1, 0);
+    blocks.verts.clear();
+    for (std::size_t b = 0; b < count; ++b) {
+      const std::size_t first = blocks.verts.size();
+      for (std::size_t i = b * kOrphanBlock; i < std::min(items, (b + 1) * kOrphanBlock); ++i) {
+        for (const Index v : verts_of(i)) blocks.verts.push_back(v);
+      }
+      std::sort(blocks.verts.begin() + static_cast<std::ptrdiff_t>(first), blocks.verts.end());
+      blocks.verts.erase(std::unique(blocks.verts.begin() + static_cast<std::ptrdiff_t>(first), blocks.verts.end()),
+                         blocks.verts.end());
+      blocks.begin.push_back(blocks.verts.size());
+    }
+    blocks.bound.assign(count, 0);
+    blocks.awake.assign(count, 1);
+  };
+  cut(vf_blocks_, orphan_vf_.size(), [&](std::size_t i) {
+    const auto [v, g] = orphan_vf_[i];
+    const Face& t = topo.face(g);
+    return std::array<Index, 4>{v, t[0], t[1], t[2]};
+  });
+  cut(ee_blocks_, orphan_ee_.size(), [&](std::size_t i) {
+    const OrphanEdges& o = orphan_ee_[i];
+    return std::array<Index, 4>{o.a[0], o.a[1], o.b[0], o.b[1]};
+  });
+  orphan_ref_.clear();
   packed_.assign(static_cast<std::size_t>(nf), PackedFace{});
   for (Index f = 0; f < nf; ++f) {
     PackedFace& pf = packed_[static_cast<std::size_t>(f)];
@@ -285,6 +314,80 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
   } else {
     stats_.set("overflow", 0);
   }
+}
+
+bool ExactDetector::wake_orphan_blocks(PositionsView x, Scalar pad, int threads) {
+  const auto wake_all = [&] {
+    for (OrphanBlocks* set : {&vf_blocks_, &ee_blocks_}) set->awake.assign(set->size(), 1);
+  };
+  if (orphan_ref_.size() != x.size()) {  // first frame (or new topology): refresh
+    wake_all();
+    orphan_refreshed_ = true;
+    orphan_backoff_ = orphan_wait_ = 0;
+    return true;
+  }
+  if (orphan_wait_ > 0) {  // backing off: every block, no bounds
+    --orphan_wait_;
+    wake_all();
+    return false;
+  }
+  std::mutex mutex;
+  std::size_t woken = 0, blocks = 0;
+  // Every 16th block first: when most of those are woken by the motion, the frame is stale
+  // without looking at the others.
+  for (const std::size_t stride : {std::size_t(16), std::size_t(1)}) {
+  woken = blocks = 0;
+  for (OrphanBlocks* set : {&vf_blocks_, &ee_blocks_}) {
+    OrphanBlocks& bl = *set;
+    blocks += (bl.size() + stride - 1) / stride;
+    parallel_for_chunks((bl.size() + stride - 1) / stride, threads, 256, [&](std::size_t begin, std::size_t end) {
+      std::size_t local = 0;
+      for (std::size_t b = begin * stride; b < end * stride && b < bl.size(); b += stride) {
+        // Translated so that the block's first vertex stays put (distances do not change),
+        // every vertex has moved by at most `moved`, so every point of its features too, and
+        // no distance has dropped by more than twice that. Rounding: the differences are
+        // local (the block's extent), their error a few ulps of it.
+        const Index* v = bl.verts.data() + bl.begin[b];
+        const Index* v_end = bl.verts.data() + bl.begin[b + 1];
+        const Vec3 c = x[static_cast<std::size_t>(*v)], c_ref = orphan_ref_[static_cast<std::size_t>(*v)];
+        Scalar moved2 = 0, extent2 = 0;
+        for (; v != v_end; ++v) {
+          const Vec3 now = x[static_cast<std::size_t>(*v)] - c;
+          const Vec3 then = orphan_ref_[static_cast<std::size_t>(*v)] - c_ref;
+          moved2 = std::max(moved2, (now - then).squaredNorm());
+          extent2 = std::max({extent2, now.squaredNorm(), then.squaredNorm()});
+        }
+        const Scalar moved = std::sqrt(moved2) * (1 + 1e-12) + 1e-12 * std::sqrt(extent2);
+        // Awake unless provably beyond pad (NaN: awake).
+        const bool awake = !(bl.bound[b] - 2 * moved > pad);
+        bl.awake[b] = awake ? 1 : 0;
+        local += awake & (bl.bound[b] > pad);
+      }
+      const std::lock_guard lock(mutex);
+      woken += local;
+    });
+  }
+  if (2 * woken > blocks) break;
+  }
+  // Blocks that hold a pair within pad are awake whatever the motion; when the motion wakes more
+  // than a quarter of the others, the bounds are stale: refresh, unless the previous frame was
+  // a refresh already (the motion per frame is then too large for the bounds to pay): wait 1,
+  // 2, 4, ... 64 frames, testing every block, before trying again.
+  const bool stale = 4 * woken > blocks;
+  if (!stale) {
+    if (orphan_refreshed_) orphan_backoff_ = 0;
+    orphan_refreshed_ = false;
+    return false;
+  }
+  wake_all();
+  if (orphan_refreshed_) {
+    orphan_backoff_ = std::min(64, std::max(1, 2 * orphan_backoff_));
+    orphan_wait_ = orphan_backoff_;
+    orphan_refreshed_ = false;
+    return false;
+  }
+  orphan_refreshed_ = true;
+  return true;
 }
 
 void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuffer& candidates,
@@ -519,14 +622,29 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     merge(local);
   });
 
-  // 2. Orphan sub-pairs of faces that share a vertex.
+  // 2. Orphan sub-pairs of faces that share a vertex, by blocks: those woken by the motion since
+  // the last refresh, or all of them on a refresh, which then also bounds each block's distances
+  // from below. A bound: the box gap when it exceeds 2 pad, else the kernel's distance less the
+  // pad's rounding margin (pad - h, which covers the kernel's rounding at either frame).
   const auto orphans_start = std::chrono::steady_clock::now();
+  const bool refresh = wake_orphan_blocks(x, pad, threads);
+  const Scalar kernel_margin = pad - h;
+  const auto gap_or_distance = [&](Scalar gap, const auto& sqr_distance) {
+    gap *= 1 - 1e-12;
+    return gap > 2 * pad ? gap : std::sqrt(sqr_distance()) * (1 - 1e-12) - kernel_margin;
+  };
+  std::size_t tested_blocks = 0;
   if (kinds.vf) {
-    parallel_for_chunks(orphan_vf_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+    parallel_for_chunks(vf_blocks_.size(), threads, 64, [&](std::size_t begin, std::size_t end) {
       LocalContacts local{spare_sets_.take()};
       std::array<std::uint16_t, kBlock> list;
-      for (std::size_t i = begin; i < end; i += kBlock) {
-        std::size_t n = std::min(kBlock, end - i);
+      std::size_t tested = 0;
+      for (std::size_t b = begin; b < end; ++b) {
+        if (!vf_blocks_.awake[b]) continue;
+        ++tested;
+        const std::size_t i = b * kOrphanBlock;
+        std::size_t n = std::min(kOrphanBlock, orphan_vf_.size() - i);
+        const std::size_t items = n;
         iota(list, n);
         n = sift_vertex_face(
             list.data(), n, [&](std::uint16_t k) -> const Vec3& { return narrow::at(x, orphan_vf_[i + k][0]); },
@@ -537,8 +655,22 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           const auto [v, g] = orphan_vf_[i + list[s]];
           vf_kernel(narrow::at(x, v), v, packed_[static_cast<std::size_t>(g)], g, local);
         }
+        if (!refresh) continue;
+        Scalar bound = std::numeric_limits<Scalar>::infinity();
+        for (std::size_t k = i; k < i + items; ++k) {
+          const Vec3& p = narrow::at(x, orphan_vf_[k][0]);
+          const auto& t = packed_[static_cast<std::size_t>(orphan_vf_[k][1])].p;
+          Scalar gap = -std::numeric_limits<Scalar>::infinity();
+          for (int a = 0; a < 3; ++a) {
+            gap = std::max({gap, std::min({t[0][a], t[1][a], t[2][a]}) - p[a], p[a] - std::max({t[0][a], t[1][a], t[2][a]})});
+          }
+          bound = std::min(bound, gap_or_distance(gap, [&] { return geometry::point_triangle(p, t[0], t[1], t[2]).sqr_distance; }));
+        }
+        vf_blocks_.bound[b] = bound;
       }
       merge(local);
+      const std::lock_guard lock(mutex);
+      tested_blocks += tested;
     });
     // 3. Isolated vertices against every face.
     parallel_for_chunks(isolated_.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
@@ -563,13 +695,18 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     });
   }
   if (kinds.ee) {
-    parallel_for_chunks(orphan_ee_.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+    parallel_for_chunks(ee_blocks_.size(), threads, 64, [&](std::size_t begin, std::size_t end) {
       LocalContacts local{spare_sets_.take()};
       std::array<std::uint16_t, kBlock> list;
-      for (std::size_t i = begin; i < end; i += kBlock) {
-        std::size_t n = std::min(kBlock, end - i);
+      std::size_t tested = 0;
+      for (std::size_t b = begin; b < end; ++b) {
+        if (!ee_blocks_.awake[b]) continue;
+        ++tested;
+        const std::size_t i = b * kOrphanBlock;
+        std::size_t n = std::min(kOrphanBlock, orphan_ee_.size() - i);
+        const std::size_t items = n;
         iota(list, n);
-        const auto ends = [&](std::uint16_t k) {
+        const auto ends = [&](std::size_t k) {
           const OrphanEdges& o = orphan_ee_[i + k];
           return std::array<const Vec3*, 4>{&narrow::at(x, o.a[0]), &narrow::at(x, o.a[1]), &narrow::at(x, o.b[0]),
                                             &narrow::at(x, o.b[1])};
@@ -580,11 +717,32 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           const auto p = ends(list[s]);
           ee_kernel(*p[0], *p[1], o.a[0], o.a[1], o.e[0], *p[2], *p[3], o.b[0], o.b[1], o.e[1], local);
         }
+        if (!refresh) continue;
+        Scalar bound = std::numeric_limits<Scalar>::infinity();
+        for (std::size_t k = 0; k < items; ++k) {
+          const auto p = ends(k);
+          Scalar gap = -std::numeric_limits<Scalar>::infinity();
+          for (int a = 0; a < 3; ++a) {
+            const auto [lo0, hi0] = std::minmax((*p[0])[a], (*p[1])[a]);
+            const auto [lo1, hi1] = std::minmax((*p[2])[a], (*p[3])[a]);
+            gap = std::max({gap, lo1 - hi0, lo0 - hi1});
+          }
+          bound = std::min(bound, gap_or_distance(gap, [&] {
+            return geometry::segment_segment(*p[0], *p[1], *p[2], *p[3]).sqr_distance;
+          }));
+        }
+        ee_blocks_.bound[b] = bound;
       }
       merge(local);
+      const std::lock_guard lock(mutex);
+      tested_blocks += tested;
     });
   }
+  if (refresh) orphan_ref_.assign(x.begin(), x.end());
   stats_.set("orphan_ms", ms_since(orphans_start));
+  stats_.set("orphan_blocks", static_cast<double>(vf_blocks_.size() + ee_blocks_.size()));
+  stats_.set("orphan_blocks_tested", static_cast<double>(tested_blocks));
+  stats_.set("orphan_refresh", refresh ? 1 : 0);
   stats_.set("narrow_ms", ms_since(narrow_start));
 
   // The frame's set in canonical order (the base class then finds it sorted).

@@ -166,6 +166,9 @@ class ExactDetector : public Detector {
   void detect(PositionsView previous, PositionsView positions, ContactSet& out) final;
   void narrow_phase(PositionsView x, Scalar pad, const CandidateBuffer& candidates,
                     ContactSet& out);
+  /// Marks the orphan blocks to test this frame (all of them on a refresh); returns whether
+  /// this frame refreshes the blocks' bounds.
+  bool wake_orphan_blocks(PositionsView x, Scalar pad, int threads);
 
   ExactParams params_;
   bool overflowed_ = false;
@@ -178,6 +181,24 @@ class ExactDetector : public Detector {
     Edge a, b;
   };
   std::vector<OrphanEdges> orphan_ee_;
+  /// Temporal coherence of the orphans (docs/exact-detectors.md). Each orphan list is cut into
+  /// blocks of `kOrphanBlock` sub-pairs, each with the vertices its sub-pairs use and a lower
+  /// bound of their distances at the positions of the last refresh (`orphan_ref_`). A block
+  /// whose vertices have since moved, relative to its first one, by less than half its margin
+  /// over the padded thickness cannot hold a contact and is skipped.
+  static constexpr std::size_t kOrphanBlock = 64;
+  struct OrphanBlocks {
+    std::vector<std::size_t> begin;   ///< block b uses verts[begin[b], begin[b + 1])
+    std::vector<Index> verts;         ///< sorted, distinct, per block
+    std::vector<Scalar> bound;        ///< lower bound of the block's distances at orphan_ref_
+    std::vector<std::uint8_t> awake;  ///< tested this frame
+    std::size_t size() const { return bound.size(); }
+  };
+  OrphanBlocks vf_blocks_, ee_blocks_;
+  Positions orphan_ref_;  ///< positions of the last refresh; empty: none yet
+  bool orphan_refreshed_ = false;  ///< the previous frame was a refresh
+  int orphan_backoff_ = 0;         ///< frames to wait before the next refresh after one that did not pay
+  int orphan_wait_ = 0;            ///< frames left to wait (every block tested meanwhile)
   std::vector<Index> isolated_;                  ///< vertices used by no face
   std::vector<Index> edge_rank_;                 ///< each edge's rank in (first, second vertex) order
   Spares<ContactSet> spare_sets_;                ///< per-chunk contact sets, for reuse
