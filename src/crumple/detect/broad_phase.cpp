@@ -10,6 +10,7 @@
 #include <limits>
 #include <numeric>
 #include <string>
+#include <tuple>
 #include <vector>
 
 namespace crumple {
@@ -331,44 +332,47 @@ bool ExactDetector::wake_orphan_blocks(PositionsView x, Scalar pad, int threads)
     wake_all();
     return false;
   }
-  std::mutex mutex;
-  std::size_t woken = 0, blocks = 0;
+  // Marks every stride-th block; returns how many were woken by the motion, and how many looked at.
+  const auto check = [&](std::size_t stride) {
+    std::mutex mutex;
+    std::size_t woken = 0, blocks = 0;
+    for (OrphanBlocks* set : {&vf_blocks_, &ee_blocks_}) {
+      OrphanBlocks& bl = *set;
+      const std::size_t count = (bl.size() + stride - 1) / stride;
+      blocks += count;
+      parallel_for_chunks(count, threads, 256, [&](std::size_t begin, std::size_t end) {
+        std::size_t local = 0;
+        for (std::size_t b = begin * stride; b < std::min(end * stride, bl.size()); b += stride) {
+          // Translated so that the block's first vertex stays put (distances do not change),
+          // every vertex has moved by at most `moved`, so every point of its features too, and
+          // no distance has dropped by more than twice that. Rounding: the differences are
+          // local (the block's extent), their error a few ulps of it.
+          const Index* v = bl.verts.data() + bl.begin[b];
+          const Index* v_end = bl.verts.data() + bl.begin[b + 1];
+          const Vec3 c = x[static_cast<std::size_t>(*v)], c_ref = orphan_ref_[static_cast<std::size_t>(*v)];
+          Scalar moved2 = 0, extent2 = 0;
+          for (; v != v_end; ++v) {
+            const Vec3 now = x[static_cast<std::size_t>(*v)] - c;
+            const Vec3 then = orphan_ref_[static_cast<std::size_t>(*v)] - c_ref;
+            moved2 = std::max(moved2, (now - then).squaredNorm());
+            extent2 = std::max({extent2, now.squaredNorm(), then.squaredNorm()});
+          }
+          const Scalar moved = std::sqrt(moved2) * (1 + 1e-12) + 1e-12 * std::sqrt(extent2);
+          // Awake unless provably beyond pad (NaN: awake).
+          const bool awake = !(bl.bound[b] - 2 * moved > pad);
+          bl.awake[b] = awake ? 1 : 0;
+          local += awake & (bl.bound[b] > pad);
+        }
+        const std::lock_guard lock(mutex);
+        woken += local;
+      });
+    }
+    return std::pair{woken, blocks};
+  };
   // Every 16th block first: when most of those are woken by the motion, the frame is stale
   // without looking at the others.
-  for (const std::size_t stride : {std::size_t(16), std::size_t(1)}) {
-  woken = blocks = 0;
-  for (OrphanBlocks* set : {&vf_blocks_, &ee_blocks_}) {
-    OrphanBlocks& bl = *set;
-    blocks += (bl.size() + stride - 1) / stride;
-    parallel_for_chunks((bl.size() + stride - 1) / stride, threads, 256, [&](std::size_t begin, std::size_t end) {
-      std::size_t local = 0;
-      for (std::size_t b = begin * stride; b < end * stride && b < bl.size(); b += stride) {
-        // Translated so that the block's first vertex stays put (distances do not change),
-        // every vertex has moved by at most `moved`, so every point of its features too, and
-        // no distance has dropped by more than twice that. Rounding: the differences are
-        // local (the block's extent), their error a few ulps of it.
-        const Index* v = bl.verts.data() + bl.begin[b];
-        const Index* v_end = bl.verts.data() + bl.begin[b + 1];
-        const Vec3 c = x[static_cast<std::size_t>(*v)], c_ref = orphan_ref_[static_cast<std::size_t>(*v)];
-        Scalar moved2 = 0, extent2 = 0;
-        for (; v != v_end; ++v) {
-          const Vec3 now = x[static_cast<std::size_t>(*v)] - c;
-          const Vec3 then = orphan_ref_[static_cast<std::size_t>(*v)] - c_ref;
-          moved2 = std::max(moved2, (now - then).squaredNorm());
-          extent2 = std::max({extent2, now.squaredNorm(), then.squaredNorm()});
-        }
-        const Scalar moved = std::sqrt(moved2) * (1 + 1e-12) + 1e-12 * std::sqrt(extent2);
-        // Awake unless provably beyond pad (NaN: awake).
-        const bool awake = !(bl.bound[b] - 2 * moved > pad);
-        bl.awake[b] = awake ? 1 : 0;
-        local += awake & (bl.bound[b] > pad);
-      }
-      const std::lock_guard lock(mutex);
-      woken += local;
-    });
-  }
-  if (2 * woken > blocks) break;
-  }
+  auto [woken, blocks] = check(16);
+  if (2 * woken <= blocks) std::tie(woken, blocks) = check(1);
   // Blocks that hold a pair within pad are awake whatever the motion; when the motion wakes more
   // than a quarter of the others, the bounds are stale: refresh, unless the previous frame was
   // a refresh already (the motion per frame is then too large for the bounds to pay): wait 1,
@@ -627,7 +631,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   // from below. A bound: the box gap when it exceeds 2 pad, else the kernel's distance less the
   // pad's rounding margin (pad - h, which covers the kernel's rounding at either frame).
   const auto orphans_start = std::chrono::steady_clock::now();
-  const bool refresh = wake_orphan_blocks(x, pad, threads);
+  const bool refresh = (kinds.vf || kinds.ee) && wake_orphan_blocks(x, pad, threads);
   const Scalar kernel_margin = pad - h;
   const auto gap_or_distance = [&](Scalar gap, const auto& sqr_distance) {
     gap *= 1 - 1e-12;
