@@ -638,44 +638,53 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     return gap > 2 * pad ? gap : std::sqrt(sqr_distance()) * (1 - 1e-12) - kernel_margin;
   };
   std::size_t tested_blocks = 0;
-  if (kinds.vf) {
-    parallel_for_chunks(vf_blocks_.size(), threads, 64, [&](std::size_t begin, std::size_t end) {
+  // Runs test(i, n, local) on the sub-pairs [i, i + n) of each awake block of `blocks` (cut from a
+  // list of `items`) and, on a refresh, records each block's bound: the least lower_bound(k)
+  // over its sub-pairs.
+  const auto orphan_pass = [&](OrphanBlocks& blocks, std::size_t items, const auto& test, const auto& lower_bound) {
+    parallel_for_chunks(blocks.size(), threads, 64, [&](std::size_t begin, std::size_t end) {
       LocalContacts local{spare_sets_.take()};
-      std::array<std::uint16_t, kBlock> list;
       std::size_t tested = 0;
       for (std::size_t b = begin; b < end; ++b) {
-        if (!vf_blocks_.awake[b]) continue;
+        if (!blocks.awake[b]) continue;
         ++tested;
-        const std::size_t i = b * kOrphanBlock;
-        std::size_t n = std::min(kOrphanBlock, orphan_vf_.size() - i);
-        const std::size_t items = n;
-        iota(list, n);
-        n = sift_vertex_face(
-            list.data(), n, [&](std::uint16_t k) -> const Vec3& { return narrow::at(x, orphan_vf_[i + k][0]); },
-            [&](std::uint16_t k) -> const PackedFace& {
-              return packed_[static_cast<std::size_t>(orphan_vf_[i + k][1])];
-            });
-        for (std::size_t s = 0; s < n; ++s) {
-          const auto [v, g] = orphan_vf_[i + list[s]];
-          vf_kernel(narrow::at(x, v), v, packed_[static_cast<std::size_t>(g)], g, local);
-        }
+        const std::size_t i = b * kOrphanBlock, n = std::min(kOrphanBlock, items - i);
+        test(i, n, local);
         if (!refresh) continue;
         Scalar bound = std::numeric_limits<Scalar>::infinity();
-        for (std::size_t k = i; k < i + items; ++k) {
+        for (std::size_t k = i; k < i + n; ++k) bound = std::min(bound, lower_bound(k));
+        blocks.bound[b] = bound;
+      }
+      merge(local);
+      const std::lock_guard lock(mutex);
+      tested_blocks += tested;
+    });
+  };
+  if (kinds.vf) {
+    orphan_pass(
+        vf_blocks_, orphan_vf_.size(),
+        [&](std::size_t i, std::size_t n, LocalContacts& local) {
+          std::array<std::uint16_t, kBlock> list;
+          iota(list, n);
+          n = sift_vertex_face(
+              list.data(), n, [&](std::uint16_t k) -> const Vec3& { return narrow::at(x, orphan_vf_[i + k][0]); },
+              [&](std::uint16_t k) -> const PackedFace& {
+                return packed_[static_cast<std::size_t>(orphan_vf_[i + k][1])];
+              });
+          for (std::size_t s = 0; s < n; ++s) {
+            const auto [v, g] = orphan_vf_[i + list[s]];
+            vf_kernel(narrow::at(x, v), v, packed_[static_cast<std::size_t>(g)], g, local);
+          }
+        },
+        [&](std::size_t k) {
           const Vec3& p = narrow::at(x, orphan_vf_[k][0]);
           const auto& t = packed_[static_cast<std::size_t>(orphan_vf_[k][1])].p;
           Scalar gap = -std::numeric_limits<Scalar>::infinity();
           for (int a = 0; a < 3; ++a) {
             gap = std::max({gap, std::min({t[0][a], t[1][a], t[2][a]}) - p[a], p[a] - std::max({t[0][a], t[1][a], t[2][a]})});
           }
-          bound = std::min(bound, gap_or_distance(gap, [&] { return geometry::point_triangle(p, t[0], t[1], t[2]).sqr_distance; }));
-        }
-        vf_blocks_.bound[b] = bound;
-      }
-      merge(local);
-      const std::lock_guard lock(mutex);
-      tested_blocks += tested;
-    });
+          return gap_or_distance(gap, [&] { return geometry::point_triangle(p, t[0], t[1], t[2]).sqr_distance; });
+        });
     // 3. Isolated vertices against every face.
     parallel_for_chunks(isolated_.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
       LocalContacts local{spare_sets_.take()};
@@ -699,31 +708,25 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     });
   }
   if (kinds.ee) {
-    parallel_for_chunks(ee_blocks_.size(), threads, 64, [&](std::size_t begin, std::size_t end) {
-      LocalContacts local{spare_sets_.take()};
-      std::array<std::uint16_t, kBlock> list;
-      std::size_t tested = 0;
-      for (std::size_t b = begin; b < end; ++b) {
-        if (!ee_blocks_.awake[b]) continue;
-        ++tested;
-        const std::size_t i = b * kOrphanBlock;
-        std::size_t n = std::min(kOrphanBlock, orphan_ee_.size() - i);
-        const std::size_t items = n;
-        iota(list, n);
-        const auto ends = [&](std::size_t k) {
-          const OrphanEdges& o = orphan_ee_[i + k];
-          return std::array<const Vec3*, 4>{&narrow::at(x, o.a[0]), &narrow::at(x, o.a[1]), &narrow::at(x, o.b[0]),
-                                            &narrow::at(x, o.b[1])};
-        };
-        n = sift_edge_edge(list.data(), n, ends);
-        for (std::size_t s = 0; s < n; ++s) {
-          const OrphanEdges& o = orphan_ee_[i + list[s]];
-          const auto p = ends(list[s]);
-          ee_kernel(*p[0], *p[1], o.a[0], o.a[1], o.e[0], *p[2], *p[3], o.b[0], o.b[1], o.e[1], local);
-        }
-        if (!refresh) continue;
-        Scalar bound = std::numeric_limits<Scalar>::infinity();
-        for (std::size_t k = 0; k < items; ++k) {
+    // The four ends of orphan edge pair k.
+    const auto ends = [&](std::size_t k) {
+      const OrphanEdges& o = orphan_ee_[k];
+      return std::array<const Vec3*, 4>{&narrow::at(x, o.a[0]), &narrow::at(x, o.a[1]), &narrow::at(x, o.b[0]),
+                                        &narrow::at(x, o.b[1])};
+    };
+    orphan_pass(
+        ee_blocks_, orphan_ee_.size(),
+        [&](std::size_t i, std::size_t n, LocalContacts& local) {
+          std::array<std::uint16_t, kBlock> list;
+          iota(list, n);
+          n = sift_edge_edge(list.data(), n, [&](std::uint16_t code) { return ends(i + code); });
+          for (std::size_t s = 0; s < n; ++s) {
+            const OrphanEdges& o = orphan_ee_[i + list[s]];
+            const auto p = ends(i + list[s]);
+            ee_kernel(*p[0], *p[1], o.a[0], o.a[1], o.e[0], *p[2], *p[3], o.b[0], o.b[1], o.e[1], local);
+          }
+        },
+        [&](std::size_t k) {
           const auto p = ends(k);
           Scalar gap = -std::numeric_limits<Scalar>::infinity();
           for (int a = 0; a < 3; ++a) {
@@ -731,16 +734,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
             const auto [lo1, hi1] = std::minmax((*p[2])[a], (*p[3])[a]);
             gap = std::max({gap, lo1 - hi0, lo0 - hi1});
           }
-          bound = std::min(bound, gap_or_distance(gap, [&] {
-            return geometry::segment_segment(*p[0], *p[1], *p[2], *p[3]).sqr_distance;
-          }));
-        }
-        ee_blocks_.bound[b] = bound;
-      }
-      merge(local);
-      const std::lock_guard lock(mutex);
-      tested_blocks += tested;
-    });
+          return gap_or_distance(gap, [&] { return geometry::segment_segment(*p[0], *p[1], *p[2], *p[3]).sqr_distance; });
+        });
   }
   if (refresh) orphan_ref_.assign(x.begin(), x.end());
   stats_.set("orphan_ms", ms_since(orphans_start));
