@@ -257,6 +257,64 @@ TEST(ExactDetectors, OrphanBlocksSleepOnlyWhileTheyCannotTouch) {
   EXPECT_GT(orphan_contacts, 0u) << "the fold should bring orphan pairs within h";
 }
 
+// Two triangles sharing only vertex w: every sub-pair between them is an orphan, in one block
+// of each kind. A static lattice far off adds blocks that sleep, so that the frame does not
+// count as stale (which would test every block); it is coarse, so that its sub-pairs, which
+// share blocks with the triangles', are far apart. On frame 0 (a refresh) the nearest orphan pair
+// of the triangles is 4h apart; on the next frame, b1 and b2 move 3.5h towards A (w, a1, a2
+// stay), down to 0.5h. The vertex-face block's bound is then beaten by twice the motion and it
+// must be tested: a bound overestimated even threefold would let it sleep through the contacts.
+// One scene per way a refresh bounds a pair: the pair's box gap (b1 above a level A), its plane
+// distance (the same, tilted: b1 is inside A's box) and the kernel's distance (b1 level with A,
+// beside its edge w-a1, inside its box). A smaller step (4h -> 3h) leaves every block provably
+// apart, and asleep.
+TEST(ExactDetectors, OrphanBoundsHoldAtEveryKindOfRejection) {
+  const Scalar h = 0.01;
+  const Vec3 beside = Vec3(1, -1, 0).normalized();
+  const Eigen::Matrix3d tilt = Eigen::AngleAxisd(std::numbers::pi / 6, Vec3::UnitX()).toRotationMatrix();
+  struct Scene {
+    std::string name;
+    Positions base;  // w, a1, a2, b1, b2 with b1 and b2 at their nearest to A
+    Vec3 away;       // the direction in which b1 and b2 are moved away from there
+    Eigen::Matrix3d frame;
+  };
+  const std::vector<Scene> scenes{
+      {"box gap", {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0.3, 0.3, 0), Vec3(0.5, 0.2, 0)}, Vec3::UnitZ(),
+       Eigen::Matrix3d::Identity()},
+      {"plane distance", {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0.3, 0.3, 0), Vec3(0.5, 0.2, 0)},
+       Vec3::UnitZ(), tilt},
+      {"kernel distance", {Vec3(0, 0, 0), Vec3(1, 1, 0), Vec3(-1, 1, 0), Vec3(0.5, 0.5, 0), Vec3(1, -0.5, 0)}, beside,
+       Eigen::Matrix3d::Identity()},
+  };
+  const TriMesh far = shapes::lattice(12, 12, 100, 100);
+  for (const Scene& scene : scenes) {
+    SCOPED_TRACE(scene.name);
+    const auto at = [&](Scalar d) {
+      Positions x = scene.base;
+      for (std::size_t i : {3u, 4u}) x[i] += d * scene.away;
+      for (Vec3& p : x) p = scene.frame * p;
+      for (const Vec3& p : far.positions()) x.push_back(p + Vec3(200, 0, 0));
+      return x;
+    };
+    std::vector<Face> faces{{0, 1, 2}, {0, 3, 4}};
+    for (Face f : far.topology().faces()) faces.push_back({f[0] + 5, f[1] + 5, f[2] + 5});
+    const TriMesh mesh = TriMesh::create(at(0), faces);
+    const std::vector<Positions> closing{at(4 * h), at(0.5 * h)};
+    const std::size_t n = expect_sequence_exact(mesh, closing, h, default_specs(), ContactKinds::parse("vf,ee"), {1, 2});
+    if (HasFatalFailure()) return;
+    EXPECT_GT(n, 0u) << "b1 should touch A on the second frame";
+
+    auto d = make("kdop", h, ContactKinds::parse("vf,ee"), 1);
+    d->set_topology(mesh.topology_ptr());
+    ContactSet got;
+    d->update(at(4 * h), got);
+    ASSERT_GT(d->stats().get("orphan_blocks"), 8);
+    d->update(at(4 * h), at(3 * h), got);
+    EXPECT_TRUE(got.empty());
+    EXPECT_EQ(d->stats().get("orphan_blocks_tested"), 0) << "4h apart and 2h of closing: every block can sleep";
+  }
+}
+
 TEST(ExactDetectors, KdopRebuildsWhenQualityDegrades) {
   const TriMesh lattice = shapes::lattice(24, 24);
   const auto frames = blend(lattice.positions(), testing::crumple_lattice(lattice, 0.3, 5), 4);

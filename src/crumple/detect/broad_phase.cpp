@@ -426,35 +426,45 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     ee_tests += local.ee_tests;
     tt_tests += local.tt_tests;
   };
-  // |wn| / |n| > pad with a margin for the rounding of wn (|wn| <= sqrt(scale)): the distance
-  // to a plane or between two lines exceeds pad. Branch-free: it sifts lists of sub-pairs of
-  // which an unpredictable part is rejected (see `sift`).
-  const auto beyond = [pad](Scalar wn, const Vec3& n, Scalar scale) {
-    const Scalar nn = n.squaredNorm();
-    return ((wn * wn > pad * pad * nn) & (std::abs(wn) > pad * std::sqrt(nn) + 1e-13 * std::sqrt(scale))) != 0;
+  // The distance of a point to a plane, or between two lines, is |wn| / |n| for n the plane's
+  // (the lines') normal and w a vector joining them; |wn| <= sqrt(scale).
+  struct Separation {
+    Scalar wn;
+    Vec3 n;
+    Scalar scale;
   };
-  // Plane rejection of vertex p against face t: dist(p, triangle) >= dist(p, plane) =
-  // |(p - a) . n| / |n|. Rejected only beyond pad plus a bound on the rounding of the dot
-  // product (degenerate n: never).
-  const auto off_plane = [&](const Vec3& p, const PackedFace& t) {
+  // |wn| / |n| > pad with a margin for the rounding of wn. Branch-free: it sifts lists of
+  // sub-pairs of which an unpredictable part is rejected (see `sift`).
+  const auto beyond = [pad](const Separation& s) {
+    const Scalar nn = s.n.squaredNorm();
+    return ((s.wn * s.wn > pad * pad * nn) & (std::abs(s.wn) > pad * std::sqrt(nn) + 1e-13 * std::sqrt(s.scale))) != 0;
+  };
+  // A lower bound of |wn| / |n| with the same margin (degenerate n: -inf).
+  const auto separation_bound = [](const Separation& s) {
+    const Scalar nn = s.n.squaredNorm();
+    return nn > 0 ? (std::abs(s.wn) - 1e-13 * std::sqrt(s.scale)) / std::sqrt(nn) * (1 - 1e-12)
+                  : -std::numeric_limits<Scalar>::infinity();
+  };
+  // Vertex p against the plane of face t: dist(p, triangle) >= dist(p, plane) = |(p - a) . n| /
+  // |n| (degenerate n: never rejected).
+  const auto plane = [](const Vec3& p, const PackedFace& t) {
     const Vec3& a = t.p[0];
     const Vec3 e1 = t.p[1] - a, e2 = t.p[2] - a, w = p - a;
     const Vec3 n = e1.cross(e2);
-    return beyond(w.dot(n), n, w.squaredNorm() * e1.squaredNorm() * e2.squaredNorm());
+    return Separation{w.dot(n), n, w.squaredNorm() * e1.squaredNorm() * e2.squaredNorm()};
   };
-  // Line rejection: dist(segments) >= dist(lines) = |w . (d0 x d1)| / |d0 x d1|, with the same
-  // rounding guard (parallel edges: never rejected here).
-  const auto off_line = [&](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
+  // dist(segments) >= dist(lines) = |w . (d0 x d1)| / |d0 x d1| (parallel edges: never rejected).
+  const auto line = [](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
     const Vec3 d0 = p1 - p0, d1 = q1 - q0, w = q0 - p0;
     const Vec3 n = d0.cross(d1);
-    return beyond(w.dot(n), n, w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm());
+    return Separation{w.dot(n), n, w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm()};
   };
   // Vertex v at p against face g, past the cheap rejections: the shared kernel (not inlined:
-  // reached by a minority of the sub-pairs).
-  const auto vf_kernel = [&](const Vec3& p, Index v, const PackedFace& t, Index g,
-                             LocalContacts& local) __attribute__((noinline)) {
+  // reached by a minority of the sub-pairs). The squared distance goes to *sqr_distance if given.
+  const auto vf_kernel = [&](const Vec3& p, Index v, const PackedFace& t, Index g, LocalContacts& local,
+                             Scalar* sqr_distance = nullptr) __attribute__((noinline)) {
     ++local.vf_tests;
-    if (auto c = narrow::vertex_face(v, p, g, t.p[0], t.p[1], t.p[2], h2)) local.set.vf.push_back(*c);
+    if (auto c = narrow::vertex_face(v, p, g, t.p[0], t.p[1], t.p[2], h2, sqr_distance)) local.set.vf.push_back(*c);
   };
   // The box of face t padded by pad holds p (branch-free).
   const auto in_box = [pad](const Vec3& p, const PackedFace& t) {
@@ -469,8 +479,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   // Edge e0 = (p0, p1) of vertices (u0, u1) and edge e1 = (q0, q1) of vertices (w0, w1), each
   // in any order, past the cheap rejections: the shared kernel.
   const auto ee_kernel = [&](const Vec3& p0, const Vec3& p1, Index u0, Index u1, Index e0, const Vec3& q0,
-                             const Vec3& q1, Index w0, Index w1, Index e1,
-                             LocalContacts& local) __attribute__((noinline)) {
+                             const Vec3& q1, Index w0, Index w1, Index e1, LocalContacts& local,
+                             Scalar* sqr_distance = nullptr) __attribute__((noinline)) {
     ++local.ee_tests;
     // The shared kernel sees the edges as the mesh stores them (lower id first, each from its
     // lower vertex), as for every other detector: the same bits.
@@ -479,8 +489,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     const Vec3& a1 = u0 < u1 ? p1 : p0;
     const Vec3& b0 = w0 < w1 ? q0 : q1;
     const Vec3& b1 = w0 < w1 ? q1 : q0;
-    auto c = e0 < e1 ? narrow::edge_edge(e0, ea, a0, a1, e1, eb, b0, b1, h2)
-                     : narrow::edge_edge(e1, eb, b0, b1, e0, ea, a0, a1, h2);
+    auto c = e0 < e1 ? narrow::edge_edge(e0, ea, a0, a1, e1, eb, b0, b1, h2, sqr_distance)
+                     : narrow::edge_edge(e1, eb, b0, b1, e0, ea, a0, a1, h2, sqr_distance);
     if (c) local.set.ee.push_back(*c);
   };
   // The boxes of edges (p0, p1) and (q0, q1) padded by pad / 2 overlap (branch-free).
@@ -508,7 +518,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   // edge-edge ones, ends(code) pointers to the four ends (first edge, then second).
   const auto sift_vertex_face = [&](std::uint16_t* list, std::size_t n, const auto& point, const auto& face) {
     n = sift(list, n, [&](std::uint16_t code) { return in_box(point(code), face(code)); });
-    return sift(list, n, [&](std::uint16_t code) { return !off_plane(point(code), face(code)); });
+    return sift(list, n, [&](std::uint16_t code) { return !beyond(plane(point(code), face(code))); });
   };
   const auto sift_edge_edge = [&](std::uint16_t* list, std::size_t n, const auto& ends) {
     n = sift(list, n, [&](std::uint16_t code) {
@@ -517,7 +527,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     });
     return sift(list, n, [&](std::uint16_t code) {
       const auto p = ends(code);
-      return !off_line(*p[0], *p[1], *p[2], *p[3]);
+      return !beyond(line(*p[0], *p[1], *p[2], *p[3]));
     });
   };
   // Sub-pairs are taken in blocks: the block's sub-pairs are listed, then the rejections sift
@@ -628,20 +638,39 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
 
   // 2. Orphan sub-pairs of faces that share a vertex, by blocks: those woken by the motion since
   // the last refresh, or all of them on a refresh, which then also bounds each block's distances
-  // from below. A bound: the box gap when it exceeds 2 pad, else the kernel's distance less the
-  // pad's rounding margin (pad - h, which covers the kernel's rounding at either frame).
+  // from below with what its tests compute anyway (no extra kernel call): the box gap of the
+  // sub-pairs the box rejects, the plane (line) distance of those that the plane (line)
+  // rejects, and the kernel's distance, less the pad's rounding margin (pad - h, which covers
+  // the kernel's rounding at either frame), of the others.
   const auto orphans_start = std::chrono::steady_clock::now();
   const bool refresh = (kinds.vf || kinds.ee) && wake_orphan_blocks(x, pad, threads);
   const Scalar kernel_margin = pad - h;
-  const auto gap_or_distance = [&](Scalar gap, const auto& sqr_distance) {
-    gap *= 1 - 1e-12;
-    return gap > 2 * pad ? gap : std::sqrt(sqr_distance()) * (1 - 1e-12) - kernel_margin;
+  constexpr Scalar kInf = std::numeric_limits<Scalar>::infinity();
+  // NaN-sticky minimum: a NaN bound keeps its block awake.
+  const auto least = [](Scalar& bound, Scalar value) {
+    if (!(value >= bound)) bound = value;
   };
+  // Sifts list[0, n) by value(code) <= pad (a NaN is kept), lowering `bound` to the values of the
+  // codes dropped; returns the number kept.
+  const auto sift_bounded = [&](std::uint16_t* list, std::size_t n, const auto& value, Scalar& bound) {
+    std::size_t kept = 0;
+    for (std::size_t s = 0; s < n; ++s) {
+      const std::uint16_t code = list[s];
+      const Scalar v = value(code);
+      const bool keep = !(v > pad);
+      list[kept] = code;
+      kept += keep ? 1u : 0u;
+      bound = std::min(bound, keep ? kInf : v);
+    }
+    return kept;
+  };
+  // The kernel's distance, as a bound.
+  const auto kernel_bound = [&](Scalar sqr_distance) { return std::sqrt(sqr_distance) * (1 - 1e-12) - kernel_margin; };
   std::size_t tested_blocks = 0;
   // Runs test(i, n, local) on the sub-pairs [i, i + n) of each awake block of `blocks` (cut from a
-  // list of `items`) and, on a refresh, records each block's bound: the least lower_bound(k)
-  // over its sub-pairs.
-  const auto orphan_pass = [&](OrphanBlocks& blocks, std::size_t items, const auto& test, const auto& lower_bound) {
+  // list of `items`); on a refresh, refresh_test(i, n, local) instead, which returns the block's
+  // bound.
+  const auto orphan_pass = [&](OrphanBlocks& blocks, std::size_t items, const auto& test, const auto& refresh_test) {
     parallel_for_chunks(blocks.size(), threads, 64, [&](std::size_t begin, std::size_t end) {
       LocalContacts local{spare_sets_.take()};
       std::size_t tested = 0;
@@ -649,11 +678,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
         if (!blocks.awake[b]) continue;
         ++tested;
         const std::size_t i = b * kOrphanBlock, n = std::min(kOrphanBlock, items - i);
-        test(i, n, local);
-        if (!refresh) continue;
-        Scalar bound = std::numeric_limits<Scalar>::infinity();
-        for (std::size_t k = i; k < i + n; ++k) bound = std::min(bound, lower_bound(k));
-        blocks.bound[b] = bound;
+        if (refresh) {
+          blocks.bound[b] = refresh_test(i, n, local);
+        } else {
+          test(i, n, local);
+        }
       }
       merge(local);
       const std::lock_guard lock(mutex);
@@ -661,29 +690,50 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     });
   };
   if (kinds.vf) {
+    const auto point = [&](std::size_t k) -> const Vec3& { return narrow::at(x, orphan_vf_[k][0]); };
+    const auto face = [&](std::size_t k) -> const PackedFace& {
+      return packed_[static_cast<std::size_t>(orphan_vf_[k][1])];
+    };
+    const auto vf_test = [&](std::size_t k, LocalContacts& local, Scalar* sqr_distance = nullptr) {
+      const auto [v, g] = orphan_vf_[k];
+      vf_kernel(point(k), v, face(k), g, local, sqr_distance);
+    };
     orphan_pass(
         vf_blocks_, orphan_vf_.size(),
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
           std::array<std::uint16_t, kBlock> list;
           iota(list, n);
           n = sift_vertex_face(
-              list.data(), n, [&](std::uint16_t k) -> const Vec3& { return narrow::at(x, orphan_vf_[i + k][0]); },
-              [&](std::uint16_t k) -> const PackedFace& {
-                return packed_[static_cast<std::size_t>(orphan_vf_[i + k][1])];
-              });
-          for (std::size_t s = 0; s < n; ++s) {
-            const auto [v, g] = orphan_vf_[i + list[s]];
-            vf_kernel(narrow::at(x, v), v, packed_[static_cast<std::size_t>(g)], g, local);
-          }
+              list.data(), n, [&](std::uint16_t k) -> const Vec3& { return point(i + k); },
+              [&](std::uint16_t k) -> const PackedFace& { return face(i + k); });
+          for (std::size_t s = 0; s < n; ++s) vf_test(i + list[s], local);
         },
-        [&](std::size_t k) {
-          const Vec3& p = narrow::at(x, orphan_vf_[k][0]);
-          const auto& t = packed_[static_cast<std::size_t>(orphan_vf_[k][1])].p;
-          Scalar gap = -std::numeric_limits<Scalar>::infinity();
-          for (int a = 0; a < 3; ++a) {
-            gap = std::max({gap, std::min({t[0][a], t[1][a], t[2][a]}) - p[a], p[a] - std::max({t[0][a], t[1][a], t[2][a]})});
+        [&](std::size_t i, std::size_t n, LocalContacts& local) {
+          std::array<std::uint16_t, kBlock> list;
+          iota(list, n);
+          Scalar bound = kInf;
+          n = sift_bounded(
+              list.data(), n,
+              [&](std::uint16_t k) {
+                const Vec3& p = point(i + k);
+                const auto& t = face(i + k).p;
+                Scalar gap = -kInf;
+                for (int a = 0; a < 3; ++a) {
+                  gap = std::max({gap, std::min({t[0][a], t[1][a], t[2][a]}) - p[a],
+                                  p[a] - std::max({t[0][a], t[1][a], t[2][a]})});
+                }
+                return gap * (1 - 1e-12);
+              },
+              bound);
+          n = sift_bounded(
+              list.data(), n, [&](std::uint16_t k) { return separation_bound(plane(point(i + k), face(i + k))); },
+              bound);
+          for (std::size_t s = 0; s < n; ++s) {
+            Scalar sqr_distance = 0;
+            vf_test(i + list[s], local, &sqr_distance);
+            least(bound, kernel_bound(sqr_distance));
           }
-          return gap_or_distance(gap, [&] { return geometry::point_triangle(p, t[0], t[1], t[2]).sqr_distance; });
+          return bound;
         });
     // 3. Isolated vertices against every face.
     parallel_for_chunks(isolated_.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
@@ -714,27 +764,49 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
       return std::array<const Vec3*, 4>{&narrow::at(x, o.a[0]), &narrow::at(x, o.a[1]), &narrow::at(x, o.b[0]),
                                         &narrow::at(x, o.b[1])};
     };
+    const auto ee_test = [&](std::size_t k, LocalContacts& local, Scalar* sqr_distance = nullptr) {
+      const OrphanEdges& o = orphan_ee_[k];
+      const auto p = ends(k);
+      ee_kernel(*p[0], *p[1], o.a[0], o.a[1], o.e[0], *p[2], *p[3], o.b[0], o.b[1], o.e[1], local, sqr_distance);
+    };
     orphan_pass(
         ee_blocks_, orphan_ee_.size(),
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
           std::array<std::uint16_t, kBlock> list;
           iota(list, n);
           n = sift_edge_edge(list.data(), n, [&](std::uint16_t code) { return ends(i + code); });
-          for (std::size_t s = 0; s < n; ++s) {
-            const OrphanEdges& o = orphan_ee_[i + list[s]];
-            const auto p = ends(i + list[s]);
-            ee_kernel(*p[0], *p[1], o.a[0], o.a[1], o.e[0], *p[2], *p[3], o.b[0], o.b[1], o.e[1], local);
-          }
+          for (std::size_t s = 0; s < n; ++s) ee_test(i + list[s], local);
         },
-        [&](std::size_t k) {
-          const auto p = ends(k);
-          Scalar gap = -std::numeric_limits<Scalar>::infinity();
-          for (int a = 0; a < 3; ++a) {
-            const auto [lo0, hi0] = std::minmax((*p[0])[a], (*p[1])[a]);
-            const auto [lo1, hi1] = std::minmax((*p[2])[a], (*p[3])[a]);
-            gap = std::max({gap, lo1 - hi0, lo0 - hi1});
+        [&](std::size_t i, std::size_t n, LocalContacts& local) {
+          std::array<std::uint16_t, kBlock> list;
+          iota(list, n);
+          Scalar bound = kInf;
+          n = sift_bounded(
+              list.data(), n,
+              [&](std::uint16_t k) {
+                const auto p = ends(i + k);
+                Scalar gap = -kInf;
+                for (int a = 0; a < 3; ++a) {
+                  const auto [lo0, hi0] = std::minmax((*p[0])[a], (*p[1])[a]);
+                  const auto [lo1, hi1] = std::minmax((*p[2])[a], (*p[3])[a]);
+                  gap = std::max({gap, lo1 - hi0, lo0 - hi1});
+                }
+                return gap * (1 - 1e-12);
+              },
+              bound);
+          n = sift_bounded(
+              list.data(), n,
+              [&](std::uint16_t k) {
+                const auto p = ends(i + k);
+                return separation_bound(line(*p[0], *p[1], *p[2], *p[3]));
+              },
+              bound);
+          for (std::size_t s = 0; s < n; ++s) {
+            Scalar sqr_distance = 0;
+            ee_test(i + list[s], local, &sqr_distance);
+            least(bound, kernel_bound(sqr_distance));
           }
-          return gap_or_distance(gap, [&] { return geometry::segment_segment(*p[0], *p[1], *p[2], *p[3]).sqr_distance; });
+          return bound;
         });
   }
   if (refresh) orphan_ref_.assign(x.begin(), x.end());

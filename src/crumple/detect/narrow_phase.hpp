@@ -19,10 +19,12 @@ inline const Vec3& at(PositionsView x, Index i) { return x[static_cast<std::size
 
 /// Vertex v at p against face f with corners a, b, c in face order (v not a corner of f); a
 /// contact when the distance is < h (`sqr_thickness` = h^2). The normal points from the face to
-/// the vertex.
+/// the vertex. The squared distance, contact or not, goes to `*sqr_distance` when given.
 inline std::optional<VertexFaceContact> vertex_face(Index v, const Vec3& p, Index f, const Vec3& a,
-                                                    const Vec3& b, const Vec3& c, Scalar sqr_thickness) {
+                                                    const Vec3& b, const Vec3& c, Scalar sqr_thickness,
+                                                    Scalar* sqr_distance = nullptr) {
   const geometry::PointTriangleResult r = geometry::point_triangle(p, a, b, c);
+  if (sqr_distance != nullptr) *sqr_distance = r.sqr_distance;
   if (!(r.sqr_distance < sqr_thickness)) return std::nullopt;
   VertexFaceContact contact;
   contact.vertex = v;
@@ -51,11 +53,13 @@ inline std::optional<VertexFaceContact> vertex_face(PositionsView x, const Topol
 /// Edges e0 = ea and e1 = eb (sharing no vertex) at positions p0, p1 (of ea[0], ea[1]) and q0,
 /// q1 (of eb[0], eb[1]); a contact when the distance is < h. The contact is order-normalised (see
 /// `EdgeEdgeContact`). Callers pass e0 < e1, each edge as the mesh stores it, so that every
-/// detector evaluates a pair in the same order and gets the same bits.
+/// detector evaluates a pair in the same order and gets the same bits. The squared distance,
+/// contact or not, goes to `*sqr_distance` when given.
 inline std::optional<EdgeEdgeContact> edge_edge(Index e0, const Edge& ea, const Vec3& p0, const Vec3& p1,
                                                 Index e1, const Edge& eb, const Vec3& q0, const Vec3& q1,
-                                                Scalar sqr_thickness) {
+                                                Scalar sqr_thickness, Scalar* sqr_distance = nullptr) {
   const geometry::SegmentSegmentResult r = geometry::segment_segment(p0, p1, q0, q1);
+  if (sqr_distance != nullptr) *sqr_distance = r.sqr_distance;
   if (!(r.sqr_distance < sqr_thickness)) return std::nullopt;
   const Scalar distance = std::sqrt(r.sqr_distance);
   Vec3 normal;
