@@ -37,58 +37,81 @@ void inflate(Box& b, Scalar r) {
   }
 }
 
-/// Gathers the records of every list in `parts` into `dest` in canonical order (`CanonicalLess`),
-/// whose first criterion is `key(x)` in [0, keys): counted per key, then scattered and each
-/// key's few records sorted, on `threads` threads that each own a range of keys holding about the same
-/// number of records (each reads every part, writes only its range). No global sort, no
-/// intermediate copy: the frame's 100k-600k contacts (72-byte records) go from the per-chunk
-/// lists to their final place once. Fewer records than keys / 8 are copied and sorted instead.
-template <class T, class Key>
+/// Gathers the records of every list in `parts` into `dest` in canonical order (`CanonicalLess`).
+/// key(x) is x's place in that order as one integer, first criterion << 32 | second, the first
+/// in [0, keys). The records are not moved until their place is known: the (key, address) items
+/// are listed (in parallel over the parts), counted per first criterion, scattered, and each
+/// first criterion's few items sorted, on `threads` threads that each own a range of first
+/// criteria holding about the same number of records; each then copies its range's records to
+/// their final place, once. Fewer records than keys / 8 are sorted by key instead of counted.
+/// `items` and `sorted` are scratch.
+template <class T, class Key, class Item>
 void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*>& parts, Index keys, Key key,
-                   int threads) {
-  std::size_t total = 0;
-  for (const auto* p : parts) total += p->size();
+                   int threads, std::vector<Item>& items, std::vector<Item>& sorted) {
+  std::vector<std::size_t> offset(parts.size() + 1, 0);
+  for (std::size_t i = 0; i < parts.size(); ++i) offset[i + 1] = offset[i] + parts[i]->size();
+  const std::size_t total = offset.back();
   dest.resize(total);
   if (total == 0) return;
+  items.resize(total);
+  parallel_for_chunks(parts.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      Item* to = items.data() + offset[i];
+      for (const T& x : *parts[i]) *to++ = {key(x), &x};
+    }
+  });
+  const auto copy = [&](const Item* from, std::size_t begin, std::size_t end) {
+    for (std::size_t j = begin; j < end; ++j) {
+      if (j + 16 < end) {  // the records are scattered: fetch ahead
+        const auto* ahead = static_cast<const char*>(from[j + 16].record);
+        __builtin_prefetch(ahead);
+        __builtin_prefetch(ahead + sizeof(T) - 1);
+      }
+      dest[j] = *static_cast<const T*>(from[j].record);
+    }
+  };
+  const auto by_key = [](const Item& a, const Item& b) { return a.key < b.key; };
   if (total < static_cast<std::size_t>(keys) / 8) {
     // Few records for many keys: one sort costs less than counting over every key.
-    std::size_t at = 0;
-    for (const auto* p : parts) {
-      std::copy(p->begin(), p->end(), dest.begin() + static_cast<std::ptrdiff_t>(at));
-      at += p->size();
-    }
-    std::sort(dest.begin(), dest.end(), CanonicalLess{});
+    std::sort(items.begin(), items.end(), by_key);
+    parallel_for_chunks(total, threads, 4096, [&](std::size_t begin, std::size_t end) { copy(items.data(), begin, end); });
     return;
   }
   std::vector<std::size_t> start(static_cast<std::size_t>(keys) + 1, 0);
-  for (const auto* p : parts) {
-    for (const T& x : *p) ++start[static_cast<std::size_t>(key(x)) + 1];
-  }
+  for (const Item& x : items) ++start[(x.key >> 32) + 1];
   for (std::size_t k = 1; k < start.size(); ++k) start[k] += start[k - 1];
   const auto ranges = static_cast<std::size_t>(resolve_threads(threads));
-  std::vector<std::size_t> bound{0};  // key ranges of about total / ranges records each
+  std::vector<std::size_t> bound{0};  // ranges of first criteria holding about total / ranges records each
   for (std::size_t r = 1; r < ranges; ++r) {
     const auto it = std::lower_bound(start.begin(), start.end(), total * r / ranges);
     bound.push_back(std::max(bound.back(), static_cast<std::size_t>(it - start.begin())));
   }
   bound.push_back(static_cast<std::size_t>(keys));
+  sorted.resize(total);
   parallel_for_chunks(ranges, threads, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t r = begin; r < end; ++r) {
       const std::size_t lo = bound[r], hi = std::max(lo, bound[r + 1]);
       std::vector<std::size_t> next(start.begin() + static_cast<std::ptrdiff_t>(lo),
                                     start.begin() + static_cast<std::ptrdiff_t>(hi));
-      for (const auto* p : parts) {
-        for (const T& x : *p) {
-          const auto k = static_cast<std::size_t>(key(x));
-          if (k >= lo && k < hi) dest[next[k - lo]++] = x;
-        }
+      for (const Item& x : items) {
+        const auto k = static_cast<std::size_t>(x.key >> 32);
+        if (k >= lo && k < hi) sorted[next[k - lo]++] = x;
       }
       for (std::size_t k = lo; k < hi; ++k) {
-        if (start[k + 1] - start[k] > 1) {
-          std::sort(dest.begin() + static_cast<std::ptrdiff_t>(start[k]),
-                    dest.begin() + static_cast<std::ptrdiff_t>(start[k + 1]), CanonicalLess{});
+        Item* first = sorted.data() + start[k];
+        Item* last = sorted.data() + start[k + 1];
+        if (last - first > 16) {
+          std::sort(first, last, by_key);
+        } else {  // a handful: insertion
+          for (Item* i = first + 1; i < last; ++i) {
+            const Item x = *i;
+            Item* j = i;
+            for (; j > first && x.key < (j - 1)->key; --j) *j = *(j - 1);
+            *j = x;
+          }
         }
       }
+      copy(sorted.data(), start[lo], start[hi]);
     }
   });
 }
@@ -827,16 +850,23 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     tt_parts.push_back(&p.tt);
   }
   const Index nv = topo.num_vertices();
+  const auto pair_key = [](Index first, Index second) {
+    return static_cast<std::uint64_t>(first) << 32 | static_cast<std::uint32_t>(second);
+  };
   gather_sorted(
-      out.vf, vf_parts, nv, [](const VertexFaceContact& c) { return c.vertex; }, threads);
-  // Edge-edge contacts are ordered by their first edge's vertices, then the second's: keyed by
-  // the rank of the first edge, each key holds a few records to sort (by the vertex of `a`
-  // alone, each would hold ten times more on cloth-ball).
+      out.vf, vf_parts, nv, [&](const VertexFaceContact& c) { return pair_key(c.vertex, c.face); }, threads,
+      gather_items_, gather_sorted_);
+  // Edge-edge contacts are ordered by their first edge's vertices, then the second's: by the
+  // edges' ranks in that order.
   gather_sorted(
       out.ee, ee_parts, topo.num_edges(),
-      [this](const EdgeEdgeContact& c) { return edge_rank_[static_cast<std::size_t>(c.edge0)]; }, threads);
+      [&](const EdgeEdgeContact& c) {
+        return pair_key(edge_rank_[static_cast<std::size_t>(c.edge0)], edge_rank_[static_cast<std::size_t>(c.edge1)]);
+      },
+      threads, gather_items_, gather_sorted_);
   gather_sorted(
-      out.tt, tt_parts, static_cast<Index>(nf), [](const TriangleTriangleContact& c) { return c.face0; }, threads);
+      out.tt, tt_parts, static_cast<Index>(nf), [&](const TriangleTriangleContact& c) { return pair_key(c.face0, c.face1); },
+      threads, gather_items_, gather_sorted_);
   for (ContactSet& p : parts) spare_sets_.give(std::move(p));
   stats_.set("sort_ms", ms_since(gather_start));
   stats_.set("orphan_vf", static_cast<double>(orphan_vf_.size()));

@@ -202,6 +202,12 @@ class ExactDetector : public Detector {
   std::vector<Index> isolated_;                  ///< vertices used by no face
   std::vector<Index> edge_rank_;                 ///< each edge's rank in (first, second vertex) order
   Spares<ContactSet> spare_sets_;                ///< per-chunk contact sets, for reuse
+  /// A contact being gathered: its place in canonical order, and where it is.
+  struct GatherItem {
+    std::uint64_t key;
+    const void* record;
+  };
+  std::vector<GatherItem> gather_items_, gather_sorted_;  ///< gather scratch, kept across frames
   /// What the narrow phase reads of one face, packed so that a candidate pair touches two
   /// records (the corners' positions are copied in every frame).
   struct PackedFace {
