@@ -1,6 +1,9 @@
 #include <crumple/core/parallel.hpp>
 
 #include <algorithm>
+#include <map>
+#include <memory>
+#include <mutex>
 #include <thread>
 
 #ifdef CRUMPLE_HAVE_TBB
@@ -10,6 +13,24 @@
 #endif
 
 namespace crumple {
+
+#ifdef CRUMPLE_HAVE_TBB
+namespace {
+
+/// One arena per thread count, made on first use and kept: making one for every loop cost 12-94
+/// us a call in a loop of small calls (0.5-1.7 us with the arena kept; an exact detector's frame
+/// makes about ten such calls). Never destroyed, so that no loop can outlive its arena at exit.
+tbb::task_arena& arena(int threads) {
+  static std::mutex mutex;
+  static auto* arenas = new std::map<int, std::unique_ptr<tbb::task_arena>>;
+  const std::lock_guard lock(mutex);
+  auto& a = (*arenas)[threads];
+  if (!a) a = std::make_unique<tbb::task_arena>(threads);
+  return *a;
+}
+
+}  // namespace
+#endif
 
 int resolve_threads(int threads) {
   if (threads > 0) return threads;
@@ -26,8 +47,7 @@ void parallel_for_chunks(std::size_t n, int threads, std::size_t grain,
   grain = std::max<std::size_t>(grain, 1);
 #ifdef CRUMPLE_HAVE_TBB
   if (threads != 1 && n > grain) {
-    tbb::task_arena arena(resolve_threads(threads));
-    arena.execute([&] {
+    arena(resolve_threads(threads)).execute([&] {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain),
                         [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
     });
