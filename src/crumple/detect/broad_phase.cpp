@@ -689,6 +689,23 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   };
   // The kernel's distance, as a bound.
   const auto kernel_bound = [&](Scalar sqr_distance) { return std::sqrt(sqr_distance) * (1 - 1e-12) - kernel_margin; };
+  // On a refresh, the sub-pairs [i, i + n) of a block: sifted by their box gap gap(k), then by
+  // their plane or line distance separation(k) (k: the place in the block), then test(i + k,
+  // local, &sqr_distance) on those left; returns the least of the values, the block's bound.
+  const auto refresh_block = [&](std::size_t i, std::size_t n, LocalContacts& local, const auto& gap,
+                                 const auto& separation, const auto& test) {
+    std::array<std::uint16_t, kBlock> list;
+    iota(list, n);
+    Scalar bound = kInf;
+    n = sift_bounded(list.data(), n, gap, bound);
+    n = sift_bounded(list.data(), n, separation, bound);
+    for (std::size_t s = 0; s < n; ++s) {
+      Scalar sqr_distance = 0;
+      test(i + list[s], local, &sqr_distance);
+      least(bound, kernel_bound(sqr_distance));
+    }
+    return bound;
+  };
   std::size_t tested_blocks = 0;
   // Runs test(i, n, local) on the sub-pairs [i, i + n) of each awake block of `blocks` (cut from a
   // list of `items`); on a refresh, refresh_test(i, n, local) instead, which returns the block's
@@ -732,11 +749,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           for (std::size_t s = 0; s < n; ++s) vf_test(i + list[s], local);
         },
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
-          std::array<std::uint16_t, kBlock> list;
-          iota(list, n);
-          Scalar bound = kInf;
-          n = sift_bounded(
-              list.data(), n,
+          return refresh_block(
+              i, n, local,
               [&](std::uint16_t k) {
                 const Vec3& p = point(i + k);
                 const auto& t = face(i + k).p;
@@ -747,16 +761,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
                 }
                 return gap * (1 - 1e-12);
               },
-              bound);
-          n = sift_bounded(
-              list.data(), n, [&](std::uint16_t k) { return separation_bound(plane(point(i + k), face(i + k))); },
-              bound);
-          for (std::size_t s = 0; s < n; ++s) {
-            Scalar sqr_distance = 0;
-            vf_test(i + list[s], local, &sqr_distance);
-            least(bound, kernel_bound(sqr_distance));
-          }
-          return bound;
+              [&](std::uint16_t k) { return separation_bound(plane(point(i + k), face(i + k))); }, vf_test);
         });
     // 3. Isolated vertices against every face.
     parallel_for_chunks(isolated_.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
@@ -801,11 +806,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           for (std::size_t s = 0; s < n; ++s) ee_test(i + list[s], local);
         },
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
-          std::array<std::uint16_t, kBlock> list;
-          iota(list, n);
-          Scalar bound = kInf;
-          n = sift_bounded(
-              list.data(), n,
+          return refresh_block(
+              i, n, local,
               [&](std::uint16_t k) {
                 const auto p = ends(i + k);
                 Scalar gap = -kInf;
@@ -816,20 +818,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
                 }
                 return gap * (1 - 1e-12);
               },
-              bound);
-          n = sift_bounded(
-              list.data(), n,
               [&](std::uint16_t k) {
                 const auto p = ends(i + k);
                 return separation_bound(line(*p[0], *p[1], *p[2], *p[3]));
               },
-              bound);
-          for (std::size_t s = 0; s < n; ++s) {
-            Scalar sqr_distance = 0;
-            ee_test(i + list[s], local, &sqr_distance);
-            least(bound, kernel_bound(sqr_distance));
-          }
-          return bound;
+              ee_test);
         });
   }
   if (refresh) orphan_ref_.assign(x.begin(), x.end());
