@@ -499,6 +499,16 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     }
     return !outside;
   };
+  // The gap between p and the box of face t (negative inside; in_box: not beyond pad), as a
+  // lower bound of their distance (rounded down by 1e-12 of itself).
+  const auto vertex_box_gap = [](const Vec3& p, const PackedFace& t) {
+    Scalar gap = -std::numeric_limits<Scalar>::infinity();
+    for (int a = 0; a < 3; ++a) {
+      gap = std::max({gap, std::min({t.p[0][a], t.p[1][a], t.p[2][a]}) - p[a],
+                      p[a] - std::max({t.p[0][a], t.p[1][a], t.p[2][a]})});
+    }
+    return gap * (1 - 1e-12);
+  };
   // Edge e0 = (p0, p1) of vertices (u0, u1) and edge e1 = (q0, q1) of vertices (w0, w1), each
   // in any order, past the cheap rejections: the shared kernel.
   const auto ee_kernel = [&](const Vec3& p0, const Vec3& p1, Index u0, Index u1, Index e0, const Vec3& q0,
@@ -524,6 +534,17 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
                !(std::min(q0[i], q1[i]) - half <= std::max(p0[i], p1[i]) + half);
     }
     return !apart;
+  };
+  // The gap between the boxes of edges (p0, p1) and (q0, q1) (negative if they overlap;
+  // boxes_meet: not beyond pad), as a lower bound of their distance.
+  const auto edge_box_gap = [](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
+    Scalar gap = -std::numeric_limits<Scalar>::infinity();
+    for (int a = 0; a < 3; ++a) {
+      const auto [lo0, hi0] = std::minmax(p0[a], p1[a]);
+      const auto [lo1, hi1] = std::minmax(q0[a], q1[a]);
+      gap = std::max({gap, lo1 - hi0, lo0 - hi1});
+    }
+    return gap * (1 - 1e-12);
   };
   // Keeps, in order, the codes of list[0, n) for which keep(code) holds; returns their number.
   // Branch-free: which sub-pairs pass a rejection test is unpredictable.
@@ -751,16 +772,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
           return refresh_block(
               i, n, local,
-              [&](std::uint16_t k) {
-                const Vec3& p = point(i + k);
-                const auto& t = face(i + k).p;
-                Scalar gap = -kInf;
-                for (int a = 0; a < 3; ++a) {
-                  gap = std::max({gap, std::min({t[0][a], t[1][a], t[2][a]}) - p[a],
-                                  p[a] - std::max({t[0][a], t[1][a], t[2][a]})});
-                }
-                return gap * (1 - 1e-12);
-              },
+              [&](std::uint16_t k) { return vertex_box_gap(point(i + k), face(i + k)); },
               [&](std::uint16_t k) { return separation_bound(plane(point(i + k), face(i + k))); }, vf_test);
         });
     // 3. Isolated vertices against every face.
@@ -810,13 +822,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
               i, n, local,
               [&](std::uint16_t k) {
                 const auto p = ends(i + k);
-                Scalar gap = -kInf;
-                for (int a = 0; a < 3; ++a) {
-                  const auto [lo0, hi0] = std::minmax((*p[0])[a], (*p[1])[a]);
-                  const auto [lo1, hi1] = std::minmax((*p[2])[a], (*p[3])[a]);
-                  gap = std::max({gap, lo1 - hi0, lo0 - hi1});
-                }
-                return gap * (1 - 1e-12);
+                return edge_box_gap(*p[0], *p[1], *p[2], *p[3]);
               },
               [&](std::uint16_t k) {
                 const auto p = ends(i + k);
