@@ -1,6 +1,10 @@
 #include <crumple/core/error.hpp>
 #include <crumple/detect/compare.hpp>
 #include <crumple/detect/detector.hpp>
+#include <crumple/detect/hash_grid.hpp>
+#include <crumple/detect/kdop_tree.hpp>
+#include <crumple/detect/stochastic.hpp>
+#include <crumple/detect/sweep_prune.hpp>
 
 #include <gtest/gtest.h>
 
@@ -104,6 +108,27 @@ TEST(MethodSpec, DocumentedDefaultsAreTheDefaults) {
       previous = x;
     }
   }
+}
+
+// The same, on the parameters themselves (a small scene can build the same tree whatever the
+// leaf size, so behaviour alone does not show a default that differs): the bare name, each
+// documented default named alone, and the struct a program fills in code are all equal.
+template <class Params>
+void expect_documented_defaults(Method method) {
+  const MethodInfo& info = method_info(method);
+  const Params bare = Params::from_spec(MethodSpec(method));
+  EXPECT_TRUE(bare == Params{}) << info.name << ": the bare spec differs from the struct's defaults";
+  for (const ParamInfo& p : info.params) {
+    const std::string text = std::string(info.name) + ":" + std::string(p.key) + "=" + std::string(p.default_value);
+    EXPECT_TRUE(Params::from_spec(MethodSpec::parse(text)) == bare) << text << " is not the default";
+  }
+}
+
+TEST(MethodSpec, DocumentedDefaultsAreTheParameterStructsDefaults) {
+  expect_documented_defaults<KdopParams>(Method::Kdop);
+  expect_documented_defaults<HashParams>(Method::Hash);
+  expect_documented_defaults<SapParams>(Method::Sap);
+  expect_documented_defaults<StochasticParams>(Method::Stochastic);
 }
 
 std::string text_of(const ContactSet& set) {

@@ -51,6 +51,7 @@ struct ExactParams {
   std::size_t max_contacts = 0;  ///< cap on the contacts of one frame; 0 = no cap
   bool overflow_error = true;    ///< over the cap: throw (true) or keep the first contacts
   static ExactParams from_spec(const MethodSpec& spec);
+  bool operator==(const ExactParams&) const = default;
 };
 
 /// Per-frame input of a broad phase.

@@ -41,11 +41,11 @@ inline std::uint32_t hash_cell(std::int32_t i, std::int32_t j, std::int32_t k, s
 
 HashParams HashParams::from_spec(const MethodSpec& spec) {
   HashParams p;
-  p.cell = spec.get_double("cell", 0);
+  p.cell = spec.get_double("cell", p.cell);
   if (!(std::isfinite(p.cell) && p.cell >= 0)) {
     throw InputError("method " + spec.to_string() + ": cell must be a number >= 0");
   }
-  const long long table = spec.get_int("table", 0);
+  const long long table = spec.get_int("table", static_cast<long long>(p.table));
   if (table < 0 || table > (1ll << 31)) {
     throw InputError("method " + spec.to_string() + ": table must be in 0..2^31");
   }

@@ -28,6 +28,7 @@ struct HashParams {
   std::uint64_t table = 0;  ///< number of buckets; 0 = automatic
   ExactParams exact;
   static HashParams from_spec(const MethodSpec& spec);
+  bool operator==(const HashParams&) const = default;
 };
 
 class HashDetector final : public ExactDetector {

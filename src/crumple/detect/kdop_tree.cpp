@@ -29,18 +29,19 @@ double ms_since(std::chrono::steady_clock::time_point start) {
 }  // namespace
 
 KdopParams KdopParams::from_spec(const MethodSpec& spec) {
+  // Keys left out keep the struct's defaults (one place says what they are).
   KdopParams p;
   static constexpr std::array<std::string_view, 4> kK{"6", "14", "18", "26"};
   static constexpr std::array<std::string_view, 3> kArity{"2", "4", "8"};
-  p.k = std::stoi(spec.get_choice("k", "18", kK));
-  p.arity = std::stoi(spec.get_choice("arity", "4", kArity));
-  const long long leaf = spec.get_int("leaf", 16);
+  p.k = std::stoi(spec.get_choice("k", std::to_string(p.k), kK));
+  p.arity = std::stoi(spec.get_choice("arity", std::to_string(p.arity), kArity));
+  const long long leaf = spec.get_int("leaf", p.leaf);
   // Saturated to int (a value past it is out of range all the same): `validate` reports it.
   p.leaf = static_cast<int>(
       std::clamp<long long>(leaf, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
-  p.rebuild = spec.get_double("rebuild", 2.0);
-  p.sweep = spec.get_bool("sweep", false);
-  p.cones = spec.get_bool("cones", false);
+  p.rebuild = spec.get_double("rebuild", p.rebuild);
+  p.sweep = spec.get_bool("sweep", p.sweep);
+  p.cones = spec.get_bool("cones", p.cones);
   p.exact = ExactParams::from_spec(spec);
   p.validate("method " + spec.to_string());
   return p;

@@ -56,7 +56,9 @@ struct KdopParams {
   /// than it saves (docs/exact-detectors.md).
   bool cones = false;
   ExactParams exact;
+  /// Reads a `kdop:...` spec; keys left out keep the defaults above.
   static KdopParams from_spec(const MethodSpec& spec);
+  bool operator==(const KdopParams&) const = default;
   /// Throws `InputError` ("<who>: leaf must be in 1..64, got 65", ...) when a field is out of
   /// its range: a node's members are bits of one 64-bit mask.
   void validate(const std::string& who) const;

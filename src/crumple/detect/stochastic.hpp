@@ -99,6 +99,7 @@ struct StochasticParams {
   /// propagation) and `setting=2` (active=100, propagation=none) set defaults that explicit keys
   /// override. Throws `InputError` on bad values.
   static StochasticParams from_spec(const MethodSpec& spec);
+  bool operator==(const StochasticParams&) const = default;
   /// Canonical `stochastic:...` text with every key.
   std::string to_string() const;
 };

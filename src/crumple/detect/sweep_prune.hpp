@@ -25,6 +25,7 @@ struct SapParams {
   int axis = -1;  ///< 0, 1, 2, or -1 = automatic
   ExactParams exact;
   static SapParams from_spec(const MethodSpec& spec);
+  bool operator==(const SapParams&) const = default;
 };
 
 class SapDetector final : public ExactDetector {
