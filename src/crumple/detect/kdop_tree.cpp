@@ -408,9 +408,15 @@ class KdopTree final : public KdopDetector::Tree {
     const bool swept = params_.sweep && !in.previous.empty();
     swept_ = swept;
     if (swept) now_dops_.resize(order_.size());
+    const std::size_t nf = order_.size();
     for (std::size_t l = levels_.size(); l-- > 0;) {
       const auto [lb, le] = levels_[l];
-      parallel_for_chunks(static_cast<std::size_t>(le - lb), in.threads, 1024, [&](std::size_t begin, std::size_t end) {
+      const auto count = static_cast<std::size_t>(le - lb);
+      // Chunks of about 2048 faces on a level of leaves (chunks of 1024 leaves held the whole of
+      // a 20k-face mesh, refitted on one thread), of 1024 nodes above.
+      const bool leaves = nodes_[static_cast<std::size_t>(lb)].leaf;
+      const std::size_t grain = leaves ? std::max<std::size_t>(1, 2048 * count / std::max<std::size_t>(nf, 1)) : 1024;
+      parallel_for_chunks(count, in.threads, grain, [&](std::size_t begin, std::size_t end) {
         std::array<FloatDop, 64> faces;  // a leaf's face k-DOPs, for its lanes
         for (std::size_t i = begin; i < end; ++i) {
           const std::size_t n = static_cast<std::size_t>(lb) + i;
