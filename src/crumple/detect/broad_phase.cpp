@@ -11,6 +11,7 @@
 #include <numeric>
 #include <string>
 #include <tuple>
+#include <type_traits>
 #include <vector>
 
 namespace crumple {
@@ -44,10 +45,15 @@ void inflate(Box& b, Scalar r) {
 /// first criterion's few items sorted, on `threads` threads that each own a range of first
 /// criteria holding about the same number of records; each then copies its range's records to
 /// their final place, once. Fewer records than keys / 8 are sorted by key instead of counted.
-/// `items` and `sorted` are scratch.
-template <class T, class Key, class Item>
+/// `scratch` holds the buffers.
+template <class T, class Key, class Scratch>
 void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*>& parts, Index keys, Key key,
-                   int threads, std::vector<Item>& items, std::vector<Item>& sorted) {
+                   int threads, Scratch& scratch) {
+  auto& items = scratch.items;
+  auto& sorted = scratch.sorted;
+  auto& start = scratch.start;
+  auto& next = scratch.cursor;
+  using Item = typename std::remove_reference_t<decltype(items)>::value_type;
   std::vector<std::size_t> offset(parts.size() + 1, 0);
   for (std::size_t i = 0; i < parts.size(); ++i) offset[i + 1] = offset[i] + parts[i]->size();
   const std::size_t total = offset.back();
@@ -77,7 +83,7 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
     parallel_for_chunks(total, threads, 4096, [&](std::size_t begin, std::size_t end) { copy(items.data(), begin, end); });
     return;
   }
-  std::vector<std::size_t> start(static_cast<std::size_t>(keys) + 1, 0);
+  start.assign(static_cast<std::size_t>(keys) + 1, 0);
   for (const Item& x : items) ++start[(x.key >> 32) + 1];
   for (std::size_t k = 1; k < start.size(); ++k) start[k] += start[k - 1];
   const auto ranges = static_cast<std::size_t>(resolve_threads(threads));
@@ -88,14 +94,15 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
   }
   bound.push_back(static_cast<std::size_t>(keys));
   sorted.resize(total);
+  next.resize(static_cast<std::size_t>(keys));
   parallel_for_chunks(ranges, threads, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t r = begin; r < end; ++r) {
       const std::size_t lo = bound[r], hi = std::max(lo, bound[r + 1]);
-      std::vector<std::size_t> next(start.begin() + static_cast<std::ptrdiff_t>(lo),
-                                    start.begin() + static_cast<std::ptrdiff_t>(hi));
+      std::copy(start.begin() + static_cast<std::ptrdiff_t>(lo), start.begin() + static_cast<std::ptrdiff_t>(hi),
+                next.begin() + static_cast<std::ptrdiff_t>(lo));
       for (const Item& x : items) {
         const auto k = static_cast<std::size_t>(x.key >> 32);
-        if (k >= lo && k < hi) sorted[next[k - lo]++] = x;
+        if (k >= lo && k < hi) sorted[next[k]++] = x;
       }
       for (std::size_t k = lo; k < hi; ++k) {
         Item* first = sorted.data() + start[k];
@@ -854,7 +861,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   };
   gather_sorted(
       out.vf, vf_parts, nv, [&](const VertexFaceContact& c) { return pair_key(c.vertex, c.face); }, threads,
-      gather_items_, gather_sorted_);
+      gather_);
   // Edge-edge contacts are ordered by their first edge's vertices, then the second's: by the
   // edges' ranks in that order.
   gather_sorted(
@@ -862,10 +869,10 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
       [&](const EdgeEdgeContact& c) {
         return pair_key(edge_rank_[static_cast<std::size_t>(c.edge0)], edge_rank_[static_cast<std::size_t>(c.edge1)]);
       },
-      threads, gather_items_, gather_sorted_);
+      threads, gather_);
   gather_sorted(
       out.tt, tt_parts, static_cast<Index>(nf), [&](const TriangleTriangleContact& c) { return pair_key(c.face0, c.face1); },
-      threads, gather_items_, gather_sorted_);
+      threads, gather_);
   for (ContactSet& p : parts) spare_sets_.give(std::move(p));
   stats_.set("sort_ms", ms_since(gather_start));
   stats_.set("orphan_vf", static_cast<double>(orphan_vf_.size()));
