@@ -84,11 +84,13 @@ TEST(KdopCones, HelicalRampThatCutsItselfKeepsEveryIntersection) {
     (n.z() > 0 ? up : down)++;
   }
   ASSERT_TRUE(up == 0 || down == 0) << up << " up, " << down << " down";
-  const Outcome on = run("kdop:cones=on", m, m.positions());
+  // With leaves of at most 16 faces some nodes of this small mesh pass the culling tests (with
+  // the default leaf size none does); the default is checked for exactness below.
+  const Outcome on = run("kdop:cones=on,leaf=16", m, m.positions());
   EXPECT_GT(on.contacts.tt.size(), 10u) << "the turns must cut through each other";
   EXPECT_GT(on.culled, 0.0) << "parts of less than a turn are still culled";
   expect_same_intersections(m, m.positions(), on);
-  for (const char* spec : {"kdop:cones=on,k=6,arity=2,leaf=1", "kdop:cones=on,k=26,arity=8,leaf=16"}) {
+  for (const char* spec : {"kdop:cones=on", "kdop:cones=on,k=6,arity=2,leaf=1", "kdop:cones=on,k=26,arity=8,leaf=16"}) {
     SCOPED_TRACE(spec);
     expect_same_intersections(m, m.positions(), run(spec, m, m.positions()));
   }

@@ -44,7 +44,7 @@ namespace crumple {
 struct KdopParams {
   int k = 18;            ///< 6, 14, 18 or 26 directions
   int arity = 4;         ///< children per internal node: 2, 4 or 8
-  int leaf = 32;         ///< maximum faces per leaf (1..64)
+  int leaf = 48;         ///< maximum faces per leaf (1..64)
   double rebuild = 2.0;  ///< rebuild when the quality metric grows past this factor (>= 1)
   /// The hierarchy covers the motion from the previous positions (when given): the thesis'
   /// motion-oriented inflation. The contact set is the same either way (contacts are proximity

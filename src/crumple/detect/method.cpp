@@ -33,7 +33,7 @@ constexpr std::array<ParamInfo, 10> kStochasticParams{{
 constexpr std::array<ParamInfo, 8> kKdopParams{{
     {"k", "18", "6 | 14 | 18 | 26: k-DOP directions"},
     {"arity", "4", "2 | 4 | 8: children per node"},
-    {"leaf", "32", "maximum faces per leaf (1..64)"},
+    {"leaf", "48", "maximum faces per leaf (1..64)"},
     {"rebuild", "2", "rebuild the tree when the refit quality metric grows past this factor"},
     {"sweep", "off",
      "on | off: the hierarchy also covers the motion from the previous frame (the thesis' "
