@@ -176,6 +176,10 @@ void check_case(Stats& st, const ITri& ia, const ITri& ib, const Embedding& emb)
   const TriangleIntersection s = triangle_triangle_intersection(b[0], b[1], b[2], a[0], a[1], a[2]);
   if (s.intersects != want) problem += " swapped disagrees";
   if ((s.piercing == Piercing::Coplanar) != (r.piercing == Piercing::Coplanar)) problem += " swapped Coplanar";
+  // triangles_intersect has its own path for pairs in general position: in both orders, with
+  // the corners as given and permuted.
+  if (triangles_intersect(a[0], a[1], a[2], b[0], b[1], b[2]) != want) problem += " triangles_intersect disagrees";
+  if (triangles_intersect(b[0], b[1], b[2], a[0], a[1], a[2]) != want) problem += " swapped triangles_intersect";
   if (triangles_intersect(a[2], a[1], a[0], b[1], b[2], b[0]) != want) problem += " permuted disagrees";
   // The sub-tests exported beside it.
   for (int k = 0; k < 3; ++k) {

@@ -22,7 +22,9 @@
 ///     their three edges are tested against the other triangle (segment-segment tests
 ///     exactly, in all three coordinate projections when coplanar).
 /// Cost: ~6 filtered orient3d for separated pairs, up to ~24 when they intersect; the exact
-/// fallback (~1 us) only runs on (near-)degenerate configurations.
+/// fallback (~1 us) only runs on (near-)degenerate configurations. `triangles_intersect`, which
+/// need not say how, decides pairs that strictly straddle each other's planes with 2 more
+/// (Guigue & Devillers 2003) and sends the others through steps 2-4.
 
 #include <crumple/core/types.hpp>
 
@@ -56,7 +58,8 @@ TriangleIntersection triangle_triangle_intersection(const Vec3& a0, const Vec3& 
                                                     const Vec3& a2, const Vec3& b0,
                                                     const Vec3& b1, const Vec3& b2);
 
-/// `triangle_triangle_intersection(...).intersects`.
+/// `triangle_triangle_intersection(...).intersects` (by a shorter path for pairs in general
+/// position; see the file comment).
 bool triangles_intersect(const Vec3& a0, const Vec3& a1, const Vec3& a2, const Vec3& b0,
                          const Vec3& b1, const Vec3& b2);
 
