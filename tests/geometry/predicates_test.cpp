@@ -77,10 +77,14 @@ TEST(Predicates, Orient3dMatchesExactIntegers) {
     const int swapped = orient3d(B, A, C, D);
     const int rotated = orient3d(B, C, A, D);
     const int other_base = orient3d(D, C, B, A);  // det[c-d; b-d; a-d] = det[b-a; c-a; d-a]
-    if (got != want || exact != want || swapped != -want || rotated != want || other_base != want) {
+    // Three points at once (a corner of the plane among them: exactly 0).
+    const std::array<int, 3> sides = orient3d_sides(A, B, C, D, A, D);
+    if (got != want || exact != want || swapped != -want || rotated != want || other_base != want ||
+        sides != std::array<int, 3>{want, 0, want}) {
       if (++failures <= 8) {
         ADD_FAILURE() << "orient3d: want " << want << " got " << got << " exact " << exact
                       << " swapped " << swapped << " rotated " << rotated << " other " << other_base
+                      << " sides " << sides[0] << " " << sides[1] << " " << sides[2]
                       << "\n  input: " << json_case("orient3d", {A, B, C, D});
       }
     }
@@ -102,9 +106,11 @@ TEST(Predicates, Orient3dFilteredEqualsExactOnFloats) {
     Vec3 d = o + rng.vec(-S, S);
     if (i % 4 != 0) d = a + rng.uniform(-2, 2) * (b - a) + rng.uniform(-2, 2) * (c - a);
     const int got = orient3d(a, b, c, d), exact = detail::orient3d_exact(a, b, c, d);
+    const std::array<int, 3> sides = orient3d_sides(a, b, c, d, c, d);
     nonzero += exact != 0;
-    if (got != exact && ++failures <= 8) {
-      ADD_FAILURE() << "filtered " << got << " exact " << exact
+    if ((got != exact || sides != std::array<int, 3>{exact, 0, exact}) && ++failures <= 8) {
+      ADD_FAILURE() << "filtered " << got << " exact " << exact << " sides " << sides[0] << " " << sides[1] << " "
+                    << sides[2]
                     << "\n  input: " << json_case("orient3d", {a, b, c, d});
     }
   }

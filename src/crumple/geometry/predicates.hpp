@@ -25,6 +25,7 @@
 
 #include <crumple/core/types.hpp>
 
+#include <array>
 #include <cmath>
 
 namespace crumple::geometry {
@@ -66,6 +67,33 @@ inline int orient3d(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) 
   if (det > bound) return 1;
   if (-det > bound) return -1;
   return detail::orient3d_exact(a, b, c, d);
+}
+
+/// {orient3d(a, b, c, d0), orient3d(a, b, c, d1), orient3d(a, b, c, d2)}: the sides of three
+/// points of the plane through a, b, c. The filter shares the plane's minors: it evaluates
+/// det = (d - a) . ((b - a) x (c - a)) as w_x (u_y v_z - u_z v_y) + ... (w = d - a, u = b - a,
+/// v = c - a), the form `orient3d` evaluates with the rows in another order (each term a rounded
+/// difference times a difference of products of rounded differences), so the same bound
+/// holds; undecided signs come from the same exact expansion.
+inline std::array<int, 3> orient3d_sides(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d0,
+                                         const Vec3& d1, const Vec3& d2) {
+  const Scalar ux = b.x() - a.x(), uy = b.y() - a.y(), uz = b.z() - a.z();
+  const Scalar vx = c.x() - a.x(), vy = c.y() - a.y(), vz = c.z() - a.z();
+  const Scalar uyvz = uy * vz, uzvy = uz * vy;
+  const Scalar uzvx = uz * vx, uxvz = ux * vz;
+  const Scalar uxvy = ux * vy, uyvx = uy * vx;
+  const Scalar mx = uyvz - uzvy, my = uzvx - uxvz, mz = uxvy - uyvx;
+  const Scalar px = std::abs(uyvz) + std::abs(uzvy), py = std::abs(uzvx) + std::abs(uxvz),
+               pz = std::abs(uxvy) + std::abs(uyvx);
+  const auto side = [&](const Vec3& d) {
+    const Scalar wx = d.x() - a.x(), wy = d.y() - a.y(), wz = d.z() - a.z();
+    const Scalar det = wx * mx + wy * my + wz * mz;
+    const Scalar bound = detail::kOrient3dBound * (std::abs(wx) * px + std::abs(wy) * py + std::abs(wz) * pz);
+    if (det > bound) return 1;
+    if (-det > bound) return -1;
+    return detail::orient3d_exact(a, b, c, d);
+  };
+  return {side(d0), side(d1), side(d2)};
 }
 
 /// Exact sign of the 2D determinant (a - c) x (b - c) = (ax-cx)(by-cy) - (ay-cy)(bx-cx):

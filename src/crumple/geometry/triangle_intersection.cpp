@@ -139,9 +139,9 @@ struct PlaneSides {
 /// Step 1, plane rejection: false when the triangles are disjoint by it; else fills `sides`.
 bool straddle(const Vec3& a0, const Vec3& a1, const Vec3& a2, const Vec3& b0, const Vec3& b1,
               const Vec3& b2, PlaneSides& sides) {
-  sides.sb = {orient3d(a0, a1, a2, b0), orient3d(a0, a1, a2, b1), orient3d(a0, a1, a2, b2)};
+  sides.sb = orient3d_sides(a0, a1, a2, b0, b1, b2);
   if (same_strict_sign(sides.sb[0], sides.sb[1], sides.sb[2])) return false;
-  sides.sa = {orient3d(b0, b1, b2, a0), orient3d(b0, b1, b2, a1), orient3d(b0, b1, b2, a2)};
+  sides.sa = orient3d_sides(b0, b1, b2, a0, a1, a2);
   return !same_strict_sign(sides.sa[0], sides.sa[1], sides.sa[2]);
 }
 
