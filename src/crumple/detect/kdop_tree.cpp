@@ -547,10 +547,11 @@ class KdopTree final : public KdopDetector::Tree {
   }
 
   /// Bit i set: member `first + i` of the node (child or face slot) may overlap the k-DOP f
-  /// (float, conservative; NaN never separates, as in `Kdop::overlaps`).
-  std::uint64_t overlapping_members(const Node& node, const FloatDop& f) const {
+  /// (float, conservative; NaN never separates, as in `Kdop::overlaps`). Only the members from
+  /// lane group `from_group` on (members 4 * from_group, ...) are tested; the bits below are 0.
+  std::uint64_t overlapping_members(const Node& node, const FloatDop& f, Index from_group = 0) const {
     std::uint64_t mask = 0;
-    for (Index g = 0; g < (node.count + 3) / 4; ++g) {
+    for (Index g = from_group; g < (node.count + 3) / 4; ++g) {
       const Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
       I4 apart = {0, 0, 0, 0};
       for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
@@ -574,7 +575,8 @@ class KdopTree final : public KdopDetector::Tree {
     if (node.leaf) {
       for (Index i = 0; i + 1 < node.count; ++i) {
         const Index a = node.first + i;
-        const std::uint64_t m0 = (overlapping_members(node, member(node, i)) &
+        // Only the members after i: from the lane group holding member i + 1.
+        const std::uint64_t m0 = (overlapping_members(node, member(node, i), (i + 1) / 4) &
                                   ~leaf_adjacent_[static_cast<std::size_t>(a)]) >> (i + 1);
         for (std::uint64_t m = m0; m != 0; m &= m - 1) {
           const Index b = a + 1 + std::countr_zero(m);
