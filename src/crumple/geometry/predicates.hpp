@@ -42,6 +42,14 @@ inline constexpr Scalar kRoundoff = 0x1p-53;
 inline constexpr Scalar kOrient3dBound = (7.0 + 56.0 * kRoundoff) * kRoundoff;
 /// Same for the 2D determinant.
 inline constexpr Scalar kOrient2dBound = (3.0 + 16.0 * kRoundoff) * kRoundoff;
+/// The sign of det[b - a; c - a; d - a] from its floating-point value `det` and `permanent`
+/// (the bound's argument), or from the exact expansion when the filter cannot decide.
+inline int orient3d_sign(Scalar det, Scalar permanent, const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
+  const Scalar bound = kOrient3dBound * permanent;
+  if (det > bound) return 1;
+  if (-det > bound) return -1;
+  return orient3d_exact(a, b, c, d);
+}
 }  // namespace detail
 
 /// Exact sign of det[b - a; c - a; d - a] = ((b - a) x (c - a)) . (d - a).
@@ -63,10 +71,7 @@ inline int orient3d(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) 
   const Scalar permanent = std::abs(ux) * (std::abs(vywz) + std::abs(vzwy)) +
                            std::abs(uy) * (std::abs(vzwx) + std::abs(vxwz)) +
                            std::abs(uz) * (std::abs(vxwy) + std::abs(vywx));
-  const Scalar bound = detail::kOrient3dBound * permanent;
-  if (det > bound) return 1;
-  if (-det > bound) return -1;
-  return detail::orient3d_exact(a, b, c, d);
+  return detail::orient3d_sign(det, permanent, a, b, c, d);
 }
 
 /// {orient3d(a, b, c, d0), orient3d(a, b, c, d1), orient3d(a, b, c, d2)}: the sides of three
@@ -87,11 +92,8 @@ inline std::array<int, 3> orient3d_sides(const Vec3& a, const Vec3& b, const Vec
                pz = std::abs(uxvy) + std::abs(uyvx);
   const auto side = [&](const Vec3& d) {
     const Scalar wx = d.x() - a.x(), wy = d.y() - a.y(), wz = d.z() - a.z();
-    const Scalar det = wx * mx + wy * my + wz * mz;
-    const Scalar bound = detail::kOrient3dBound * (std::abs(wx) * px + std::abs(wy) * py + std::abs(wz) * pz);
-    if (det > bound) return 1;
-    if (-det > bound) return -1;
-    return detail::orient3d_exact(a, b, c, d);
+    return detail::orient3d_sign(wx * mx + wy * my + wz * mz, std::abs(wx) * px + std::abs(wy) * py + std::abs(wz) * pz,
+                                 a, b, c, d);
   };
   return {side(d0), side(d1), side(d2)};
 }
