@@ -105,18 +105,7 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
         if (k >= lo && k < hi) sorted[next[k]++] = x;
       }
       for (std::size_t k = lo; k < hi; ++k) {
-        Item* first = sorted.data() + start[k];
-        Item* last = sorted.data() + start[k + 1];
-        if (last - first > 16) {
-          std::sort(first, last, by_key);
-        } else {  // a handful: insertion
-          for (Item* i = first + 1; i < last; ++i) {
-            const Item x = *i;
-            Item* j = i;
-            for (; j > first && x.key < (j - 1)->key; --j) *j = *(j - 1);
-            *j = x;
-          }
-        }
+        std::sort(sorted.data() + start[k], sorted.data() + start[k + 1], by_key);
       }
       copy(sorted.data(), start[lo], start[hi]);
     }
