@@ -315,6 +315,93 @@ TEST(ExactDetectors, OrphanBoundsHoldAtEveryKindOfRejection) {
   }
 }
 
+// Temporal coherence of the k-DOP traversal (`coherence=on`, the default): units whose
+// vertices moved by the same vector since the refresh frame reuse its candidates. Two stacks of
+// 6x6 lattices 0.6h apart (contacts inside each stack on every frame): stack A carried rigidly
+// down onto stack B (its units reused, the pairs across the stacks traversed as they close in);
+// in B, one lattice slides sideways by 0.3h a frame (its units beyond the slack, traversed) and
+// one creeps down from 1.035h above the layer below by 0.01h a frame, within the slack, so that
+// its contacts appear on frame 4 from candidates recorded on frame 0 at 1.035h: the refresh
+// frame's extra inflation is what keeps them; one drops from 1.45h by 0.1h a frame (beyond the
+// slack from the first frame: a spread underestimated tenfold would reuse its units, and miss
+// its contacts from frame 5). Checked against naive on every frame; the units are the same
+// whatever the thread count.
+TEST(ExactDetectors, KdopCoherenceReusesOnlyWhatCannotHaveMoved) {
+  const Scalar h = 0.02;
+  const TriMesh piece = shapes::lattice(6, 6);
+  std::vector<Vec3> origin;  // per lattice: its corner at frame 0
+  for (int stack = 0; stack < 2; ++stack) {
+    for (int col = 0; col < 4; ++col) {
+      for (int layer = 0; layer < 4; ++layer) {
+        const double z = layer * 0.6 * h + (stack == 0 ? 11.8 * h : 0);  // A's bottom 10h above B's top
+        origin.emplace_back(1.2 * (col % 2) + 0.3 * stack, 1.2 * (col / 2), z);
+      }
+    }
+  }
+  // Top layers of three columns of B.
+  const std::size_t slider = 16 + 3, creeper = 16 + 4 + 3, dropper = 16 + 12 + 3;
+  origin[creeper].z() = 2 * 0.6 * h + 1.035 * h;
+  origin[dropper].z() = 2 * 0.6 * h + 1.45 * h;
+  const auto frame = [&](int k) {
+    Positions x;
+    for (std::size_t l = 0; l < origin.size(); ++l) {
+      Vec3 o = origin[l];
+      if (l < 16) o.z() -= k * h;
+      if (l == slider) o.y() += 0.3 * h * k;
+      if (l == creeper) o.z() -= 0.01 * h * k;
+      if (l == dropper) o.z() -= 0.1 * h * k;
+      for (const Vec3& p : piece.positions()) x.push_back(p + o);
+    }
+    return x;
+  };
+  std::vector<Face> faces;
+  const auto nv = static_cast<Index>(piece.positions().size());
+  for (std::size_t l = 0; l < origin.size(); ++l) {
+    for (Face f : piece.topology().faces()) {
+      const Index o = static_cast<Index>(l) * nv;
+      faces.push_back({f[0] + o, f[1] + o, f[2] + o});
+    }
+  }
+  const TriMesh mesh = TriMesh::create(frame(0), faces);
+  std::vector<Positions> frames;
+  for (int k = 0; k <= 12; ++k) frames.push_back(frame(k));
+  const std::size_t n = expect_sequence_exact(
+      mesh, frames, h, {"kdop", "kdop:coherence=off", "kdop:arity=2,leaf=8", "kdop:k=6,arity=8,leaf=64"},
+      ContactKinds::parse("vf,ee"), {1, 2, 3});
+  if (HasFatalFailure()) return;
+  EXPECT_GT(n, 1000u);
+
+  // The reuse happened while contacts appeared: the creeper's on frame 4, across the stacks.
+  auto d = make("kdop", h, ContactKinds::parse("vf,ee"), 1);
+  auto d3 = make("kdop", h, ContactKinds::parse("vf,ee"), 3);
+  d->set_topology(mesh.topology_ptr());
+  d3->set_topology(mesh.topology_ptr());
+  const auto lattice_of = [&](Index v) { return static_cast<std::size_t>(v / nv); };
+  std::size_t reuse_frames = 0, reused = 0, traversed = 0, creeper_from = 0, across = 0;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    ContactSet got;
+    d->update(i == 0 ? PositionsView{} : PositionsView(frames[i - 1]), frames[i], got);
+    d3->update(i == 0 ? PositionsView{} : PositionsView(frames[i - 1]), frames[i], got);
+    for (const char* key : {"coherence", "units_reused", "units_traversed"}) {
+      EXPECT_EQ(d->stats().get(key), d3->stats().get(key)) << key << ", frame " << i;
+    }
+    if (d->stats().get("coherence") != 2) continue;
+    ++reuse_frames;
+    reused += static_cast<std::size_t>(d->stats().get("units_reused"));
+    traversed += static_cast<std::size_t>(d->stats().get("units_traversed"));
+    for (const auto& c : got.vf) {
+      const std::size_t a = lattice_of(c.vertex), b = lattice_of(mesh.topology().face(c.face)[0]);
+      if ((a == creeper || b == creeper) && creeper_from == 0) creeper_from = i;
+      across += (a < 16) != (b < 16) ? 1u : 0u;
+    }
+  }
+  EXPECT_GE(reuse_frames, 8u);
+  EXPECT_GT(reused, traversed) << "most units moved rigidly";
+  EXPECT_GT(traversed, 0u) << "the stacks closing in, and the slider, are traversed";
+  EXPECT_EQ(creeper_from, 4u) << "the creeper reaches h on frame 4";
+  EXPECT_GT(across, 0u) << "the stacks meet on reuse frames";
+}
+
 TEST(ExactDetectors, KdopRebuildsWhenQualityDegrades) {
   const TriMesh lattice = shapes::lattice(24, 24);
   const auto frames = blend(lattice.positions(), testing::crumple_lattice(lattice, 0.3, 5), 4);

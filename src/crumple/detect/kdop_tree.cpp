@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <mutex>
 #include <numbers>
 #include <numeric>
 #include <string>
@@ -42,6 +43,7 @@ KdopParams KdopParams::from_spec(const MethodSpec& spec) {
   p.rebuild = spec.get_double("rebuild", p.rebuild);
   p.sweep = spec.get_bool("sweep", p.sweep);
   p.cones = spec.get_bool("cones", p.cones);
+  p.coherence = spec.get_bool("coherence", p.coherence);
   p.exact = ExactParams::from_spec(spec);
   p.validate("method " + spec.to_string());
   return p;
@@ -114,6 +116,50 @@ class KdopTree final : public KdopDetector::Tree {
     std::array<float, kAxes> lo, hi;
   };
 
+  /// Temporal coherence (proximity queries, `coherence=on`). A refresh frame inflates every
+  /// k-DOP by kSlack times the radius more and records the candidates of each *unit*: the first
+  /// self-test of a node of at most kUnitFaces faces, or pair test of two such nodes, that the
+  /// traversal reaches (the same units whatever the thread count: tasks are never cut inside
+  /// one). A later frame gives each node the box of its vertices' displacements since the
+  /// refresh; a unit whose displacements differ by at most the slack s = 2 (refresh radius -
+  /// radius) emits the recorded candidates instead of being traversed. Exact: two points of
+  /// its faces within the padded thickness now were within it + s on the refresh frame (their
+  /// relative position changed by at most s), so their faces' k-DOPs, inflated by half of
+  /// that, overlapped then, and the pair was recorded (a unit with no record had none).
+  static constexpr Index kUnitFaces = 512;
+  static constexpr Scalar kSlack = 1.0 / 16;
+  enum class Mode { off, record, reuse };
+  static constexpr Scalar kInf = std::numeric_limits<Scalar>::infinity();
+  /// Axis-aligned box of displacements x - x_ref (reuse frames have finite positions).
+  struct Moved {
+    std::array<Scalar, 3> lo{kInf, kInf, kInf}, hi{-kInf, -kInf, -kInf};
+    void extend(const Vec3& d) {
+      for (int k = 0; k < 3; ++k) {
+        const auto i = static_cast<std::size_t>(k);
+        lo[i] = std::min(lo[i], d[k]);
+        hi[i] = std::max(hi[i], d[k]);
+      }
+    }
+    void merge(const Moved& o) {
+      for (std::size_t i = 0; i < 3; ++i) {
+        lo[i] = std::min(lo[i], o.lo[i]);
+        hi[i] = std::max(hi[i], o.hi[i]);
+      }
+    }
+  };
+  /// A recorded unit: candidates unit_pairs_[begin, end) of the nodes key = (min << 32 | max).
+  struct Unit {
+    std::uint64_t key;
+    std::size_t begin, end;
+  };
+  /// One task's traversal state.
+  struct Walk {
+    std::vector<FacePair> out;
+    std::vector<Unit> units;  ///< refresh frames: its units with candidates, into `pairs`
+    std::vector<FacePair> pairs;
+    std::size_t reused = 0, live = 0;
+  };
+
   /// Leaf: `first`/`count` index slots of `order_`; internal: child node ids.
   struct Node {
     Index first = 0;
@@ -132,10 +178,12 @@ class KdopTree final : public KdopDetector::Tree {
     if (topo.num_faces() == 0) return;
     const auto t0 = std::chrono::steady_clock::now();
     if (nodes_.empty()) build(topo, in.positions, stats);
+    choose_coherence(in);
     refit(in);
     double q = quality();
     if (q > params_.rebuild * built_quality_) {
-      build(topo, in.positions, stats);
+      build(topo, in.positions, stats);  // the node ids change: the cache is dropped
+      if (mode_ == Mode::reuse) start_record(in);
       refit(in);
       q = quality();
     }
@@ -155,6 +203,7 @@ class KdopTree final : public KdopDetector::Tree {
     const auto t1 = std::chrono::steady_clock::now();
     traverse(in.threads, out, stats);
     stats.set("traversal_ms", ms_since(t1));
+    stats.set("coherence", mode_ == Mode::off ? 0 : mode_ == Mode::record ? 1 : 2);
     if (culling_) stats.set("culled_nodes", static_cast<double>(culled_.load()));
   }
 
@@ -182,6 +231,34 @@ class KdopTree final : public KdopDetector::Tree {
     }
     order_.resize(static_cast<std::size_t>(nf));
     std::iota(order_.begin(), order_.end(), 0);
+    // Connected components (by shared vertices), and each one's mean face centroid.
+    {
+      std::vector<Index> root(static_cast<std::size_t>(topo.num_vertices()));
+      std::iota(root.begin(), root.end(), 0);
+      const auto find = [&](Index v) {
+        while (root[static_cast<std::size_t>(v)] != v) {
+          v = root[static_cast<std::size_t>(v)] = root[static_cast<std::size_t>(root[static_cast<std::size_t>(v)])];
+        }
+        return v;
+      };
+      for (Index f = 0; f < nf; ++f) {
+        const Face& t = topo.face(f);
+        for (int k = 1; k < 3; ++k) root[static_cast<std::size_t>(find(t[k]))] = find(t[0]);
+      }
+      component_.resize(static_cast<std::size_t>(nf));
+      component_centroid_.assign(root.size(), Vec3::Zero());
+      std::vector<Index> count(root.size(), 0);
+      for (Index f = 0; f < nf; ++f) {
+        const Index c = find(topo.face(f)[0]);
+        component_[static_cast<std::size_t>(f)] = c;
+        component_centroid_[static_cast<std::size_t>(c)] += centroid[static_cast<std::size_t>(f)];
+        ++count[static_cast<std::size_t>(c)];
+      }
+      for (std::size_t c = 0; c < root.size(); ++c) {
+        if (count[c] > 0) component_centroid_[c] /= static_cast<Scalar>(count[c]);
+      }
+      component_faces_.assign(root.size(), 0);
+    }
     nodes_.assign(1, Node{});
     levels_.clear();
     struct Item {
@@ -236,6 +313,25 @@ class KdopTree final : public KdopDetector::Tree {
       }
     }
     dops_.assign(nodes_.size(), Dop());
+    small_.resize(nodes_.size());
+    leaf_ids_.clear();
+    leaf_verts_.assign(nodes_.size() + 1, 0);
+    verts_.clear();
+    for (std::size_t n = 0; n < nodes_.size(); ++n) {
+      const Node& node = nodes_[n];
+      small_[n] = node.faces <= kUnitFaces ? 1 : 0;
+      if (node.leaf) {
+        leaf_ids_.push_back(static_cast<Index>(n));
+        const std::size_t first = verts_.size();
+        for (Index s = node.first; s < node.first + node.count; ++s) {
+          for (const Index v : slot_faces_[static_cast<std::size_t>(s)]) verts_.push_back(v);
+        }
+        std::sort(verts_.begin() + static_cast<std::ptrdiff_t>(first), verts_.end());
+        verts_.erase(std::unique(verts_.begin() + static_cast<std::ptrdiff_t>(first), verts_.end()), verts_.end());
+      }
+      leaf_verts_[n + 1] = verts_.size();
+    }
+    cache_valid_ = false;
     built_quality_ = 0;  // set by the first refit
     contours_valid_ = false;
     stats.add("rebuilds", 1);
@@ -263,10 +359,85 @@ class KdopTree final : public KdopDetector::Tree {
       return ca < cb || (ca == cb && a < b);
     };
     const Index left = parts / 2;
-    const Index mid = begin + static_cast<Index>(static_cast<long long>(end - begin) * left / parts);
-    std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end, less);
+    Index mid = begin + static_cast<Index>(static_cast<long long>(end - begin) * left / parts);
+    const Index at = component_cut(centroid, begin, end, mid, axis);
+    if (at >= 0) {
+      mid = at;
+    } else {
+      std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end, less);
+    }
     split(centroid, begin, mid, left, cuts);
     split(centroid, mid, end, parts - left, cuts);
+  }
+
+  /// Where the faces of slots [begin, end) belong to several connected components, a cut
+  /// between components, so that a node does not mix pieces that move apart (rigid bodies,
+  /// separate cloths; n-body's 305 balls of 480 faces: a leaf of the median cut held faces of two
+  /// balls in about half the cases, and no coherence unit with it could be reused). Along each
+  /// axis (the longest first), the components are ordered by their centroids and the boundary
+  /// nearest `mid` that leaves each side at least a quarter of the faces is compared with the
+  /// median cut along that axis: kept when it puts at most a quarter of the faces on the other
+  /// side (separate or stacked bodies; not intertwined rods, which it would cut lengthwise:
+  /// rod-twist's traversal took 8% longer with those cuts). The axis moving the fewest wins.
+  /// Returns the cut, with the slots partitioned, or -1 (then the median cut is made).
+  Index component_cut(const std::vector<Vec3>& centroid, Index begin, Index end, Index mid, int longest) {
+    const auto first = order_.begin() + begin, last = order_.begin() + end;
+    const auto comp = [&](Index f) { return static_cast<std::size_t>(component_[static_cast<std::size_t>(f)]); };
+    if (std::all_of(first, last, [&](Index f) { return comp(f) == comp(*first); })) return -1;
+    struct Piece {
+      Index component, faces;
+    };
+    std::vector<Piece> pieces;
+    for (auto it = first; it != last; ++it) {
+      if (component_faces_[comp(*it)]++ == 0) pieces.push_back({static_cast<Index>(comp(*it)), 0});
+    }
+    for (Piece& p : pieces) {
+      p.faces = component_faces_[static_cast<std::size_t>(p.component)];
+      component_faces_[static_cast<std::size_t>(p.component)] = 0;
+    }
+    const Index size = end - begin;
+    Index best_at = -1, best_moved = size;
+    std::vector<Index> best_left;
+    for (const int axis : {longest, (longest + 1) % 3, (longest + 2) % 3}) {
+      std::sort(pieces.begin(), pieces.end(), [&](const Piece& p, const Piece& q) {
+        const Scalar cp = component_centroid_[static_cast<std::size_t>(p.component)][axis];
+        const Scalar cq = component_centroid_[static_cast<std::size_t>(q.component)][axis];
+        return cp < cq || (cp == cq && p.component < q.component);
+      });
+      Index at = begin, cut = -1;
+      std::size_t rank = 0;
+      for (std::size_t r = 0; r + 1 < pieces.size(); ++r) {
+        at += pieces[r].faces;
+        const bool balanced = 4 * static_cast<long long>(at - begin) >= size && 4 * static_cast<long long>(end - at) >= size;
+        if (balanced && (cut < 0 || std::abs(at - mid) < std::abs(cut - mid))) {
+          cut = at;
+          rank = r;
+        }
+      }
+      if (cut < 0) continue;
+      for (std::size_t r = 0; r <= rank; ++r) component_faces_[static_cast<std::size_t>(pieces[r].component)] = 1;
+      scratch_.clear();
+      for (auto it = first; it != last; ++it) scratch_.push_back(centroid[static_cast<std::size_t>(*it)][axis]);
+      const auto median = scratch_.begin() + (mid - begin);
+      std::nth_element(scratch_.begin(), median, scratch_.end());
+      Index moved = 0;
+      for (auto it = first; it != last; ++it) {
+        const bool left_side = component_faces_[comp(*it)] == 1;
+        moved += left_side == (centroid[static_cast<std::size_t>(*it)][axis] < *median) ? 0 : 1;
+      }
+      for (std::size_t r = 0; r <= rank; ++r) component_faces_[static_cast<std::size_t>(pieces[r].component)] = 0;
+      if (4 * static_cast<long long>(moved) <= size && moved < best_moved) {
+        best_at = cut;
+        best_moved = moved;
+        best_left.clear();
+        for (std::size_t r = 0; r <= rank; ++r) best_left.push_back(pieces[r].component);
+      }
+    }
+    if (best_at < 0) return -1;
+    for (const Index c : best_left) component_faces_[static_cast<std::size_t>(c)] = 1;
+    std::partition(first, last, [&](Index f) { return component_faces_[comp(f)] == 1; });
+    for (const Index c : best_left) component_faces_[static_cast<std::size_t>(c)] = 0;
+    return best_at;
   }
 
   // ---- normal-cone culling -------------------------------------------------------------------
@@ -408,6 +579,9 @@ class KdopTree final : public KdopDetector::Tree {
     const bool swept = params_.sweep && !in.previous.empty();
     swept_ = swept;
     if (swept) now_dops_.resize(order_.size());
+    const Scalar radius = refit_radius_;
+    const bool moves = mode_ == Mode::reuse;  // displacement boxes since the refresh frame
+    if (moves) moved_.resize(nodes_.size());
     const std::size_t nf = order_.size();
     for (std::size_t l = levels_.size(); l-- > 0;) {
       const auto [lb, le] = levels_[l];
@@ -422,6 +596,7 @@ class KdopTree final : public KdopDetector::Tree {
           const std::size_t n = static_cast<std::size_t>(lb) + i;
           const Node& node = nodes_[n];
           Dop d;
+          Moved mv;
           if (node.leaf) {
             // Each face's k-DOP straight from its corners (and their previous positions when
             // swept), inflated: the same slabs as merging per-vertex k-DOPs, since rounding
@@ -432,21 +607,31 @@ class KdopTree final : public KdopDetector::Tree {
               for (const Index v : t) f.extend(in.positions[static_cast<std::size_t>(v)]);
               if (swept) {
                 Dop now = f;
-                now.inflate(in.radius);
+                now.inflate(radius);
                 now_dops_[static_cast<std::size_t>(s)] = now;
                 for (const Index v : t) f.extend(in.previous[static_cast<std::size_t>(v)]);
               }
-              f.inflate(in.radius);
+              f.inflate(radius);
               d.merge(f);
               faces[static_cast<std::size_t>(s - node.first)] = float_dop(f);
             }
             fill_lanes(node, faces.data());
+            if (moves) {
+              for (std::size_t k = leaf_verts_[n]; k < leaf_verts_[n + 1]; ++k) {
+                const auto v = static_cast<std::size_t>(verts_[k]);
+                mv.extend(in.positions[v] - cache_ref_[v]);
+              }
+            }
           } else {
             for (Index c = node.first; c < node.first + node.count; ++c) d.merge(dops_[static_cast<std::size_t>(c)]);
+            if (moves) {
+              for (Index c = node.first; c < node.first + node.count; ++c) mv.merge(moved_[static_cast<std::size_t>(c)]);
+            }
             // Its children are refitted: levels go bottom-up.
             fill_lanes(node, &float_dops_[static_cast<std::size_t>(node.first)]);
           }
           dops_[n] = d;
+          if (moves) moved_[n] = mv;
           float_dops_[n] = float_dop(d);
         }
       });
@@ -569,7 +754,13 @@ class KdopTree final : public KdopDetector::Tree {
     return overlapping_members(node, float_dops_[static_cast<std::size_t>(q)]);
   }
 
-  void self(Index n, std::vector<FacePair>& out) const {
+  /// Self-test of node n. With kUnits, the first small node or pair of small nodes reached is a
+  /// coherence unit (`unit`); inside a unit, and when coherence is off, kUnits is false.
+  template <bool kUnits>
+  void self(Index n, Walk& w) const {
+    if constexpr (kUnits) {
+      if (small_[static_cast<std::size_t>(n)]) return unit(n, n, w);
+    }
     if (culled(n)) return;
     const Node& node = nodes_[static_cast<std::size_t>(n)];
     if (node.leaf) {
@@ -580,41 +771,77 @@ class KdopTree final : public KdopDetector::Tree {
                                   ~leaf_adjacent_[static_cast<std::size_t>(a)]) >> (i + 1);
         for (std::uint64_t m = m0; m != 0; m &= m - 1) {
           const Index b = a + 1 + std::countr_zero(m);
-          if (!(swept_ && now_apart(a, b))) emit(a, b, out);
+          if (!(swept_ && now_apart(a, b))) emit(a, b, w.out);
         }
       }
       return;
     }
-    for (Index c = node.first; c < node.first + node.count; ++c) self(c, out);
+    for (Index c = node.first; c < node.first + node.count; ++c) self<kUnits>(c, w);
     for (Index i = 0; i + 1 < node.count; ++i) {
       const Index c = node.first + i;
       for (std::uint64_t m = overlapping_node(node, c) >> (i + 1); m != 0; m &= m - 1) {
-        pair(c, c + 1 + std::countr_zero(m), out);
+        pair<kUnits>(c, c + 1 + std::countr_zero(m), w);
       }
     }
   }
 
   /// Nodes a and b, whose k-DOPs may overlap.
-  void pair(Index a, Index b, std::vector<FacePair>& out) const {
+  template <bool kUnits>
+  void pair(Index a, Index b, Walk& w) const {
+    if constexpr (kUnits) {
+      if (small_[static_cast<std::size_t>(a)] && small_[static_cast<std::size_t>(b)]) return unit(a, b, w);
+    }
     const Node& na = nodes_[static_cast<std::size_t>(a)];
     const Node& nb = nodes_[static_cast<std::size_t>(b)];
     if (na.leaf && nb.leaf) {
-      emit_leaf_pair(a, b, out);
+      emit_leaf_pair(a, b, w.out);
     } else if (na.leaf || (!nb.leaf && nb.faces > na.faces)) {
       for (std::uint64_t m = overlapping_node(nb, a); m != 0; m &= m - 1) {
-        pair(a, nb.first + std::countr_zero(m), out);
+        pair<kUnits>(a, nb.first + std::countr_zero(m), w);
       }
     } else {
       for (std::uint64_t m = overlapping_node(na, b); m != 0; m &= m - 1) {
-        pair(na.first + std::countr_zero(m), b, out);
+        pair<kUnits>(na.first + std::countr_zero(m), b, w);
       }
+    }
+  }
+
+  /// A coherence unit: self(a) when a == b, else pair(a, b). Reuse frames: when the
+  /// displacements of the unit's vertices since the refresh frame differ by at most the slack,
+  /// the refresh frame's candidates of the unit are emitted (none when it had none); otherwise,
+  /// and on other frames, it is traversed, and recorded on a refresh frame.
+  void unit(Index a, Index b, Walk& w) const {
+    const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(std::min(a, b))) << 32) |
+                              static_cast<std::uint32_t>(std::max(a, b));
+    if (mode_ == Mode::reuse &&
+        spread(moved_[static_cast<std::size_t>(a)], moved_[static_cast<std::size_t>(b)]) <= slack_) {
+      const auto it = std::lower_bound(units_.begin(), units_.end(), key,
+                                       [](const Unit& u, std::uint64_t k) { return u.key < k; });
+      if (it != units_.end() && it->key == key) {
+        w.out.insert(w.out.end(), unit_pairs_.begin() + static_cast<std::ptrdiff_t>(it->begin),
+                     unit_pairs_.begin() + static_cast<std::ptrdiff_t>(it->end));
+      }
+      ++w.reused;
+      return;
+    }
+    const std::size_t begin = w.out.size();
+    if (a == b) {
+      self<false>(a, w);
+    } else {
+      pair<false>(a, b, w);
+    }
+    ++w.live;
+    if (mode_ == Mode::record && w.out.size() > begin) {
+      w.units.push_back({key, w.pairs.size(), w.pairs.size() + (w.out.size() - begin)});
+      w.pairs.insert(w.pairs.end(), w.out.begin() + static_cast<std::ptrdiff_t>(begin), w.out.end());
     }
   }
 
   /// Splits the self-traversal of the root into independent tasks (a == b: self(a), else
   /// pair(a, b) of overlapping nodes), then runs them in parallel.
-  void traverse(int threads, CandidateBuffer& out, DetectorStats& stats) const {
+  void traverse(int threads, CandidateBuffer& out, DetectorStats& stats) {
     std::vector<std::array<Index, 2>> tasks{{0, 0}};
+    const bool coherent = mode_ != Mode::off;
     const std::size_t target = resolve_threads(threads) > 1 ? 256 * static_cast<std::size_t>(resolve_threads(threads)) : 1;
     const auto overlap = [&](Index a, Index b) {
       return dops_[static_cast<std::size_t>(a)].overlaps(dops_[static_cast<std::size_t>(b)]);
@@ -625,8 +852,10 @@ class KdopTree final : public KdopDetector::Tree {
       for (const auto& [a, b] : tasks) {
         const Node& na = nodes_[static_cast<std::size_t>(a)];
         const Node& nb = nodes_[static_cast<std::size_t>(b)];
+        // Units stay whole (their cache is keyed by the nodes).
+        const bool unit = coherent && small_[static_cast<std::size_t>(a)] && small_[static_cast<std::size_t>(b)];
         if (a == b) {
-          if (na.leaf) {
+          if (na.leaf || unit) {
             next.push_back({a, a});
             continue;
           }
@@ -638,7 +867,7 @@ class KdopTree final : public KdopDetector::Tree {
               if (overlap(c, d)) next.push_back({c, d});
             }
           }
-        } else if (na.leaf && nb.leaf) {
+        } else if ((na.leaf && nb.leaf) || unit) {
           next.push_back({a, b});
         } else {
           expanded = true;
@@ -657,21 +886,148 @@ class KdopTree final : public KdopDetector::Tree {
       if (!expanded) break;
     }
     stats.set("tasks", static_cast<double>(tasks.size()));
+    std::mutex mutex;
+    std::size_t reused = 0, live = 0;
+    std::vector<std::vector<Unit>> units;  // record frames: per chunk, into pairs[chunk]
+    std::vector<std::vector<FacePair>> pairs;
     parallel_for_chunks(tasks.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
-      std::vector<FacePair> local = out.take();
+      Walk w{out.take(), {}, {}};
       for (std::size_t i = begin; i < end; ++i) {
         const auto [a, b] = tasks[i];
         if (a == b) {
-          self(a, local);
+          coherent ? self<true>(a, w) : self<false>(a, w);
         } else {
-          pair(a, b, local);
+          coherent ? pair<true>(a, b, w) : pair<false>(a, b, w);
         }
       }
-      out.add(std::move(local));
+      out.add(std::move(w.out));
+      const std::lock_guard lock(mutex);
+      reused += w.reused;
+      live += w.live;
+      if (!w.units.empty()) {
+        units.push_back(std::move(w.units));
+        pairs.push_back(std::move(w.pairs));
+      }
     });
+    if (mode_ == Mode::record) {
+      for (std::size_t c = 0; c < units.size(); ++c) {
+        for (Unit u : units[c]) {
+          u.begin += unit_pairs_.size();
+          u.end += unit_pairs_.size();
+          units_.push_back(u);
+        }
+        unit_pairs_.insert(unit_pairs_.end(), pairs[c].begin(), pairs[c].end());
+      }
+      std::sort(units_.begin(), units_.end(), [](const Unit& x, const Unit& y) { return x.key < y.key; });
+      cache_valid_ = true;
+    }
+    if (coherent) {
+      stats.set("units_reused", static_cast<double>(reused));
+      stats.set("units_traversed", static_cast<double>(live));
+    }
+  }
+
+  // ---- temporal coherence --------------------------------------------------------------------
+  /// Decides this frame's mode and the radius of its refit (larger on a refresh frame).
+  void choose_coherence(const FrameInput& in) {
+    refit_radius_ = in.radius;
+    mode_ = Mode::off;
+    // Displacement boxes take no NaN: a frame with a non-finite coordinate is traversed, and
+    // the next finite one records.
+    const bool usable = params_.coherence && !in.intersection_only && !(params_.sweep && !in.previous.empty()) &&
+                        std::all_of(in.positions.begin(), in.positions.end(), [](const Vec3& p) { return p.allFinite(); });
+    if (!usable) {
+      cache_valid_ = false;
+      return;
+    }
+    if (!cache_valid_ || cache_ref_.size() != in.positions.size()) return start_record(in);
+    if (cache_wait_ > 0) {  // backing off: traversed, nothing recorded
+      --cache_wait_;
+      return;
+    }
+    slack_ = 2 * (cache_radius_ - in.radius);
+    if (slack_ > 0 && cache_fresh(in.positions)) {
+      if (cache_refreshed_) cache_backoff_ = 0;
+      cache_refreshed_ = false;
+      mode_ = Mode::reuse;
+      return;
+    }
+    // Stale. Right after a refresh the motion per frame is too large for the cache to pay:
+    // wait 1, 2, 4, ... 64 frames before recording again.
+    if (cache_refreshed_) {
+      cache_backoff_ = std::min(64, std::max(1, 2 * cache_backoff_));
+      cache_wait_ = cache_backoff_;
+      cache_refreshed_ = false;
+      return;
+    }
+    start_record(in);
+  }
+
+  /// A refresh frame: the k-DOPs are inflated by the slack more, and every unit's candidates
+  /// are recorded with the positions.
+  void start_record(const FrameInput& in) {
+    mode_ = Mode::record;
+    cache_radius_ = refit_radius_ = in.radius * (1 + kSlack);
+    cache_ref_.assign(in.positions.begin(), in.positions.end());
+    units_.clear();
+    unit_pairs_.clear();
+    cache_valid_ = false;  // until the traversal has recorded every unit
+    cache_refreshed_ = true;
+  }
+
+  /// Of every 16th leaf, at most a quarter have vertices whose displacements since the refresh
+  /// frame differ by more than the slack (else most units would be traversed anyway).
+  bool cache_fresh(PositionsView x) const {
+    std::size_t looked = 0, moved = 0;
+    for (std::size_t i = 0; i < leaf_ids_.size(); i += 16) {
+      const auto n = static_cast<std::size_t>(leaf_ids_[i]);
+      Moved m;
+      for (std::size_t k = leaf_verts_[n]; k < leaf_verts_[n + 1]; ++k) {
+        const auto v = static_cast<std::size_t>(verts_[k]);
+        m.extend(x[v] - cache_ref_[v]);
+      }
+      ++looked;
+      moved += spread(m, m) <= slack_ ? 0 : 1;
+    }
+    return 4 * moved <= looked;
+  }
+
+  /// Bound on |(p - p_ref) - (q - q_ref)| for points p, q of the faces of two nodes with these
+  /// displacement boxes (a point of a face moves by a convex combination of its corners'
+  /// displacements, which lies in the box), with the rounding of x - x_ref (relative to the
+  /// displacement) and of the norm covered. NaN when a displacement is.
+  static Scalar spread(const Moved& a, const Moved& b) {
+    Moved u = a;
+    u.merge(b);
+    Scalar s2 = 0, big = 0;
+    for (std::size_t k = 0; k < 3; ++k) {
+      s2 += (u.hi[k] - u.lo[k]) * (u.hi[k] - u.lo[k]);
+      big = std::max({big, std::abs(u.lo[k]), std::abs(u.hi[k])});
+    }
+    return std::sqrt(s2) * (1 + 1e-12) + 1e-12 * big;
   }
 
   const KdopParams& params_;
+  // Temporal coherence (proximity frames).
+  Mode mode_ = Mode::off;
+  Scalar refit_radius_ = 0;  ///< this frame's inflation radius
+  bool cache_valid_ = false;  ///< units_ hold a complete refresh frame of the current tree
+  bool cache_refreshed_ = false;  ///< the previous frame recorded
+  int cache_backoff_ = 0, cache_wait_ = 0;
+  Scalar cache_radius_ = 0;  ///< inflation radius of the refresh frame
+  Scalar slack_ = 0;         ///< 2 (cache_radius_ - this frame's radius)
+  Positions cache_ref_;      ///< positions of the refresh frame
+  std::vector<Unit> units_;  ///< the refresh frame's units with candidates, by key
+  std::vector<FacePair> unit_pairs_;
+  std::vector<Moved> moved_;  ///< per node, reuse frames: displacement box since the refresh
+  std::vector<char> small_;   ///< per node: at most kUnitFaces faces
+  std::vector<Index> leaf_ids_;
+  std::vector<std::size_t> leaf_verts_;  ///< per node: a leaf's vertices are verts_[n, n + 1)
+  std::vector<Index> verts_;
+  std::vector<Index> component_;        ///< per face, its connected component (build only)
+  std::vector<Vec3> component_centroid_;  ///< per component id, mean face centroid (build only)
+  std::vector<Index> component_faces_;    ///< per component id, scratch of `split` (all 0)
+  std::vector<Scalar> scratch_;           ///< scratch of `split`
   std::vector<Node> nodes_;
   std::vector<Dop> dops_;
   std::vector<FloatDop> float_dops_;  ///< per node

@@ -6,7 +6,10 @@
 ///
 ///  - Build (first frame, and again when the quality metric degrades): top-down, faces sorted
 ///    by centroid along the largest extent and cut into `arity` equal parts, down to leaves of
-///    at most `leaf` faces. Nodes are stored breadth-first, so every depth is one index range.
+///    at most `leaf` faces; where a node holds several connected components, the cut goes
+///    between components (ordered by their centroids) when that leaves each side at least a
+///    quarter of the faces, so nodes do not mix pieces that move apart. Nodes are stored
+///    breadth-first, so every depth is one index range.
 ///  - Refit (every frame), bottom-up and level by level in parallel: a face's k-DOP holds its
 ///    corners at the current positions and, with `sweep=on` and previous positions given, at
 ///    the previous ones (the projection of a linearly moving point is linear in time, so this
@@ -22,8 +25,8 @@
 ///    (a monotone conversion, so never less than the double test keeps); face pairs that pass
 ///    are tested in double. Faces that share a vertex are skipped at the leaves (their orphan
 ///    sub-pairs are handled by the pipeline).
-/// Spec: `kdop:k=6|14|18|26,arity=2|4|8,leaf=N,rebuild=R,sweep=on|off,cones=on|off` plus `max_contacts`,
-/// `overflow`.
+/// Spec: `kdop:k=6|14|18|26,arity=2|4|8,leaf=N,rebuild=R,sweep=on|off,cones=on|off,coherence=on|off`
+/// plus `max_contacts`, `overflow`.
 ///  - Normal-cone culling (ALGORITHMS.md §3; Volino & Magnenat-Thalmann), for intersection-only
 ///    queries (`kinds` = tt): a node whose faces all face one of 26 fixed directions V (a
 ///    per-face bit mask ANDed up the tree) and whose boundary, projected along V, is one
@@ -32,6 +35,14 @@
 ///    is a height field can still hold features closer than the thickness (ALGORITHMS.md §3
 ///    pitfalls). Needs consistently oriented faces; any doubt (degenerate face, an edge used
 ///    twice in one direction, a loop winding more than once) keeps the self-test.
+///  - Temporal coherence (`coherence=on`, proximity queries): a refresh frame inflates the
+///    k-DOPs by a slack s more and records the candidates of each unit (the first self-test of a
+///    node of at most 512 faces, or pair test of two such nodes, that the traversal reaches); on
+///    later frames a unit whose vertices' displacements since then differ by at most s emits
+///    those candidates without being traversed. Exact (the argument is in kdop_tree.cpp). When
+///    more than a quarter of a sample of leaves have moved beyond s the cache is refreshed, and
+///    when that happens right after a refresh it waits 1, 2, 4, ... 64 frames (deforming cloth
+///    pays only the sample).
 
 #include <crumple/detect/broad_phase.hpp>
 
@@ -55,6 +66,11 @@ struct KdopParams {
   /// Off by default: on the real meshes it skips under 1% of the candidates and costs more
   /// than it saves (docs/exact-detectors.md).
   bool cones = false;
+  /// Temporal coherence of the self-traversal for proximity queries (see the file comment):
+  /// a patch (or a pair of nearby patches) whose vertices all moved by nearly the same vector
+  /// since a refresh frame reuses that frame's candidates instead of being traversed again
+  /// (rigid bodies carried along, cloth at rest). The contacts are the same either way.
+  bool coherence = true;
   ExactParams exact;
   /// Reads a `kdop:...` spec; keys left out keep the defaults above.
   static KdopParams from_spec(const MethodSpec& spec);

@@ -30,7 +30,7 @@ constexpr std::array<ParamInfo, 10> kStochasticParams{{
      "thesis settings: 1 = 10 active pairs with propagation, 2 = 100 without (keys override)"},
 }};
 
-constexpr std::array<ParamInfo, 8> kKdopParams{{
+constexpr std::array<ParamInfo, 9> kKdopParams{{
     {"k", "18", "6 | 14 | 18 | 26: k-DOP directions"},
     {"arity", "4", "2 | 4 | 8: children per node"},
     {"leaf", "48", "maximum faces per leaf (1..64)"},
@@ -42,6 +42,10 @@ constexpr std::array<ParamInfo, 8> kKdopParams{{
     {"cones", "off",
      "on | off: skip the self-test of patches that provably cannot intersect themselves "
      "(normals in a cone, star-shaped contour); intersection-only queries (--kinds tt)"},
+    {"coherence", "on",
+     "on | off: patches whose vertices all moved by nearly the same vector since a refresh "
+     "frame reuse that frame's candidates instead of being traversed again; proximity "
+     "queries (same contacts)"},
     {"max_contacts", "0", "cap on the contacts of one frame (0 = none); see overflow"},
     {"overflow", "error",
      "error | truncate: over max_contacts, throw, or keep the first contacts in canonical "
