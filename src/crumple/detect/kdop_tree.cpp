@@ -313,6 +313,12 @@ class KdopTree final : public KdopDetector::Tree {
       }
     }
     dops_.assign(nodes_.size(), Dop());
+    level_leaf_faces_.assign(levels_.size(), 0);
+    for (std::size_t l = 0; l < levels_.size(); ++l) {
+      for (Index n = levels_[l][0]; n < levels_[l][1]; ++n) {
+        if (nodes_[static_cast<std::size_t>(n)].leaf) level_leaf_faces_[l] += nodes_[static_cast<std::size_t>(n)].faces;
+      }
+    }
     small_.resize(nodes_.size());
     leaf_ids_.clear();
     leaf_verts_.assign(nodes_.size() + 1, 0);
@@ -582,14 +588,13 @@ class KdopTree final : public KdopDetector::Tree {
     const Scalar radius = refit_radius_;
     const bool moves = mode_ == Mode::reuse;  // displacement boxes since the refresh frame
     if (moves) moved_.resize(nodes_.size());
-    const std::size_t nf = order_.size();
     for (std::size_t l = levels_.size(); l-- > 0;) {
       const auto [lb, le] = levels_[l];
       const auto count = static_cast<std::size_t>(le - lb);
-      // Chunks of about 2048 faces on a level of leaves (chunks of 1024 leaves held the whole of
-      // a 20k-face mesh, refitted on one thread), of 1024 nodes above.
-      const bool leaves = nodes_[static_cast<std::size_t>(lb)].leaf;
-      const std::size_t grain = leaves ? std::max<std::size_t>(1, 2048 * count / std::max<std::size_t>(nf, 1)) : 1024;
+      // Chunks of about 2048 faces on a level with leaves (chunks of 1024 leaves held the whole
+      // of a 20k-face mesh, refitted on one thread), of 1024 nodes above.
+      const auto leaf_faces = static_cast<std::size_t>(level_leaf_faces_[l]);
+      const std::size_t grain = leaf_faces > 0 ? std::max<std::size_t>(1, 2048 * count / leaf_faces) : 1024;
       parallel_for_chunks(count, in.threads, grain, [&](std::size_t begin, std::size_t end) {
         std::array<FloatDop, 64> faces;  // a leaf's face k-DOPs, for its lanes
         for (std::size_t i = begin; i < end; ++i) {
@@ -932,17 +937,29 @@ class KdopTree final : public KdopDetector::Tree {
   void choose_coherence(const FrameInput& in) {
     refit_radius_ = in.radius;
     mode_ = Mode::off;
-    // Displacement boxes take no NaN: a frame with a non-finite coordinate is traversed, and
-    // the next finite one records.
-    const bool usable = params_.coherence && !in.intersection_only && !(params_.sweep && !in.previous.empty()) &&
-                        std::all_of(in.positions.begin(), in.positions.end(), [](const Vec3& p) { return p.allFinite(); });
-    if (!usable) {
+    if (!params_.coherence || in.intersection_only || (params_.sweep && !in.previous.empty())) {
       cache_valid_ = false;
       return;
     }
-    if (!cache_valid_ || cache_ref_.size() != in.positions.size()) return start_record(in);
+    // Displacement boxes take no NaN: a frame with a non-finite coordinate is traversed, and
+    // the next finite one records.
+    const auto finite = [&] {
+      return std::all_of(in.positions.begin(), in.positions.end(), [](const Vec3& p) { return p.allFinite(); });
+    };
+    if (!cache_valid_ || cache_ref_.size() != in.positions.size()) {
+      if (finite()) {
+        start_record(in);
+      } else {
+        cache_valid_ = false;
+      }
+      return;
+    }
     if (cache_wait_ > 0) {  // backing off: traversed, nothing recorded
       --cache_wait_;
+      return;
+    }
+    if (!finite()) {
+      cache_valid_ = false;
       return;
     }
     slack_ = 2 * (cache_radius_ - in.radius);
@@ -1038,6 +1055,7 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<Dop> now_dops_;     ///< per slot, current positions only, inflated (when swept)
   bool swept_ = false;            ///< this frame's boxes cover the motion
   std::vector<std::array<Index, 2>> levels_;  ///< node range of each depth
+  std::vector<Index> level_leaf_faces_;       ///< faces in the leaves of each depth
   double built_quality_ = 0;
   // Normal-cone culling (intersection-only frames).
   bool culling_ = false;
