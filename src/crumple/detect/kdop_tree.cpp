@@ -178,7 +178,9 @@ class KdopTree final : public KdopDetector::Tree {
     if (topo.num_faces() == 0) return;
     const auto t0 = std::chrono::steady_clock::now();
     if (nodes_.empty()) build(topo, in.positions, stats);
+    const auto tc = std::chrono::steady_clock::now();
     choose_coherence(in);
+    stats.set("coherence_ms", ms_since(tc));
     refit(in);
     double q = quality();
     if (q > params_.rebuild * built_quality_) {
@@ -397,10 +399,14 @@ class KdopTree final : public KdopDetector::Tree {
     for (auto it = first; it != last; ++it) {
       if (component_faces_[comp(*it)]++ == 0) pieces.push_back({static_cast<Index>(comp(*it)), 0});
     }
+    Index largest = 0;
     for (Piece& p : pieces) {
       p.faces = component_faces_[static_cast<std::size_t>(p.component)];
       component_faces_[static_cast<std::size_t>(p.component)] = 0;
+      largest = std::max(largest, p.faces);
     }
+    // A piece larger than a coherence unit is cut across units anyway.
+    if (largest > kUnitFaces) return -1;
     const Index size = end - begin;
     Index best_at = -1, best_moved = size;
     std::vector<Index> best_left;
@@ -958,12 +964,12 @@ class KdopTree final : public KdopDetector::Tree {
       --cache_wait_;
       return;
     }
-    if (!finite()) {
-      cache_valid_ = false;
-      return;
-    }
     slack_ = 2 * (cache_radius_ - in.radius);
     if (slack_ > 0 && cache_fresh(in.positions)) {
+      if (!finite()) {
+        cache_valid_ = false;
+        return;
+      }
       if (cache_refreshed_) cache_backoff_ = 0;
       cache_refreshed_ = false;
       mode_ = Mode::reuse;
@@ -977,7 +983,11 @@ class KdopTree final : public KdopDetector::Tree {
       cache_refreshed_ = false;
       return;
     }
-    start_record(in);
+    if (finite()) {
+      start_record(in);
+    } else {
+      cache_valid_ = false;
+    }
   }
 
   /// A refresh frame: the k-DOPs are inflated by the slack more, and every unit's candidates
@@ -993,9 +1003,11 @@ class KdopTree final : public KdopDetector::Tree {
   }
 
   /// Of every 16th leaf, at most a quarter have vertices whose displacements since the refresh
-  /// frame differ by more than the slack (else most units would be traversed anyway).
+  /// frame differ by more than the slack (else most units would be traversed anyway). Stops as
+  /// soon as more than a quarter have (deforming cloth: a quarter of the sample, scattered reads).
   bool cache_fresh(PositionsView x) const {
-    std::size_t looked = 0, moved = 0;
+    const std::size_t samples = (leaf_ids_.size() + 15) / 16;
+    std::size_t moved = 0;
     for (std::size_t i = 0; i < leaf_ids_.size(); i += 16) {
       const auto n = static_cast<std::size_t>(leaf_ids_[i]);
       Moved m;
@@ -1003,10 +1015,10 @@ class KdopTree final : public KdopDetector::Tree {
         const auto v = static_cast<std::size_t>(verts_[k]);
         m.extend(x[v] - cache_ref_[v]);
       }
-      ++looked;
       moved += spread(m, m) <= slack_ ? 0 : 1;
+      if (4 * moved > samples) return false;
     }
-    return 4 * moved <= looked;
+    return true;
   }
 
   /// Bound on |(p - p_ref) - (q - q_ref)| for points p, q of the faces of two nodes with these
