@@ -6,10 +6,12 @@
 ///
 ///  - Build (first frame, and again when the quality metric degrades): top-down, faces sorted
 ///    by centroid along the largest extent and cut into `arity` equal parts, down to leaves of
-///    at most `leaf` faces; where a node holds several connected components, the cut goes
-///    between components (ordered by their centroids) when that leaves each side at least a
-///    quarter of the faces, so nodes do not mix pieces that move apart. Nodes are stored
-///    breadth-first, so every depth is one index range.
+///    at most `leaf` faces; where a node holds several connected components, each of at most
+///    512 faces, the cut goes between components (ordered by their centroids, along the axis
+///    where this moves the fewest faces across the median cut, at most a quarter) when that
+///    leaves each side at least a quarter of the faces, so that small bodies that move apart
+///    are not mixed in a node. Nodes are stored breadth-first, so every depth is one index
+///    range.
 ///  - Refit (every frame), bottom-up and level by level in parallel: a face's k-DOP holds its
 ///    corners at the current positions and, with `sweep=on` and previous positions given, at
 ///    the previous ones (the projection of a linearly moving point is linear in time, so this
