@@ -379,9 +379,10 @@ class KdopTree final : public KdopDetector::Tree {
   }
 
   /// Where the faces of slots [begin, end) belong to several connected components, a cut
-  /// between components, so that a node does not mix pieces that move apart (rigid bodies,
-  /// separate cloths; n-body's 305 balls of 480 faces: a leaf of the median cut held faces of two
-  /// balls in about half the cases, and no coherence unit with it could be reused). Along each
+  /// between components, so that a node does not mix small bodies that move apart (n-body's 305
+  /// balls of 480 faces: a leaf of the median cut held faces of two balls in about half the
+  /// cases, and no coherence unit with it could be reused). Only where every component in the
+  /// node fits in a unit (a larger one is cut across units anyway). Along each
   /// axis (the longest first), the components are ordered by their centroids and the boundary
   /// nearest `mid` that leaves each side at least a quarter of the faces is compared with the
   /// median cut along that axis: kept when it puts at most a quarter of the faces on the other
@@ -405,7 +406,6 @@ class KdopTree final : public KdopDetector::Tree {
       component_faces_[static_cast<std::size_t>(p.component)] = 0;
       largest = std::max(largest, p.faces);
     }
-    // A piece larger than a coherence unit is cut across units anyway.
     if (largest > kUnitFaces) return -1;
     const Index size = end - begin;
     Index best_at = -1, best_moved = size;
