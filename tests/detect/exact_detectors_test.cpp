@@ -325,7 +325,8 @@ TEST(ExactDetectors, OrphanBoundsHoldAtEveryKindOfRejection) {
 // frame's extra inflation is what keeps them; one drops from 1.45h by 0.1h a frame (beyond the
 // slack from the first frame: a spread underestimated tenfold would reuse its units, and miss
 // its contacts from frame 5). Checked against naive on every frame; the units are the same
-// whatever the thread count.
+// whatever the thread count. (`rebuild=1` rebuilds the tree on reuse frames, which must record
+// afresh.)
 TEST(ExactDetectors, KdopCoherenceReusesOnlyWhatCannotHaveMoved) {
   const Scalar h = 0.02;
   const TriMesh piece = shapes::lattice(6, 6);
@@ -366,7 +367,8 @@ TEST(ExactDetectors, KdopCoherenceReusesOnlyWhatCannotHaveMoved) {
   std::vector<Positions> frames;
   for (int k = 0; k <= 12; ++k) frames.push_back(frame(k));
   const std::size_t n = expect_sequence_exact(
-      mesh, frames, h, {"kdop", "kdop:coherence=off", "kdop:arity=2,leaf=8", "kdop:k=6,arity=8,leaf=64"},
+      mesh, frames, h,
+      {"kdop", "kdop:coherence=off", "kdop:arity=2,leaf=8", "kdop:k=6,arity=8,leaf=64", "kdop:rebuild=1,leaf=16"},
       ContactKinds::parse("vf,ee"), {1, 2, 3});
   if (HasFatalFailure()) return;
   EXPECT_GT(n, 1000u);
