@@ -294,6 +294,11 @@ class KdopTree final : public KdopDetector::Tree {
         nodes_.push_back(Node{});
       }
     }
+    // The component scratch serves the cuts only.
+    component_ = {};
+    component_centroid_ = {};
+    component_faces_ = {};
+    scratch_ = {};
     Index groups = 0;
     for (Node& node : nodes_) {
       node.lanes = groups;
@@ -1053,10 +1058,11 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<Index> leaf_ids_;
   std::vector<std::size_t> leaf_verts_;  ///< per node: a leaf's vertices are verts_[n, n + 1)
   std::vector<Index> verts_;
-  std::vector<Index> component_;        ///< per face, its connected component (build only)
-  std::vector<Vec3> component_centroid_;  ///< per component id, mean face centroid (build only)
-  std::vector<Index> component_faces_;    ///< per component id, scratch of `split` (all 0)
-  std::vector<Scalar> scratch_;           ///< scratch of `split`
+  // Scratch of `build` and `split`, released after the cuts.
+  std::vector<Index> component_;          ///< per face, its connected component
+  std::vector<Vec3> component_centroid_;  ///< per component id, mean face centroid
+  std::vector<Index> component_faces_;    ///< per component id (all 0 between uses)
+  std::vector<Scalar> scratch_;
   std::vector<Node> nodes_;
   std::vector<Dop> dops_;
   std::vector<FloatDop> float_dops_;  ///< per node
