@@ -24,13 +24,6 @@ double ms_since(std::chrono::steady_clock::time_point start) {
 
 Box point_box(const Vec3& p) { return {{p.x(), p.y(), p.z()}, {p.x(), p.y(), p.z()}}; }
 
-void grow(Box& b, const Vec3& p) {
-  for (int i = 0; i < 3; ++i) {
-    b.lo[i] = std::min(b.lo[i], p[i]);
-    b.hi[i] = std::max(b.hi[i], p[i]);
-  }
-}
-
 void inflate(Box& b, Scalar r) {
   for (int i = 0; i < 3; ++i) {
     b.lo[i] -= r;
@@ -276,10 +269,10 @@ void ExactDetector::face_boxes(const FrameInput& in, bool sweep, std::vector<Box
     for (std::size_t f = begin; f < end; ++f) {
       const Face& t = topo.face(static_cast<Index>(f));
       Box b = point_box(narrow::at(in.positions, t[0]));
-      grow(b, narrow::at(in.positions, t[1]));
-      grow(b, narrow::at(in.positions, t[2]));
+      b.grow(narrow::at(in.positions, t[1]));
+      b.grow(narrow::at(in.positions, t[2]));
       if (swept) {
-        for (Index v : t) grow(b, narrow::at(in.previous, v));
+        for (Index v : t) b.grow(narrow::at(in.previous, v));
       }
       inflate(b, in.radius);
       out[f] = b;

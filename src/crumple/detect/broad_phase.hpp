@@ -31,6 +31,7 @@
 #include <algorithm>
 #include <array>
 #include <cstddef>
+#include <limits>
 #include <mutex>
 #include <utility>
 #include <vector>
@@ -149,6 +150,24 @@ struct Box {
   bool contains(const Vec3& p) const {
     return (lo[0] <= p.x()) & (p.x() <= hi[0]) & (lo[1] <= p.y()) & (p.y() <= hi[1]) &
            (lo[2] <= p.z()) & (p.z() <= hi[2]);
+  }
+  /// The empty box (lo = +inf, hi = -inf): `grow` and `merge` start from it.
+  static Box empty() {
+    constexpr Scalar inf = std::numeric_limits<Scalar>::infinity();
+    return {{inf, inf, inf}, {-inf, -inf, -inf}};
+  }
+  void grow(const Vec3& p) {
+    for (int i = 0; i < 3; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      lo[k] = std::min(lo[k], p[i]);
+      hi[k] = std::max(hi[k], p[i]);
+    }
+  }
+  void merge(const Box& o) {
+    for (std::size_t k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], o.lo[k]);
+      hi[k] = std::max(hi[k], o.hi[k]);
+    }
   }
 };
 

@@ -129,24 +129,6 @@ class KdopTree final : public KdopDetector::Tree {
   static constexpr Index kUnitFaces = 512;
   static constexpr Scalar kSlack = 1.0 / 16;
   enum class Mode { off, record, reuse };
-  static constexpr Scalar kInf = std::numeric_limits<Scalar>::infinity();
-  /// Axis-aligned box of displacements x - x_ref (reuse frames have finite positions).
-  struct Moved {
-    std::array<Scalar, 3> lo{kInf, kInf, kInf}, hi{-kInf, -kInf, -kInf};
-    void extend(const Vec3& d) {
-      for (int k = 0; k < 3; ++k) {
-        const auto i = static_cast<std::size_t>(k);
-        lo[i] = std::min(lo[i], d[k]);
-        hi[i] = std::max(hi[i], d[k]);
-      }
-    }
-    void merge(const Moved& o) {
-      for (std::size_t i = 0; i < 3; ++i) {
-        lo[i] = std::min(lo[i], o.lo[i]);
-        hi[i] = std::max(hi[i], o.hi[i]);
-      }
-    }
-  };
   /// A recorded unit: candidates unit_pairs_[begin, end) of the nodes key = (min << 32 | max).
   struct Unit {
     std::uint64_t key;
@@ -612,7 +594,7 @@ class KdopTree final : public KdopDetector::Tree {
           const std::size_t n = static_cast<std::size_t>(lb) + i;
           const Node& node = nodes_[n];
           Dop d;
-          Moved mv;
+          Box mv = Box::empty();
           if (node.leaf) {
             // Each face's k-DOP straight from its corners (and their previous positions when
             // swept), inflated: the same slabs as merging per-vertex k-DOPs, since rounding
@@ -635,7 +617,7 @@ class KdopTree final : public KdopDetector::Tree {
             if (moves) {
               for (std::size_t k = leaf_verts_[n]; k < leaf_verts_[n + 1]; ++k) {
                 const auto v = static_cast<std::size_t>(verts_[k]);
-                mv.extend(in.positions[v] - cache_ref_[v]);
+                mv.grow(in.positions[v] - cache_ref_[v]);
               }
             }
           } else {
@@ -1015,10 +997,10 @@ class KdopTree final : public KdopDetector::Tree {
     std::size_t moved = 0;
     for (std::size_t i = 0; i < leaf_ids_.size(); i += 16) {
       const auto n = static_cast<std::size_t>(leaf_ids_[i]);
-      Moved m;
+      Box m = Box::empty();
       for (std::size_t k = leaf_verts_[n]; k < leaf_verts_[n + 1]; ++k) {
         const auto v = static_cast<std::size_t>(verts_[k]);
-        m.extend(x[v] - cache_ref_[v]);
+        m.grow(x[v] - cache_ref_[v]);
       }
       moved += spread(m, m) <= slack_ ? 0 : 1;
       if (4 * moved > samples) return false;
@@ -1029,9 +1011,9 @@ class KdopTree final : public KdopDetector::Tree {
   /// Bound on |(p - p_ref) - (q - q_ref)| for points p, q of the faces of two nodes with these
   /// displacement boxes (a point of a face moves by a convex combination of its corners'
   /// displacements, which lies in the box), with the rounding of x - x_ref (relative to the
-  /// displacement) and of the norm covered. NaN when a displacement is.
-  static Scalar spread(const Moved& a, const Moved& b) {
-    Moved u = a;
+  /// displacement) and of the norm covered. Reuse frames have finite positions (checked).
+  static Scalar spread(const Box& a, const Box& b) {
+    Box u = a;
     u.merge(b);
     Scalar s2 = 0, big = 0;
     for (std::size_t k = 0; k < 3; ++k) {
@@ -1053,7 +1035,7 @@ class KdopTree final : public KdopDetector::Tree {
   Positions cache_ref_;      ///< positions of the refresh frame
   std::vector<Unit> units_;  ///< the refresh frame's units with candidates, by key
   std::vector<FacePair> unit_pairs_;
-  std::vector<Moved> moved_;  ///< per node, reuse frames: displacement box since the refresh
+  std::vector<Box> moved_;  ///< per node, reuse frames: box of the displacements since the refresh
   std::vector<char> small_;   ///< per node: at most kUnitFaces faces
   std::vector<Index> leaf_ids_;
   std::vector<std::size_t> leaf_verts_;  ///< per node: a leaf's vertices are verts_[n, n + 1)
