@@ -136,8 +136,10 @@ constexpr SubPairTable kSubPairs{};
 
 /// Contacts found by one chunk of work, kept until the frame's set is gathered.
 struct LocalContacts {
+  explicit LocalContacts(ContactSet&& spare) : set(std::move(spare)) {}
   ContactSet set;
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
+  narrow::EdgeEdgeBatch ee_batch;  ///< edge pairs queued for the kernel, four at a time
 };
 
 }  // namespace
@@ -428,6 +430,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
   std::vector<ContactSet> parts;  // each chunk's contacts, gathered in order at the end
   const auto merge = [&](LocalContacts& local) {
+    local.ee_batch.flush(h2, local.set.ee);
     const std::lock_guard lock(mutex);
     if (!local.set.empty()) {
       parts.push_back(std::move(local.set));
@@ -499,21 +502,20 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     return gap * (1 - 1e-12);
   };
   // Edge e0 = (p0, p1) of vertices (u0, u1) and edge e1 = (q0, q1) of vertices (w0, w1), each
-  // in any order, past the cheap rejections: the shared kernel.
+  // in any order, past the cheap rejections: the shared kernel, which sees the edges as the mesh
+  // stores them (lower id first, each from its lower vertex), as for every other detector: the
+  // same bits. Queued four at a time (the contacts reach local.set.ee at the latest in `merge`),
+  // unless the squared distance is wanted.
   const auto ee_kernel = [&](const Vec3& p0, const Vec3& p1, Index u0, Index u1, Index e0, const Vec3& q0,
                              const Vec3& q1, Index w0, Index w1, Index e1, LocalContacts& local,
-                             Scalar* sqr_distance = nullptr) __attribute__((noinline)) {
+                             Scalar* sqr_distance = nullptr) {
     ++local.ee_tests;
-    // The shared kernel sees the edges as the mesh stores them (lower id first, each from its
-    // lower vertex), as for every other detector: the same bits.
-    const Edge ea{std::min(u0, u1), std::max(u0, u1)}, eb{std::min(w0, w1), std::max(w0, w1)};
-    const Vec3& a0 = u0 < u1 ? p0 : p1;
-    const Vec3& a1 = u0 < u1 ? p1 : p0;
-    const Vec3& b0 = w0 < w1 ? q0 : q1;
-    const Vec3& b1 = w0 < w1 ? q1 : q0;
-    auto c = e0 < e1 ? narrow::edge_edge(e0, ea, a0, a1, e1, eb, b0, b1, h2, sqr_distance)
-                     : narrow::edge_edge(e1, eb, b0, b1, e0, ea, a0, a1, h2, sqr_distance);
-    if (c) local.set.ee.push_back(*c);
+    const auto pair = narrow::EdgePair::ordered(e0, u0, u1, p0, p1, e1, w0, w1, q0, q1);
+    if (sqr_distance == nullptr) {
+      local.ee_batch.push(pair, h2, local.set.ee);
+    } else if (auto c = pair.test(h2, sqr_distance)) {
+      local.set.ee.push_back(*c);
+    }
   };
   // The boxes of edges (p0, p1) and (q0, q1) padded by pad / 2 overlap (branch-free).
   const auto boxes_meet = [half](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {

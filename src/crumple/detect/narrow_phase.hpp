@@ -8,9 +8,13 @@
 #include <crumple/core/types.hpp>
 #include <crumple/detect/contact.hpp>
 #include <crumple/geometry/distance.hpp>
+#include <crumple/geometry/segment_batch.hpp>
 #include <crumple/mesh/mesh.hpp>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <vector>
 #include <optional>
 
 namespace crumple::narrow {
@@ -50,17 +54,12 @@ inline std::optional<VertexFaceContact> vertex_face(PositionsView x, const Topol
   return vertex_face(v, at(x, v), f, at(x, t[0]), at(x, t[1]), at(x, t[2]), sqr_thickness);
 }
 
-/// Edges e0 = ea and e1 = eb (sharing no vertex) at positions p0, p1 (of ea[0], ea[1]) and q0,
-/// q1 (of eb[0], eb[1]); a contact when the distance is < h. The contact is order-normalised (see
-/// `EdgeEdgeContact`). Callers pass e0 < e1, each edge as the mesh stores it, so that every
-/// detector evaluates a pair in the same order and gets the same bits. The squared distance,
-/// contact or not, goes to `*sqr_distance` when given.
-inline std::optional<EdgeEdgeContact> edge_edge(Index e0, const Edge& ea, const Vec3& p0, const Vec3& p1,
-                                                Index e1, const Edge& eb, const Vec3& q0, const Vec3& q1,
-                                                Scalar sqr_thickness, Scalar* sqr_distance = nullptr) {
-  const geometry::SegmentSegmentResult r = geometry::segment_segment(p0, p1, q0, q1);
-  if (sqr_distance != nullptr) *sqr_distance = r.sqr_distance;
-  if (!(r.sqr_distance < sqr_thickness)) return std::nullopt;
+/// The contact of edges e0 = ea and e1 = eb (at p0, p1 and q0, q1, as `edge_edge` takes them)
+/// from their kernel result r (segment_segment(p0, p1, q0, q1), closest points included), when
+/// its distance is below h.
+inline EdgeEdgeContact edge_edge_contact(Index e0, const Edge& ea, const Vec3& p0, const Vec3& p1, Index e1,
+                                         const Edge& eb, const Vec3& q0, const Vec3& q1,
+                                         const geometry::SegmentSegmentResult& r) {
   const Scalar distance = std::sqrt(r.sqr_distance);
   Vec3 normal;
   const Vec3 gap = r.closest1 - r.closest0;
@@ -75,6 +74,20 @@ inline std::optional<EdgeEdgeContact> edge_edge(Index e0, const Edge& ea, const 
   return make_edge_edge_contact(e0, ea, e1, eb, distance, r.s, r.t, normal);
 }
 
+/// Edges e0 = ea and e1 = eb (sharing no vertex) at positions p0, p1 (of ea[0], ea[1]) and q0,
+/// q1 (of eb[0], eb[1]); a contact when the distance is < h. The contact is order-normalised (see
+/// `EdgeEdgeContact`). Callers pass e0 < e1, each edge as the mesh stores it, so that every
+/// detector evaluates a pair in the same order and gets the same bits. The squared distance,
+/// contact or not, goes to `*sqr_distance` when given.
+inline std::optional<EdgeEdgeContact> edge_edge(Index e0, const Edge& ea, const Vec3& p0, const Vec3& p1,
+                                                Index e1, const Edge& eb, const Vec3& q0, const Vec3& q1,
+                                                Scalar sqr_thickness, Scalar* sqr_distance = nullptr) {
+  const geometry::SegmentSegmentResult r = geometry::segment_segment(p0, p1, q0, q1);
+  if (sqr_distance != nullptr) *sqr_distance = r.sqr_distance;
+  if (!(r.sqr_distance < sqr_thickness)) return std::nullopt;
+  return edge_edge_contact(e0, ea, p0, p1, e1, eb, q0, q1, r);
+}
+
 /// Edges e0 < e1 (sharing no vertex), with the positions read from x.
 inline std::optional<EdgeEdgeContact> edge_edge(PositionsView x, const Topology& topo, Index e0,
                                                 Index e1, Scalar sqr_thickness) {
@@ -82,5 +95,56 @@ inline std::optional<EdgeEdgeContact> edge_edge(PositionsView x, const Topology&
   const Edge& eb = topo.edge(e1);
   return edge_edge(e0, ea, at(x, ea[0]), at(x, ea[1]), e1, eb, at(x, eb[0]), at(x, eb[1]), sqr_thickness);
 }
+
+/// An edge pair as `edge_edge` takes it (e0 < e1, each edge as the mesh stores it, p0 p1 the
+/// positions of ea's vertices, q0 q1 eb's), from edges given in any order: edge e of vertices
+/// (u0, u1) at (x0, x1) and edge f of vertices (w0, w1) at (y0, y1).
+struct EdgePair {
+  Index e0, e1;
+  Edge ea, eb;
+  const Vec3 *p0, *p1, *q0, *q1;
+  static EdgePair ordered(Index e, Index u0, Index u1, const Vec3& x0, const Vec3& x1, Index f, Index w0, Index w1,
+                          const Vec3& y0, const Vec3& y1) {
+    const Edge a{std::min(u0, u1), std::max(u0, u1)}, b{std::min(w0, w1), std::max(w0, w1)};
+    const Vec3* a0 = u0 < u1 ? &x0 : &x1;
+    const Vec3* a1 = u0 < u1 ? &x1 : &x0;
+    const Vec3* b0 = w0 < w1 ? &y0 : &y1;
+    const Vec3* b1 = w0 < w1 ? &y1 : &y0;
+    return e < f ? EdgePair{e, f, a, b, a0, a1, b0, b1} : EdgePair{f, e, b, a, b0, b1, a0, a1};
+  }
+  /// edge_edge on this pair.
+  std::optional<EdgeEdgeContact> test(Scalar sqr_thickness, Scalar* sqr_distance = nullptr) const {
+    return edge_edge(e0, ea, *p0, *p1, e1, eb, *q0, *q1, sqr_thickness, sqr_distance);
+  }
+};
+
+/// Edge pairs tested four at a time (geometry::segment_segment_x4, the same bits as
+/// `edge_edge`): `push` queues a pair, whose positions must stay in place until the next
+/// `flush`; every fourth push, and `flush`, appends the contacts of the queued pairs to `out`.
+class EdgeEdgeBatch {
+ public:
+  void push(const EdgePair& pair, Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
+    batch_.set(n_, *pair.p0, *pair.p1, *pair.q0, *pair.q1);
+    pairs_[n_++] = pair;
+    if (n_ == geometry::SegmentBatch::kLanes) flush(sqr_thickness, out);
+  }
+  void flush(Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
+    if (n_ == 0) return;
+    const geometry::SegmentBatchResult r = geometry::segment_segment_x4(batch_, n_);
+    for (std::size_t i = 0; i < n_; ++i) {
+      if (!(r.sqr_distance[i] < sqr_thickness)) continue;
+      const EdgePair& p = pairs_[i];
+      geometry::SegmentSegmentResult one{r.sqr_distance[i], r.s[i], r.t[i], {}, {}};
+      geometry::set_closest_points(one, *p.p0, *p.p1, *p.q0, *p.q1);
+      out.push_back(edge_edge_contact(p.e0, p.ea, *p.p0, *p.p1, p.e1, p.eb, *p.q0, *p.q1, one));
+    }
+    n_ = 0;
+  }
+
+ private:
+  geometry::SegmentBatch batch_;
+  std::array<EdgePair, geometry::SegmentBatch::kLanes> pairs_{};
+  std::size_t n_ = 0;
+};
 
 }  // namespace crumple::narrow
