@@ -14,8 +14,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <vector>
 #include <optional>
+#include <vector>
 
 namespace crumple::narrow {
 
@@ -55,8 +55,8 @@ inline std::optional<VertexFaceContact> vertex_face(PositionsView x, const Topol
 }
 
 /// The contact of edges e0 = ea and e1 = eb (at p0, p1 and q0, q1, as `edge_edge` takes them)
-/// from their kernel result r (segment_segment(p0, p1, q0, q1), closest points included), when
-/// its distance is below h.
+/// from their kernel result r (segment_segment(p0, p1, q0, q1), closest points included), whose
+/// distance the caller found below h.
 inline EdgeEdgeContact edge_edge_contact(Index e0, const Edge& ea, const Vec3& p0, const Vec3& p1, Index e1,
                                          const Edge& eb, const Vec3& q0, const Vec3& q1,
                                          const geometry::SegmentSegmentResult& r) {
