@@ -121,16 +121,21 @@ struct EdgePair {
 /// Edge pairs tested four at a time (geometry::segment_segment_x4, the same bits as
 /// `edge_edge`): `push` queues a pair, whose positions must stay in place until the next
 /// `flush`; every fourth push, and `flush`, appends the contacts of the queued pairs to `out`.
+/// Without AVX2 (`geometry::has_avx2()`), `push` tests each pair at once with `edge_edge`.
 class EdgeEdgeBatch {
  public:
   void push(const EdgePair& pair, Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
+    if (!lanes_) {
+      if (auto c = pair.test(sqr_thickness)) out.push_back(*c);
+      return;
+    }
     batch_.set(n_, *pair.p0, *pair.p1, *pair.q0, *pair.q1);
     pairs_[n_++] = pair;
     if (n_ == geometry::SegmentBatch::kLanes) flush(sqr_thickness, out);
   }
   void flush(Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
     if (n_ == 0) return;
-    const geometry::SegmentBatchResult r = geometry::segment_segment_x4(batch_, n_);
+    const geometry::SegmentBatchResult r = geometry::segment_segment_x4(batch_);
     for (std::size_t i = 0; i < n_; ++i) {
       if (!(r.sqr_distance[i] < sqr_thickness)) continue;
       const EdgePair& p = pairs_[i];
@@ -142,6 +147,7 @@ class EdgeEdgeBatch {
   }
 
  private:
+  bool lanes_ = geometry::has_avx2();
   geometry::SegmentBatch batch_;
   std::array<EdgePair, geometry::SegmentBatch::kLanes> pairs_{};
   std::size_t n_ = 0;

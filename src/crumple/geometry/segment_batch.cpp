@@ -3,7 +3,7 @@
 #include <cstring>
 
 // The vector type's ABI differs with and without AVX, which GCC warns about at every function
-// taking or returning one; all of those below are inlined into segment_segment_x4_avx2.
+// taking or returning one; all of those below are inlined into segment_segment_x4.
 #pragma GCC diagnostic ignored "-Wpsabi"
 
 namespace crumple::geometry {
@@ -11,7 +11,7 @@ namespace crumple::geometry {
 namespace {
 
 // Four doubles, and the masks that comparing them gives (all bits set where true), as GCC's
-// vector extensions; compiled with AVX2 only (segment_segment_x4_avx2), where they are one
+// vector extensions; compiled with AVX2 only (segment_segment_x4), where they are one
 // register each.
 using V = Scalar __attribute__((vector_size(32)));
 using M = long long __attribute__((vector_size(32)));
@@ -120,23 +120,8 @@ bool has_avx2() {
   return yes;
 }
 
-__attribute__((target("avx2"))) SegmentBatchResult segment_segment_x4_avx2(const SegmentBatch& batch) {
+__attribute__((target("avx2"))) SegmentBatchResult segment_segment_x4(const SegmentBatch& batch) {
   return run(batch);
-}
-
-SegmentBatchResult segment_segment_x4(const SegmentBatch& batch, std::size_t count) {
-  if (has_avx2()) return segment_segment_x4_avx2(batch);
-  SegmentBatchResult out;
-  for (std::size_t i = 0; i < count; ++i) {
-    const auto point = [&](std::size_t k) {
-      return Vec3(batch.coords[3 * k][i], batch.coords[3 * k + 1][i], batch.coords[3 * k + 2][i]);
-    };
-    const SegmentSegmentResult r = segment_segment(point(0), point(1), point(2), point(3));
-    out.sqr_distance[i] = r.sqr_distance;
-    out.s[i] = r.s;
-    out.t[i] = r.t;
-  }
-  return out;
 }
 
 }  // namespace crumple::geometry

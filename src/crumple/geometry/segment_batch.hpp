@@ -8,9 +8,9 @@
 /// for four pairs in vector lanes and selects each lane's outcome. Every lane performs the
 /// scalar kernel's operations, in its order, with no contraction into fused multiply-adds, so
 /// the results are the scalar kernel's bits (tests/geometry/segment_batch_test.cpp compares
-/// them on random, degenerate and adversarial inputs). On a CPU with AVX2 the lanes are one
-/// 256-bit register (chosen at run time); elsewhere the scalar kernel runs on each pair (two
-/// 128-bit halves measured slower than the scalar kernel).
+/// them on random, degenerate and adversarial inputs). The lanes are one AVX2 register, so the
+/// batch runs only on a CPU with AVX2 (`has_avx2()`, asked at run time); elsewhere callers use
+/// `segment_segment` on each pair (two 128-bit halves measured slower than the scalar kernel).
 
 #include <crumple/geometry/distance.hpp>
 
@@ -38,13 +38,11 @@ struct SegmentBatchResult {
   alignas(32) std::array<Scalar, SegmentBatch::kLanes> sqr_distance{}, s{}, t{};
 };
 
-/// The first `count` pairs of `batch` (at most four), as `segment_segment` would give them: with
-/// AVX2, four at once; otherwise by `segment_segment` itself.
-SegmentBatchResult segment_segment_x4(const SegmentBatch& batch, std::size_t count = SegmentBatch::kLanes);
-
-/// Whether this CPU runs the AVX2 path.
+/// Whether this CPU has AVX2, which `segment_segment_x4` needs.
 bool has_avx2();
-/// The AVX2 path itself, all four lanes (only where `has_avx2()`): for the tests.
-SegmentBatchResult segment_segment_x4_avx2(const SegmentBatch& batch);
+
+/// The four pairs of `batch` as `segment_segment` would give them, at once. Only where
+/// `has_avx2()`.
+SegmentBatchResult segment_segment_x4(const SegmentBatch& batch);
 
 }  // namespace crumple::geometry
