@@ -1,5 +1,6 @@
 #include <crumple/core/parallel.hpp>
 #include <crumple/detect/broad_phase.hpp>
+#include <crumple/detect/gather.hpp>
 #include <crumple/detect/narrow_phase.hpp>
 #include <crumple/geometry/triangle_intersection.hpp>
 
@@ -29,80 +30,6 @@ void inflate(Box& b, Scalar r) {
     b.lo[i] -= r;
     b.hi[i] += r;
   }
-}
-
-/// Gathers the records of every list in `parts` into `dest` in canonical order (`CanonicalLess`).
-/// key(x) is x's place in that order as one integer, first criterion << 32 | second, the first
-/// in [0, keys). The records are not moved until their place is known: the (key, address) items
-/// are listed (in parallel over the parts), counted per first criterion, scattered, and each
-/// first criterion's few items sorted, on `threads` threads that each own a range of first
-/// criteria holding about the same number of records; each then copies its range's records to
-/// their final place, once. Fewer records than keys / 8 are sorted by key instead of counted.
-/// `scratch` holds the buffers.
-template <class T, class Key, class Scratch>
-void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*>& parts, Index keys, Key key,
-                   int threads, Scratch& scratch) {
-  auto& items = scratch.items;
-  auto& sorted = scratch.sorted;
-  auto& start = scratch.start;
-  auto& next = scratch.cursor;
-  using Item = typename std::remove_reference_t<decltype(items)>::value_type;
-  std::vector<std::size_t> offset(parts.size() + 1, 0);
-  for (std::size_t i = 0; i < parts.size(); ++i) offset[i + 1] = offset[i] + parts[i]->size();
-  const std::size_t total = offset.back();
-  dest.resize(total);
-  if (total == 0) return;
-  items.resize(total);
-  parallel_for_chunks(parts.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      Item* to = items.data() + offset[i];
-      for (const T& x : *parts[i]) *to++ = {key(x), &x};
-    }
-  });
-  const auto copy = [&](const Item* from, std::size_t begin, std::size_t end) {
-    for (std::size_t j = begin; j < end; ++j) {
-      if (j + 16 < end) {  // the records are scattered: fetch ahead
-        const auto* ahead = static_cast<const char*>(from[j + 16].record);
-        __builtin_prefetch(ahead);
-        __builtin_prefetch(ahead + sizeof(T) - 1);
-      }
-      dest[j] = *static_cast<const T*>(from[j].record);
-    }
-  };
-  const auto by_key = [](const Item& a, const Item& b) { return a.key < b.key; };
-  if (total < static_cast<std::size_t>(keys) / 8) {
-    // Few records for many keys: one sort costs less than counting over every key.
-    std::sort(items.begin(), items.end(), by_key);
-    parallel_for_chunks(total, threads, 4096, [&](std::size_t begin, std::size_t end) { copy(items.data(), begin, end); });
-    return;
-  }
-  start.assign(static_cast<std::size_t>(keys) + 1, 0);
-  for (const Item& x : items) ++start[(x.key >> 32) + 1];
-  for (std::size_t k = 1; k < start.size(); ++k) start[k] += start[k - 1];
-  const auto ranges = static_cast<std::size_t>(resolve_threads(threads));
-  std::vector<std::size_t> bound{0};  // ranges of first criteria holding about total / ranges records each
-  for (std::size_t r = 1; r < ranges; ++r) {
-    const auto it = std::lower_bound(start.begin(), start.end(), total * r / ranges);
-    bound.push_back(std::max(bound.back(), static_cast<std::size_t>(it - start.begin())));
-  }
-  bound.push_back(static_cast<std::size_t>(keys));
-  sorted.resize(total);
-  next.resize(static_cast<std::size_t>(keys));
-  parallel_for_chunks(ranges, threads, 1, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t r = begin; r < end; ++r) {
-      const std::size_t lo = bound[r], hi = std::max(lo, bound[r + 1]);
-      std::copy(start.begin() + static_cast<std::ptrdiff_t>(lo), start.begin() + static_cast<std::ptrdiff_t>(hi),
-                next.begin() + static_cast<std::ptrdiff_t>(lo));
-      for (const Item& x : items) {
-        const auto k = static_cast<std::size_t>(x.key >> 32);
-        if (k >= lo && k < hi) sorted[next[k]++] = x;
-      }
-      for (std::size_t k = lo; k < hi; ++k) {
-        std::sort(sorted.data() + start[k], sorted.data() + start[k + 1], by_key);
-      }
-      copy(sorted.data(), start[lo], start[hi]);
-    }
-  });
 }
 
 /// The owned sub-pairs of a candidate face pair, indexed by `mask_a | mask_b << 3` (the two
@@ -843,18 +770,18 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   const auto pair_key = [](Index first, Index second) {
     return static_cast<std::uint64_t>(first) << 32 | static_cast<std::uint32_t>(second);
   };
-  gather_sorted(
+  detail::gather_sorted(
       out.vf, vf_parts, nv, [&](const VertexFaceContact& c) { return pair_key(c.vertex, c.face); }, threads,
       gather_);
   // Edge-edge contacts are ordered by their first edge's vertices, then the second's: by the
   // edges' ranks in that order.
-  gather_sorted(
+  detail::gather_sorted(
       out.ee, ee_parts, topo.num_edges(),
       [&](const EdgeEdgeContact& c) {
         return pair_key(edge_rank_[static_cast<std::size_t>(c.edge0)], edge_rank_[static_cast<std::size_t>(c.edge1)]);
       },
       threads, gather_);
-  gather_sorted(
+  detail::gather_sorted(
       out.tt, tt_parts, static_cast<Index>(nf), [&](const TriangleTriangleContact& c) { return pair_key(c.face0, c.face1); },
       threads, gather_);
   for (ContactSet& p : parts) spare_sets_.give(std::move(p));

@@ -27,6 +27,7 @@
 
 #include <crumple/core/error.hpp>
 #include <crumple/detect/detector.hpp>
+#include <crumple/detect/gather.hpp>
 
 #include <algorithm>
 #include <array>
@@ -239,17 +240,7 @@ class ExactDetector : public Detector {
   std::vector<Index> isolated_;                  ///< vertices used by no face
   std::vector<Index> edge_rank_;                 ///< each edge's rank in (first, second vertex) order
   Spares<ContactSet> spare_sets_;                ///< per-chunk contact sets, for reuse
-  /// A contact being gathered: its place in canonical order, and where it is.
-  struct GatherItem {
-    std::uint64_t key;
-    const void* record;
-  };
-  /// Gather scratch, kept across frames (fresh buffers of MBs cost page faults every frame).
-  struct GatherScratch {
-    std::vector<GatherItem> items, sorted;
-    std::vector<std::size_t> start, cursor;  ///< per first criterion: first place, next free place
-  };
-  GatherScratch gather_;
+  detail::GatherScratch gather_;  ///< buffers of the final gather, kept across frames
   /// What the narrow phase reads of one face, packed so that a candidate pair touches two
   /// records (the corners' positions are copied in every frame).
   struct PackedFace {

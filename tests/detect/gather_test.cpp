@@ -1,0 +1,90 @@
+// detail::gather_sorted, the exact detectors' last step, against a plain sort. Its order is not
+// seen by the detector tests: Detector::update sorts whatever a detector returns out of order.
+
+#include <crumple/detect/gather.hpp>
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <random>
+#include <set>
+#include <vector>
+
+namespace crumple {
+namespace {
+
+// A record as the detectors' contacts are: ids and a payload that must travel with them.
+struct Record {
+  Index first = 0, second = 0;
+  double payload = 0;
+  std::uint64_t key() const {
+    return static_cast<std::uint64_t>(first) << 32 | static_cast<std::uint32_t>(second);
+  }
+};
+
+// `count` records with distinct (first, second), first in [0, keys) drawn so that a few first
+// criteria hold many records (up to hundreds: buckets sorted in place), split into `parts` lists
+// of random lengths (some empty).
+std::vector<std::vector<Record>> make_parts(std::mt19937& rng, Index keys, std::size_t count, std::size_t parts) {
+  std::set<std::pair<Index, Index>> seen;
+  std::vector<Record> all;
+  std::uniform_int_distribution<Index> any(0, keys - 1), hot(0, std::min<Index>(keys - 1, 3));
+  std::uniform_int_distribution<Index> second(0, 1 << 20);
+  while (all.size() < count) {
+    const Index f = (rng() % 8 == 0) ? hot(rng) : any(rng);
+    const Index s = second(rng);
+    if (seen.insert({f, s}).second) all.push_back({f, s, static_cast<double>(all.size())});
+  }
+  std::vector<std::vector<Record>> out(parts);
+  for (const Record& r : all) out[rng() % parts].push_back(r);
+  return out;
+}
+
+void expect_gathered(const std::vector<std::vector<Record>>& lists, Index keys, int threads) {
+  std::vector<const std::vector<Record>*> parts;
+  std::vector<Record> want;
+  for (const auto& l : lists) {
+    parts.push_back(&l);
+    want.insert(want.end(), l.begin(), l.end());
+  }
+  std::sort(want.begin(), want.end(), [](const Record& a, const Record& b) { return a.key() < b.key(); });
+  detail::GatherScratch scratch;
+  std::vector<Record> got{{7, 7, 7}};  // stale content is replaced
+  for (int round = 0; round < 2; ++round) {  // the scratch is reused
+    detail::gather_sorted(got, parts, keys, [](const Record& r) { return r.key(); }, threads, scratch);
+    ASSERT_EQ(got.size(), want.size());
+    for (std::size_t i = 0; i < want.size(); ++i) {
+      ASSERT_EQ(got[i].key(), want[i].key()) << "place " << i << " of " << want.size();
+      ASSERT_EQ(got[i].payload, want[i].payload) << "place " << i;
+    }
+  }
+}
+
+TEST(Gather, CountedPathMatchesASort) {
+  std::mt19937 rng(5101);
+  for (int threads : {1, 2, 3}) {
+    for (std::size_t parts : {1u, 7u, 300u}) {
+      expect_gathered(make_parts(rng, 1000, 20000, parts), 1000, threads);
+    }
+  }
+}
+
+TEST(Gather, SortedPathMatchesASort) {
+  // Fewer records than keys / 8: sorted by key rather than counted.
+  std::mt19937 rng(5102);
+  for (int threads : {1, 2}) expect_gathered(make_parts(rng, 1 << 20, 5000, 9), 1 << 20, threads);
+}
+
+TEST(Gather, EmptyAndSingle) {
+  expect_gathered({}, 10, 2);
+  expect_gathered({{}, {}}, 10, 2);
+  expect_gathered({{{3, 4, 1.5}}}, 10, 2);
+  // Every record under one first criterion, found in reverse order.
+  std::vector<Record> one;
+  for (Index s = 500; s > 0; --s) one.push_back({2, s, static_cast<double>(s)});
+  expect_gathered({one}, 4, 2);
+}
+
+}  // namespace
+}  // namespace crumple
