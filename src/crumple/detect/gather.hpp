@@ -60,8 +60,8 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
   });
   const auto copy = [&](const Item* from, std::size_t begin, std::size_t end) {
     for (std::size_t j = begin; j < end; ++j) {
-      if (j + 16 < end) {  // the records are scattered: fetch ahead
-        const auto* ahead = static_cast<const char*>(from[j + 16].record);
+      if (j + 48 < end) {  // the records are scattered: fetch ahead
+        const auto* ahead = static_cast<const char*>(from[j + 48].record);
         __builtin_prefetch(ahead);
         __builtin_prefetch(ahead + sizeof(T) - 1);
       }
@@ -95,8 +95,19 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
         const auto k = static_cast<std::size_t>(x.key >> 32);
         if (k >= lo && k < hi) sorted[next[k]++] = x;
       }
-      for (std::size_t k = lo; k < hi; ++k) {
-        std::sort(sorted.data() + start[k], sorted.data() + start[k + 1], by_key);
+      for (std::size_t k = lo; k < hi; ++k) {  // mostly a few items each: insertion sort
+        Item* const first = sorted.data() + start[k];
+        Item* const last = sorted.data() + start[k + 1];
+        if (last - first > 32) {
+          std::sort(first, last, by_key);
+          continue;
+        }
+        for (Item* i = first + (first != last); i < last; ++i) {
+          const Item x = *i;
+          Item* j = i;
+          for (; j != first && x.key < (j - 1)->key; --j) *j = *(j - 1);
+          *j = x;
+        }
       }
       copy(sorted.data(), start[lo], start[hi]);
     }
