@@ -1,5 +1,6 @@
 // segment_segment_x4 against segment_segment, bit for bit: the exact detectors' narrow phase
-// uses the batch and `naive` the scalar kernel, and their distances must be identical.
+// uses the batch and `naive` the scalar kernel, and their distances must be identical; so must
+// the contact's distance and normal that the batch computes in its lanes.
 
 #include <crumple/geometry/distance.hpp>
 #include <crumple/geometry/segment_batch.hpp>
@@ -52,14 +53,23 @@ int mismatches(int cases, const std::function<Case(int)>& make) {
     }
     const SegmentBatchResult got = segment_segment_x4(batch);
     for (std::size_t k = 0; k < 4; ++k) {
-      if (bits(got.sqr_distance[k]) == bits(want[k].sqr_distance) && bits(got.s[k]) == bits(want[k].s) &&
-          bits(got.t[k]) == bits(want[k].t)) {
-        continue;
+      // What narrow::edge_edge_contact computes from the scalar result.
+      const Vec3 gap = want[k].closest1 - want[k].closest0;
+      const Scalar gap_norm = gap.norm();
+      bool same = bits(got.sqr_distance[k]) == bits(want[k].sqr_distance) && bits(got.s[k]) == bits(want[k].s) &&
+                  bits(got.t[k]) == bits(want[k].t) &&
+                  bits(got.distance[k]) == bits(std::sqrt(want[k].sqr_distance)) &&
+                  bits(got.gap_norm[k]) == bits(gap_norm);
+      if (gap_norm > 0) {
+        const Vec3 normal = gap / gap_norm;
+        for (int i = 0; i < 3; ++i) same = same && bits(got.normal[static_cast<std::size_t>(i)][k]) == bits(normal[i]);
       }
+      if (same) continue;
       if (++bad <= 5) {
         ADD_FAILURE() << "lane " << k << ": " << describe(in[k]) << "\n  want d2 " << want[k].sqr_distance << " s "
-                      << want[k].s << " t " << want[k].t << "\n  got  d2 " << got.sqr_distance[k] << " s "
-                      << got.s[k] << " t " << got.t[k];
+                      << want[k].s << " t " << want[k].t << " |gap| " << gap_norm << "\n  got  d2 "
+                      << got.sqr_distance[k] << " s " << got.s[k] << " t " << got.t[k] << " |gap| " << got.gap_norm[k]
+                      << " (or its distance or normal differs)";
       }
     }
   }

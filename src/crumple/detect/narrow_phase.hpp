@@ -54,24 +54,24 @@ inline std::optional<VertexFaceContact> vertex_face(PositionsView x, const Topol
   return vertex_face(v, at(x, v), f, at(x, t[0]), at(x, t[1]), at(x, t[2]), sqr_thickness);
 }
 
+/// The normal of an edge-edge contact whose closest points coincide: the normalised cross
+/// product of the directions of edges (p0, p1) and (q0, q1); zero if they are parallel.
+inline Vec3 crossing_normal(const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
+  const Vec3 n = (p1 - p0).cross(q1 - q0);
+  const Scalar len = n.norm();
+  return len > 0 ? Vec3(n / len) : Vec3::Zero();
+}
+
 /// The contact of edges e0 = ea and e1 = eb (at p0, p1 and q0, q1, as `edge_edge` takes them)
 /// from their kernel result r (segment_segment(p0, p1, q0, q1), closest points included), whose
 /// distance the caller found below h.
 inline EdgeEdgeContact edge_edge_contact(Index e0, const Edge& ea, const Vec3& p0, const Vec3& p1, Index e1,
                                          const Edge& eb, const Vec3& q0, const Vec3& q1,
                                          const geometry::SegmentSegmentResult& r) {
-  const Scalar distance = std::sqrt(r.sqr_distance);
-  Vec3 normal;
   const Vec3 gap = r.closest1 - r.closest0;
   const Scalar gap_norm = gap.norm();
-  if (gap_norm > 0) {
-    normal = gap / gap_norm;
-  } else {
-    const Vec3 n = (p1 - p0).cross(q1 - q0);
-    const Scalar len = n.norm();
-    normal = len > 0 ? Vec3(n / len) : Vec3::Zero();
-  }
-  return make_edge_edge_contact(e0, ea, e1, eb, distance, r.s, r.t, normal);
+  const Vec3 normal = gap_norm > 0 ? Vec3(gap / gap_norm) : crossing_normal(p0, p1, q0, q1);
+  return make_edge_edge_contact(e0, ea, e1, eb, std::sqrt(r.sqr_distance), r.s, r.t, normal);
 }
 
 /// Edges e0 = ea and e1 = eb (sharing no vertex) at positions p0, p1 (of ea[0], ea[1]) and q0,
@@ -139,9 +139,10 @@ class EdgeEdgeBatch {
     for (std::size_t i = 0; i < n_; ++i) {
       if (!(r.sqr_distance[i] < sqr_thickness)) continue;
       const EdgePair& p = pairs_[i];
-      geometry::SegmentSegmentResult one{r.sqr_distance[i], r.s[i], r.t[i], {}, {}};
-      geometry::set_closest_points(one, *p.p0, *p.p1, *p.q0, *p.q1);
-      out.push_back(edge_edge_contact(p.e0, p.ea, *p.p0, *p.p1, p.e1, p.eb, *p.q0, *p.q1, one));
+      // The computations of edge_edge_contact, made in the lanes (the same bits).
+      const Vec3 normal = r.gap_norm[i] > 0 ? Vec3(r.normal[0][i], r.normal[1][i], r.normal[2][i])
+                                            : crossing_normal(*p.p0, *p.p1, *p.q0, *p.q1);
+      out.push_back(make_edge_edge_contact(p.e0, p.ea, p.e1, p.eb, r.distance[i], r.s[i], r.t[i], normal));
     }
     n_ = 0;
   }

@@ -1,5 +1,7 @@
 #include <crumple/geometry/segment_batch.hpp>
 
+#include <immintrin.h>
+
 #include <cstring>
 
 // The vector type's ABI differs with and without AVX, which GCC warns about at every function
@@ -16,9 +18,12 @@ namespace {
 using V = Scalar __attribute__((vector_size(32)));
 using M = long long __attribute__((vector_size(32)));
 
-#define CRUMPLE_LANES inline __attribute__((always_inline))
+// Every helper is compiled for AVX2 too (the square root is an AVX intrinsic) and inlined.
+#define CRUMPLE_LANES inline __attribute__((always_inline, target("avx2")))
 
 CRUMPLE_LANES V splat(Scalar x) { return V{x, x, x, x}; }
+CRUMPLE_LANES V sqrt(V x) { return reinterpret_cast<V>(_mm256_sqrt_pd(reinterpret_cast<__m256d>(x))); }
+CRUMPLE_LANES void store(std::array<Scalar, SegmentBatch::kLanes>& to, V x) { std::memcpy(to.data(), &x, sizeof(V)); }
 CRUMPLE_LANES V select(M m, V yes, V no) { return m ? yes : no; }
 
 // The scalar kernel's helpers, lane by lane (distance_impl.hpp).
@@ -102,9 +107,24 @@ CRUMPLE_LANES SegmentBatchResult run(const SegmentBatch& batch) {
   for (std::size_t i = 0; i < 3; ++i) r[i] = w[i] + s * u[i] - t * v[i];
   const V sqr = dot(r, r);
   SegmentBatchResult out;
-  std::memcpy(out.sqr_distance.data(), &sqr, sizeof(V));
-  std::memcpy(out.s.data(), &s, sizeof(V));
-  std::memcpy(out.t.data(), &t, sizeof(V));
+  store(out.sqr_distance, sqr);
+  store(out.s, s);
+  store(out.t, t);
+
+  // What a contact is made of (set_closest_points, then narrow::edge_edge_contact): the
+  // distance, and the unit vector between the closest points (Eigen's norm() is the square
+  // root of squaredNorm(), its division by a scalar one per coordinate).
+  store(out.distance, sqrt(sqr));
+  const M s_one = s == one, t_one = t == one;
+  V gap[3];
+  for (std::size_t i = 0; i < 3; ++i) {
+    const V closest0 = select(s_one, x[3 + i], x[i] + s * u[i]);
+    const V closest1 = select(t_one, x[9 + i], x[6 + i] + t * v[i]);
+    gap[i] = closest1 - closest0;
+  }
+  const V gap_norm = sqrt(dot(gap, gap));
+  store(out.gap_norm, gap_norm);
+  for (std::size_t i = 0; i < 3; ++i) store(out.normal[i], gap[i] / gap_norm);
   return out;
 }
 

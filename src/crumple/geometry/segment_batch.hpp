@@ -33,9 +33,14 @@ struct SegmentBatch {
 };
 
 /// The squared distances and parameters of the batch's four pairs: exactly what
-/// `segment_segment` returns for each (same bits).
+/// `segment_segment` returns for each (same bits). With them, the same bits as these
+/// computations on its result r: `distance` = sqrt(r.sqr_distance), `gap_norm` =
+/// (r.closest1 - r.closest0).norm() and `normal` = (r.closest1 - r.closest0) / gap_norm, whose
+/// coordinate i for pair k is normal[i][k] (a contact's distance and normal; where gap_norm is
+/// 0 the normal is not finite).
 struct SegmentBatchResult {
-  alignas(32) std::array<Scalar, SegmentBatch::kLanes> sqr_distance{}, s{}, t{};
+  alignas(32) std::array<Scalar, SegmentBatch::kLanes> sqr_distance{}, s{}, t{}, distance{}, gap_norm{};
+  alignas(32) std::array<std::array<Scalar, SegmentBatch::kLanes>, 3> normal{};
 };
 
 /// Whether this CPU has AVX2, which `segment_segment_x4` needs.
