@@ -3,7 +3,7 @@
 // the contact's distance and normal that the batch computes in its lanes.
 
 #include <crumple/geometry/distance.hpp>
-#include <crumple/geometry/segment_batch.hpp>
+#include <crumple/geometry/kernel_batch.hpp>
 
 #include <gtest/gtest.h>
 

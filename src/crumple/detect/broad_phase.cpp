@@ -66,7 +66,8 @@ struct LocalContacts {
   explicit LocalContacts(ContactSet&& spare) : set(std::move(spare)) {}
   ContactSet set;
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
-  narrow::EdgeEdgeBatch ee_batch;  ///< edge pairs queued for the kernel, four at a time
+  narrow::VertexFaceBatch vf_batch;  ///< vertex-face pairs queued for the kernel, four at a time
+  narrow::EdgeEdgeBatch ee_batch;    ///< edge pairs queued for the kernel, four at a time
 };
 
 }  // namespace
@@ -357,6 +358,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
   std::vector<ContactSet> parts;  // each chunk's contacts, gathered in order at the end
   const auto merge = [&](LocalContacts& local) {
+    local.vf_batch.flush(h2, local.set.vf);
     local.ee_batch.flush(h2, local.set.ee);
     const std::lock_guard lock(mutex);
     if (!local.set.empty()) {
@@ -401,12 +403,17 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     const Vec3 n = d0.cross(d1);
     return Separation{w.dot(n), n, w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm()};
   };
-  // Vertex v at p against face g, past the cheap rejections: the shared kernel (not inlined:
-  // reached by a minority of the sub-pairs). The squared distance goes to *sqr_distance if given.
+  // Vertex v at p against face g, past the cheap rejections: the shared kernel, queued four at
+  // a time (the contacts reach local.set.vf at the latest in `merge`), unless the squared
+  // distance is wanted.
   const auto vf_kernel = [&](const Vec3& p, Index v, const PackedFace& t, Index g, LocalContacts& local,
-                             Scalar* sqr_distance = nullptr) __attribute__((noinline)) {
+                             Scalar* sqr_distance = nullptr) {
     ++local.vf_tests;
-    if (auto c = narrow::vertex_face(v, p, g, t.p[0], t.p[1], t.p[2], h2, sqr_distance)) local.set.vf.push_back(*c);
+    if (sqr_distance == nullptr) {
+      local.vf_batch.push(v, p, g, t.p[0], t.p[1], t.p[2], h2, local.set.vf);
+    } else if (auto c = narrow::vertex_face(v, p, g, t.p[0], t.p[1], t.p[2], h2, sqr_distance)) {
+      local.set.vf.push_back(*c);
+    }
   };
   // The box of face t padded by pad holds p (branch-free).
   const auto in_box = [pad](const Vec3& p, const PackedFace& t) {

@@ -8,7 +8,7 @@
 #include <crumple/core/types.hpp>
 #include <crumple/detect/contact.hpp>
 #include <crumple/geometry/distance.hpp>
-#include <crumple/geometry/segment_batch.hpp>
+#include <crumple/geometry/kernel_batch.hpp>
 #include <crumple/mesh/mesh.hpp>
 
 #include <algorithm>
@@ -21,6 +21,14 @@ namespace crumple::narrow {
 
 inline const Vec3& at(PositionsView x, Index i) { return x[static_cast<std::size_t>(i)]; }
 
+/// The normal of a vertex-face contact at distance 0: the geometric normal of the face with
+/// corners a, b, c; zero if the face is degenerate.
+inline Vec3 face_normal(const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 n = (b - a).cross(c - a);
+  const Scalar len = n.norm();
+  return len > 0 ? Vec3(n / len) : Vec3::Zero();
+}
+
 /// Vertex v at p against face f with corners a, b, c in face order (v not a corner of f); a
 /// contact when the distance is < h (`sqr_thickness` = h^2). The normal points from the face to
 /// the vertex. The squared distance, contact or not, goes to `*sqr_distance` when given.
@@ -30,21 +38,10 @@ inline std::optional<VertexFaceContact> vertex_face(Index v, const Vec3& p, Inde
   const geometry::PointTriangleResult r = geometry::point_triangle(p, a, b, c);
   if (sqr_distance != nullptr) *sqr_distance = r.sqr_distance;
   if (!(r.sqr_distance < sqr_thickness)) return std::nullopt;
-  VertexFaceContact contact;
-  contact.vertex = v;
-  contact.face = f;
-  contact.distance = std::sqrt(r.sqr_distance);
-  contact.barycentric = r.barycentric;
   const Vec3 away = p - r.closest;
   const Scalar away_norm = away.norm();
-  if (away_norm > 0) {
-    contact.normal = away / away_norm;
-  } else {
-    const Vec3 n = (b - a).cross(c - a);
-    const Scalar len = n.norm();
-    contact.normal = len > 0 ? Vec3(n / len) : Vec3::Zero();
-  }
-  return contact;
+  return VertexFaceContact{v, f, std::sqrt(r.sqr_distance), r.barycentric,
+                           away_norm > 0 ? Vec3(away / away_norm) : face_normal(a, b, c)};
 }
 
 /// Same, with the positions read from x.
@@ -151,6 +148,49 @@ class EdgeEdgeBatch {
   bool lanes_ = geometry::has_avx2();
   geometry::SegmentBatch batch_;
   std::array<EdgePair, geometry::SegmentBatch::kLanes> pairs_{};
+  std::size_t n_ = 0;
+};
+
+/// Vertex-face pairs tested four at a time (geometry::point_triangle_x4, the same bits as
+/// `vertex_face`): `push` queues a pair, whose positions must stay in place until the next
+/// `flush`; every fourth push, and `flush`, appends the contacts of the queued pairs to `out`.
+/// Without AVX2 (`geometry::has_avx2()`), `push` tests each pair at once with `vertex_face`.
+class VertexFaceBatch {
+ public:
+  /// Vertex v at p against face f with corners a, b, c, as `vertex_face` takes them.
+  void push(Index v, const Vec3& p, Index f, const Vec3& a, const Vec3& b, const Vec3& c, Scalar sqr_thickness,
+            std::vector<VertexFaceContact>& out) {
+    if (!lanes_) {
+      if (auto contact = vertex_face(v, p, f, a, b, c, sqr_thickness)) out.push_back(*contact);
+      return;
+    }
+    batch_.set(n_, p, a, b, c);
+    pairs_[n_++] = {v, f, &a, &b, &c};
+    if (n_ == geometry::PointTriangleBatch::kLanes) flush(sqr_thickness, out);
+  }
+  void flush(Scalar sqr_thickness, std::vector<VertexFaceContact>& out) {
+    if (n_ == 0) return;
+    const geometry::PointTriangleBatchResult r = geometry::point_triangle_x4(batch_);
+    for (std::size_t i = 0; i < n_; ++i) {
+      if (!(r.sqr_distance[i] < sqr_thickness)) continue;
+      const Pair& p = pairs_[i];
+      // The computations of vertex_face, made in the lanes (the same bits).
+      const Vec3 normal = r.away_norm[i] > 0 ? Vec3(r.normal[0][i], r.normal[1][i], r.normal[2][i])
+                                             : face_normal(*p.a, *p.b, *p.c);
+      out.push_back(VertexFaceContact{p.v, p.f, r.distance[i],
+                                      Vec3(r.barycentric[0][i], r.barycentric[1][i], r.barycentric[2][i]), normal});
+    }
+    n_ = 0;
+  }
+
+ private:
+  struct Pair {
+    Index v, f;
+    const Vec3 *a, *b, *c;
+  };
+  bool lanes_ = geometry::has_avx2();
+  geometry::PointTriangleBatch batch_;
+  std::array<Pair, geometry::PointTriangleBatch::kLanes> pairs_{};
   std::size_t n_ = 0;
 };
 

@@ -79,7 +79,7 @@ SegmentSegmentResult segment_segment(const Vec3& p0, const Vec3& p1, const Vec3&
 
 /// Fills r.closest0 = P(r.s) and r.closest1 = Q(r.t) as `segment_segment` computes them (the
 /// end itself at parameter 1), for a result whose s and t come from it or from its batched form
-/// (segment_batch.hpp).
+/// (kernel_batch.hpp).
 void set_closest_points(SegmentSegmentResult& r, const Vec3& p0, const Vec3& p1, const Vec3& q0,
                         const Vec3& q1);
 
