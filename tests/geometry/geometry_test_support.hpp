@@ -5,13 +5,16 @@
 /// regression test) and random rotations.
 
 #include <crumple/core/types.hpp>
+#include <crumple/geometry/kernel_batch.hpp>
 
 #include <Eigen/Geometry>
+#include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <initializer_list>
 #include <numbers>
 #include <random>
@@ -58,6 +61,11 @@ class Rng {
     q.normalize();
     return q.toRotationMatrix();
   }
+  /// A point of small integer coordinates (-2 to 2; z = 0 half of the time): inputs full of
+  /// exact ties (equal lengths, parameters exactly 0 or 1, coplanar and collinear points).
+  Vec3 small_integer_point() {
+    return Vec3(integer(-2, 2), integer(-2, 2), integer(-2, 2) * (coin() ? 1 : 0));
+  }
   /// A scale 10^k, k uniform in [lo, hi].
   Scalar scale(int lo, int hi) { return std::pow(10.0, integer(lo, hi)); }
   std::mt19937_64& engine() { return gen_; }
@@ -83,6 +91,22 @@ inline std::string json_case(const char* kernel, std::initializer_list<Vec3> poi
     first = false;
   }
   return s + "]}";
+}
+
+/// Fixture of the tests of the kernels' AVX2 lanes (kernel_batch.hpp): skipped, visibly, on a CPU
+/// without AVX2, where the detectors call the scalar kernels and the lanes are never used.
+class LanesTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!has_avx2()) GTEST_SKIP() << "this CPU has no AVX2: the narrow phase runs the scalar kernels";
+  }
+};
+
+/// The bits of x, for comparisons that must be exact to the last bit (and tell -0 from 0).
+inline std::uint64_t bits(Scalar x) {
+  std::uint64_t b = 0;
+  std::memcpy(&b, &x, sizeof b);
+  return b;
 }
 
 /// Largest absolute coordinate among the points (the scale L of tolerances).

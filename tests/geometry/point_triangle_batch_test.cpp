@@ -10,8 +10,6 @@
 
 #include <array>
 #include <cmath>
-#include <cstdint>
-#include <cstring>
 #include <functional>
 #include <string>
 
@@ -20,24 +18,9 @@
 namespace crumple::geometry {
 namespace {
 
+using test::bits;
 using test::Rng;
 using Case = std::array<Vec3, 4>;  // p, a, b, c
-
-std::uint64_t bits(Scalar x) {
-  std::uint64_t b = 0;
-  std::memcpy(&b, &x, sizeof b);
-  return b;
-}
-
-std::string describe(const Case& c) {
-  std::string s;
-  char buf[96];
-  for (const Vec3& p : c) {
-    std::snprintf(buf, sizeof buf, "(%.17g, %.17g, %.17g) ", p.x(), p.y(), p.z());
-    s += buf;
-  }
-  return s;
-}
 
 // Every case of `make`, four to a batch: the lanes give the scalar kernel's bits and the
 // contact's. Returns the number of mismatching lanes (the first few are printed).
@@ -67,24 +50,18 @@ int mismatches(int cases, const std::function<Case(int)>& make) {
       }
       if (same) continue;
       if (++bad <= 5) {
-        ADD_FAILURE() << "lane " << k << ": " << describe(in[k]) << "\n  want d2 " << want.sqr_distance << " w "
-                      << want.barycentric.transpose() << " |away| " << away_norm << "\n  got  d2 "
-                      << got.sqr_distance[k] << " w " << got.barycentric[0][k] << " " << got.barycentric[1][k] << " "
-                      << got.barycentric[2][k] << " |away| " << got.away_norm[k] << " (or the distance or normal)";
+        ADD_FAILURE() << "lane " << k << ": " << test::json_case("point_triangle", {p, a, b, c}) << "\n  want d2 "
+                      << want.sqr_distance << " w " << want.barycentric.transpose() << " |away| " << away_norm
+                      << "\n  got  d2 " << got.sqr_distance[k] << " w " << got.barycentric[0][k] << " "
+                      << got.barycentric[1][k] << " " << got.barycentric[2][k] << " |away| " << got.away_norm[k]
+                      << " (or the distance or normal)";
       }
     }
   }
   return bad;
 }
 
-// Every test here is skipped, visibly, on a CPU without AVX2: the detectors then call the scalar
-// kernel on each pair and the batch is never used.
-class PointTriangleBatchLanes : public ::testing::Test {
- protected:
-  void SetUp() override {
-    if (!has_avx2()) GTEST_SKIP() << "this CPU has no AVX2: the narrow phase runs the scalar kernel";
-  }
-};
+class PointTriangleBatchLanes : public test::LanesTest {};
 
 TEST_F(PointTriangleBatchLanes, SameBitsGeneric) {
   Rng rng("PointTriangleBatchLanes.SameBitsGeneric", 9201);
@@ -129,12 +106,11 @@ TEST_F(PointTriangleBatchLanes, SameBitsDegenerate) {
 // side of a comparison shows.
 TEST_F(PointTriangleBatchLanes, SameBitsOnTies) {
   Rng rng("PointTriangleBatchLanes.SameBitsOnTies", 9203);
-  EXPECT_EQ(mismatches(200000, [&](int) {
-              const auto p = [&] {
-                return Vec3(rng.integer(-2, 2), rng.integer(-2, 2), rng.integer(-2, 2) * (rng.coin() ? 1 : 0));
-              };
-              return Case{p(), p(), p(), p()};
-            }),
+  EXPECT_EQ(mismatches(200000,
+                       [&](int) {
+                         return Case{rng.small_integer_point(), rng.small_integer_point(), rng.small_integer_point(),
+                                     rng.small_integer_point()};
+                       }),
             0);
 }
 

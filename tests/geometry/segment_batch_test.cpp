@@ -9,8 +9,6 @@
 
 #include <array>
 #include <cmath>
-#include <cstdint>
-#include <cstring>
 #include <functional>
 #include <string>
 
@@ -19,24 +17,9 @@
 namespace crumple::geometry {
 namespace {
 
+using test::bits;
 using test::Rng;
 using Case = std::array<Vec3, 4>;  // p0, p1, q0, q1
-
-std::uint64_t bits(Scalar x) {
-  std::uint64_t b = 0;
-  std::memcpy(&b, &x, sizeof b);
-  return b;
-}
-
-std::string describe(const Case& c) {
-  std::string s;
-  char buf[96];
-  for (const Vec3& p : c) {
-    std::snprintf(buf, sizeof buf, "(%.17g, %.17g, %.17g) ", p.x(), p.y(), p.z());
-    s += buf;
-  }
-  return s;
-}
 
 // Every case of `make`, four to a batch: the lanes give the scalar kernel's bits. Returns the
 // number of mismatching lanes (the first few are printed). Only on a CPU with AVX2.
@@ -66,24 +49,18 @@ int mismatches(int cases, const std::function<Case(int)>& make) {
       }
       if (same) continue;
       if (++bad <= 5) {
-        ADD_FAILURE() << "lane " << k << ": " << describe(in[k]) << "\n  want d2 " << want[k].sqr_distance << " s "
-                      << want[k].s << " t " << want[k].t << " |gap| " << gap_norm << "\n  got  d2 "
-                      << got.sqr_distance[k] << " s " << got.s[k] << " t " << got.t[k] << " |gap| " << got.gap_norm[k]
-                      << " (or its distance or normal differs)";
+        const auto& [x0, x1, x2, x3] = in[k];
+        ADD_FAILURE() << "lane " << k << ": " << test::json_case("segment_segment", {x0, x1, x2, x3}) << "\n  want d2 "
+                      << want[k].sqr_distance << " s " << want[k].s << " t " << want[k].t << " |gap| " << gap_norm
+                      << "\n  got  d2 " << got.sqr_distance[k] << " s " << got.s[k] << " t " << got.t[k] << " |gap| "
+                      << got.gap_norm[k] << " (or its distance or normal differs)";
       }
     }
   }
   return bad;
 }
 
-// Every test here is skipped, visibly, on a CPU without AVX2: the detectors then call the scalar
-// kernel on each pair and the batch is never used.
-class SegmentBatchLanes : public ::testing::Test {
- protected:
-  void SetUp() override {
-    if (!has_avx2()) GTEST_SKIP() << "this CPU has no AVX2: the narrow phase runs the scalar kernel";
-  }
-};
+class SegmentBatchLanes : public test::LanesTest {};
 
 TEST_F(SegmentBatchLanes, SameBitsGeneric) {
   Rng rng("SegmentBatchLanes.SameBitsGeneric", 9101);
@@ -146,12 +123,11 @@ TEST_F(SegmentBatchLanes, SameBitsNearParallel) {
 // parallel and collinear segments), where a lane choosing the other side of a comparison shows.
 TEST_F(SegmentBatchLanes, SameBitsOnTies) {
   Rng rng("SegmentBatchLanes.SameBitsOnTies", 9104);
-  EXPECT_EQ(mismatches(200000, [&](int) {
-              const auto p = [&] {
-                return Vec3(rng.integer(-2, 2), rng.integer(-2, 2), rng.integer(-2, 2) * (rng.coin() ? 1 : 0));
-              };
-              return Case{p(), p(), p(), p()};
-            }),
+  EXPECT_EQ(mismatches(200000,
+                       [&](int) {
+                         return Case{rng.small_integer_point(), rng.small_integer_point(), rng.small_integer_point(),
+                                     rng.small_integer_point()};
+                       }),
             0);
 }
 
