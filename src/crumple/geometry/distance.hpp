@@ -77,12 +77,6 @@ PointSegmentResult point_segment(const Vec3& p, const Vec3& a, const Vec3& b);
 SegmentSegmentResult segment_segment(const Vec3& p0, const Vec3& p1, const Vec3& q0,
                                      const Vec3& q1);
 
-/// Fills r.closest0 = P(r.s) and r.closest1 = Q(r.t) as `segment_segment` computes them (the
-/// end itself at parameter 1), for a result whose s and t come from it or from its batched form
-/// (kernel_batch.hpp).
-void set_closest_points(SegmentSegmentResult& r, const Vec3& p0, const Vec3& p1, const Vec3& q0,
-                        const Vec3& q1);
-
 /// Point to triangle (a,b,c), degenerate triangles included. `region` is exact with respect
 /// to the returned barycentrics: Vertex* iff two of them are 0 (then `closest` is that corner,
 /// bit for bit), Edge* iff exactly one is 0, Face iff none is.

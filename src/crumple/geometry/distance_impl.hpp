@@ -260,15 +260,10 @@ inline SegmentSegmentResult segment_segment(const Vec3& p0, const Vec3& p1, cons
   SegmentSegmentResult r;
   r.s = s;
   r.t = t;
-  set_closest_points(r, p0, p1, q0, q1);
+  r.closest0 = s == 1 ? p1 : Vec3(p0 + s * u);
+  r.closest1 = t == 1 ? q1 : Vec3(q0 + t * v);
   r.sqr_distance = (w + s * u - t * v).squaredNorm();
   return r;
-}
-
-inline void set_closest_points(SegmentSegmentResult& r, const Vec3& p0, const Vec3& p1, const Vec3& q0,
-                               const Vec3& q1) {
-  r.closest0 = r.s == 1 ? p1 : Vec3(p0 + r.s * (p1 - p0));
-  r.closest1 = r.t == 1 ? q1 : Vec3(q0 + r.t * (q1 - q0));
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -113,9 +113,10 @@ CRUMPLE_LANES SegmentBatchResult run(const SegmentBatch& batch) {
   store(out.s, s);
   store(out.t, t);
 
-  // What a contact is made of (set_closest_points, then narrow::edge_edge_contact): the
-  // distance, and the unit vector between the closest points (Eigen's norm() is the square
-  // root of squaredNorm(), its division by a scalar one per coordinate).
+  // What a contact is made of (segment_segment's closest points, then
+  // narrow::edge_edge_contact): the distance, and the unit vector between the closest points
+  // (Eigen's norm() is the square root of squaredNorm(), its division by a scalar one per
+  // coordinate).
   store(out.distance, sqrt(sqr));
   const M s_one = s == one, t_one = t == one;
   V gap[3];
@@ -134,9 +135,10 @@ CRUMPLE_LANES SegmentBatchResult run(const SegmentBatch& batch) {
 struct V3 {
   V c[3];
 };
-CRUMPLE_LANES V3 load(const std::array<std::array<Scalar, 4>, 12>& coords, std::size_t point) {
+// Point `point` of every pair of the batch.
+CRUMPLE_LANES V3 load(const FourPointBatch& batch, std::size_t point) {
   V3 out;
-  for (std::size_t i = 0; i < 3; ++i) std::memcpy(&out.c[i], coords[3 * point + i].data(), sizeof(V));
+  for (std::size_t i = 0; i < 3; ++i) std::memcpy(&out.c[i], batch.coords[3 * point + i].data(), sizeof(V));
   return out;
 }
 CRUMPLE_LANES V3 operator-(const V3& x, const V3& y) { return {{x.c[0] - y.c[0], x.c[1] - y.c[1], x.c[2] - y.c[2]}}; }
@@ -194,7 +196,7 @@ CRUMPLE_LANES void try_side(Best& best, M active, const V3& p, const V3& from, c
 // (corners coincident, or flat) are marked in `degenerate` and left to the scalar kernel.
 CRUMPLE_LANES PointTriangleBatchResult run_point_triangle(const PointTriangleBatch& batch, M& degenerate) {
   const V zero = splat(0), one = splat(1);
-  const V3 p = load(batch.coords, 0), a = load(batch.coords, 1), b = load(batch.coords, 2), c = load(batch.coords, 3);
+  const V3 p = load(batch, 0), a = load(batch, 1), b = load(batch, 2), c = load(batch, 3);
   const V3 ab = b - a, bc = c - b, ca = a - c;
   const V lab = dot(ab, ab), lbc = dot(bc, bc), lca = dot(ca, ca);
   // The base P0 -> P1 is the longest side: rotation 0 (a b c), 1 (b c a) or 2 (c a b).

@@ -22,18 +22,23 @@
 
 namespace crumple::geometry {
 
-/// Up to four segment pairs (P = p0 p1 against Q = q0 q1), structure of arrays: `coords[k][i]`
-/// is coordinate k % 3 of point k / 3 (p0, p1, q0, q1) of pair i. Unused lanes may hold
-/// anything finite (their results are not read).
-struct SegmentBatch {
+/// Up to four pairs of a kernel's inputs, four points each (segment-segment: p0 p1 against
+/// q0 q1; point-triangle: p against a b c), structure of arrays: `coords[k][i]` is coordinate
+/// k % 3 of point k / 3 of pair i. Unused lanes may hold anything finite (their results are not
+/// read).
+struct FourPointBatch {
   static constexpr std::size_t kLanes = 4;
   alignas(32) std::array<std::array<Scalar, kLanes>, 12> coords{};
   /// Stores pair i.
-  void set(std::size_t i, const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
-    const Vec3* points[4] = {&p0, &p1, &q0, &q1};
+  void set(std::size_t i, const Vec3& x0, const Vec3& x1, const Vec3& x2, const Vec3& x3) {
+    const Vec3* points[4] = {&x0, &x1, &x2, &x3};
     for (std::size_t k = 0; k < 12; ++k) coords[k][i] = (*points[k / 3])[static_cast<Eigen::Index>(k % 3)];
   }
 };
+/// Segment pairs (p0, p1, q0, q1).
+using SegmentBatch = FourPointBatch;
+/// Point-triangle pairs (p, a, b, c).
+using PointTriangleBatch = FourPointBatch;
 
 /// The squared distances and parameters of the batch's four pairs: exactly what
 /// `segment_segment` returns for each (same bits). With them, the same bits as these
@@ -44,19 +49,6 @@ struct SegmentBatch {
 struct SegmentBatchResult {
   alignas(32) std::array<Scalar, SegmentBatch::kLanes> sqr_distance{}, s{}, t{}, distance{}, gap_norm{};
   alignas(32) std::array<std::array<Scalar, SegmentBatch::kLanes>, 3> normal{};
-};
-
-/// Up to four point-triangle pairs (p against the triangle a b c), structure of arrays:
-/// `coords[k][i]` is coordinate k % 3 of point k / 3 (p, a, b, c) of pair i. Unused lanes may
-/// hold anything finite.
-struct PointTriangleBatch {
-  static constexpr std::size_t kLanes = 4;
-  alignas(32) std::array<std::array<Scalar, kLanes>, 12> coords{};
-  /// Stores pair i.
-  void set(std::size_t i, const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-    const Vec3* points[4] = {&p, &a, &b, &c};
-    for (std::size_t k = 0; k < 12; ++k) coords[k][i] = (*points[k / 3])[static_cast<Eigen::Index>(k % 3)];
-  }
 };
 
 /// For each pair of a `PointTriangleBatch`, the bits that `point_triangle` gives, r, and what a
