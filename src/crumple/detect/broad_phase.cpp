@@ -68,6 +68,7 @@ struct LocalContacts {
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
   narrow::VertexFaceBatch vf_batch;  ///< vertex-face pairs queued for the kernel, four at a time
   narrow::EdgeEdgeBatch ee_batch;    ///< edge pairs queued for the kernel, four at a time
+  narrow::TriangleTriangleBatch tt_batch;  ///< face pairs queued for the intersection test
 };
 
 }  // namespace
@@ -360,6 +361,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   const auto merge = [&](LocalContacts& local) {
     local.vf_batch.flush(h2, local.set.vf);
     local.ee_batch.flush(h2, local.set.ee);
+    local.tt_batch.flush(local.set.tt);
     const std::lock_guard lock(mutex);
     if (!local.set.empty()) {
       parts.push_back(std::move(local.set));
@@ -593,10 +595,10 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           }
           if (!apart) {
             ++local.tt_tests;
-            const PackedFace& s = f < g ? a : b;
-            const PackedFace& t = f < g ? b : a;
-            if (geometry::triangles_intersect(s.p[0], s.p[1], s.p[2], t.p[0], t.p[1], t.p[2])) {
-              local.set.tt.push_back({std::min(f, g), std::max(f, g)});
+            if (f < g) {
+              local.tt_batch.push(f, a.p, g, b.p, local.set.tt);
+            } else {
+              local.tt_batch.push(g, b.p, f, a.p, local.set.tt);
             }
           }
         }

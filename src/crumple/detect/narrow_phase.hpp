@@ -9,6 +9,7 @@
 #include <crumple/detect/contact.hpp>
 #include <crumple/geometry/distance.hpp>
 #include <crumple/geometry/kernel_batch.hpp>
+#include <crumple/geometry/triangle_intersection.hpp>
 #include <crumple/mesh/mesh.hpp>
 
 #include <algorithm>
@@ -191,6 +192,38 @@ class VertexFaceBatch {
   bool lanes_ = geometry::has_avx2();
   geometry::PointTriangleBatch batch_;
   std::array<Pair, geometry::PointTriangleBatch::kLanes> pairs_{};
+  std::size_t n_ = 0;
+};
+
+/// Face pairs tested for intersection four at a time (geometry::triangles_intersect_x4, exact,
+/// so the answers of `triangles_intersect`): `push` queues faces f < g, whose corners need not
+/// stay in place; every fourth push, and `flush`, appends the intersecting pairs to `out`.
+/// Without AVX2 (`geometry::has_avx2()`), `push` tests each pair at once.
+class TriangleTriangleBatch {
+ public:
+  void push(Index f, const std::array<Vec3, 3>& a, Index g, const std::array<Vec3, 3>& b,
+            std::vector<TriangleTriangleContact>& out) {
+    if (!lanes_) {
+      if (geometry::triangles_intersect(a[0], a[1], a[2], b[0], b[1], b[2])) out.push_back({f, g});
+      return;
+    }
+    batch_.set(n_, a[0], a[1], a[2], b[0], b[1], b[2]);
+    pairs_[n_++] = {f, g};
+    if (n_ == geometry::TrianglePairBatch::kLanes) flush(out);
+  }
+  void flush(std::vector<TriangleTriangleContact>& out) {
+    if (n_ == 0) return;
+    const unsigned hits = geometry::triangles_intersect_x4(batch_, n_);
+    for (std::size_t i = 0; i < n_; ++i) {
+      if ((hits >> i & 1u) != 0) out.push_back(pairs_[i]);
+    }
+    n_ = 0;
+  }
+
+ private:
+  bool lanes_ = geometry::has_avx2();
+  geometry::TrianglePairBatch batch_;
+  std::array<TriangleTriangleContact, geometry::TrianglePairBatch::kLanes> pairs_{};
   std::size_t n_ = 0;
 };
 

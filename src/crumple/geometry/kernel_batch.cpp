@@ -1,5 +1,8 @@
 #include <crumple/geometry/kernel_batch.hpp>
 
+#include <crumple/geometry/predicates.hpp>
+#include <crumple/geometry/triangle_intersection.hpp>
+
 #include <immintrin.h>
 
 #include <cmath>
@@ -27,6 +30,7 @@ CRUMPLE_LANES V splat(Scalar x) { return V{x, x, x, x}; }
 CRUMPLE_LANES V sqrt(V x) { return reinterpret_cast<V>(_mm256_sqrt_pd(reinterpret_cast<__m256d>(x))); }
 CRUMPLE_LANES void store(std::array<Scalar, SegmentBatch::kLanes>& to, V x) { std::memcpy(to.data(), &x, sizeof(V)); }
 CRUMPLE_LANES V select(M m, V yes, V no) { return m ? yes : no; }
+CRUMPLE_LANES M select(M m, M yes, M no) { return (m & yes) | (~m & no); }
 
 // The scalar kernel's helpers, lane by lane (distance_impl.hpp).
 // x.dot(y) of Eigen's fixed-size 3-vectors, summed in the order of Eigen's unrolled reduction
@@ -136,7 +140,8 @@ struct V3 {
   V c[3];
 };
 // Point `point` of every pair of the batch.
-CRUMPLE_LANES V3 load(const FourPointBatch& batch, std::size_t point) {
+template <std::size_t Points>
+CRUMPLE_LANES V3 load(const PointBatch<Points>& batch, std::size_t point) {
   V3 out;
   for (std::size_t i = 0; i < 3; ++i) std::memcpy(&out.c[i], batch.coords[3 * point + i].data(), sizeof(V));
   return out;
@@ -254,6 +259,88 @@ CRUMPLE_LANES PointTriangleBatchResult run_point_triangle(const PointTriangleBat
   return out;
 }
 
+// Orientation determinants whose sign the floating-point filter decides: where `pos` (`neg`) is
+// set, the exact sign is +1 (-1); where neither, the filter cannot tell (the scalar predicate
+// would go on to the exact expansion).
+struct Signs {
+  M pos, neg;
+};
+CRUMPLE_LANES V magnitude(V x) { return reinterpret_cast<V>(reinterpret_cast<M>(x) & ~reinterpret_cast<M>(splat(-0.0))); }
+// detail::orient3d_sign's filter.
+CRUMPLE_LANES Signs certain(V det, V permanent) {
+  const V bound = splat(detail::kOrient3dBound) * permanent;
+  return {det > bound, -det > bound};
+}
+// orient3d(a, b, c, d) with its evaluation and filter (predicates.hpp), lane by lane.
+CRUMPLE_LANES Signs orient(const V3& a, const V3& b, const V3& c, const V3& d) {
+  const V3 u = b - a, v = c - a, w = d - a;
+  const V vywz = v.c[1] * w.c[2], vzwy = v.c[2] * w.c[1];
+  const V vzwx = v.c[2] * w.c[0], vxwz = v.c[0] * w.c[2];
+  const V vxwy = v.c[0] * w.c[1], vywx = v.c[1] * w.c[0];
+  const V det = u.c[0] * (vywz - vzwy) + u.c[1] * (vzwx - vxwz) + u.c[2] * (vxwy - vywx);
+  const V permanent = magnitude(u.c[0]) * (magnitude(vywz) + magnitude(vzwy)) +
+                      magnitude(u.c[1]) * (magnitude(vzwx) + magnitude(vxwz)) +
+                      magnitude(u.c[2]) * (magnitude(vxwy) + magnitude(vywx));
+  return certain(det, permanent);
+}
+// orient3d_sides(a, b, c, d[0], d[1], d[2]) with its evaluation and filter, lane by lane.
+CRUMPLE_LANES std::array<Signs, 3> plane_sides(const V3& a, const V3& b, const V3& c, const V3& d0, const V3& d1,
+                                               const V3& d2) {
+  const V3 u = b - a, v = c - a;
+  const V uyvz = u.c[1] * v.c[2], uzvy = u.c[2] * v.c[1];
+  const V uzvx = u.c[2] * v.c[0], uxvz = u.c[0] * v.c[2];
+  const V uxvy = u.c[0] * v.c[1], uyvx = u.c[1] * v.c[0];
+  const V3 m{{uyvz - uzvy, uzvx - uxvz, uxvy - uyvx}};
+  const V3 pm{{magnitude(uyvz) + magnitude(uzvy), magnitude(uzvx) + magnitude(uxvz), magnitude(uxvy) + magnitude(uyvx)}};
+  std::array<Signs, 3> out;
+  const V3* d[3] = {&d0, &d1, &d2};
+  for (std::size_t k = 0; k < 3; ++k) {
+    const V3 w = *d[k] - a;
+    out[k] = certain(w.c[0] * m.c[0] + w.c[1] * m.c[1] + w.c[2] * m.c[2],
+                     magnitude(w.c[0]) * pm.c[0] + magnitude(w.c[1]) * pm.c[1] + magnitude(w.c[2]) * pm.c[2]);
+  }
+  return out;
+}
+// A triangle's corners (p, q, r) rotated so that p is the corner alone on its side of the other
+// triangle's plane (sides s, all certain and not all equal), and whether p lies below it.
+struct Rotated {
+  V3 p, q, r;
+  M below;
+};
+CRUMPLE_LANES Rotated rotate_alone(const V3& x0, const V3& x1, const V3& x2, const std::array<Signs, 3>& s) {
+  // triangles_intersect's `alone`: corner 2 if s0 == s1, else corner 1 if s0 == s2, else 0.
+  const M alone2 = ~(s[0].pos ^ s[1].pos), alone1 = ~(s[0].pos ^ s[2].pos);
+  return {choose(alone2, alone1, x2, x1, x0), choose(alone2, alone1, x0, x2, x1), choose(alone2, alone1, x1, x0, x2),
+          choose(alone2, alone1, s[2].neg, s[1].neg, s[0].neg)};
+}
+
+// triangles_intersect on four lanes, where the filters decide: the mask of the lanes found
+// intersecting, and in `deferred` those that need the exact predicates.
+CRUMPLE_LANES M run_triangles(const TrianglePairBatch& batch, M& deferred) {
+  const V3 a0 = load(batch, 0), a1 = load(batch, 1), a2 = load(batch, 2);
+  const V3 b0 = load(batch, 3), b1 = load(batch, 4), b2 = load(batch, 5);
+  // Step 1, the plane rejection: the corners of one triangle certainly all on one side of the
+  // other's plane.
+  const std::array<Signs, 3> sb = plane_sides(a0, a1, a2, b0, b1, b2);
+  const std::array<Signs, 3> sa = plane_sides(b0, b1, b2, a0, a1, a2);
+  const M apart = (sb[0].pos & sb[1].pos & sb[2].pos) | (sb[0].neg & sb[1].neg & sb[2].neg) |
+                  (sa[0].pos & sa[1].pos & sa[2].pos) | (sa[0].neg & sa[1].neg & sa[2].neg);
+  M all_certain = ~M{};
+  for (std::size_t k = 0; k < 3; ++k) all_certain &= (sa[k].pos | sa[k].neg) & (sb[k].pos | sb[k].neg);
+  // Not apart, with every sign certain (none zero): each triangle strictly straddles the other's
+  // plane. Guigue and Devillers' two orientations, as in triangles_intersect: p1 above the
+  // second triangle's plane by swapping its last two corners where p1 lies below, and likewise.
+  const Rotated ra = rotate_alone(a0, a1, a2, sa), rb = rotate_alone(b0, b1, b2, sb);
+  const V3 q2 = select(ra.below, rb.r, rb.q), r2 = select(ra.below, rb.q, rb.r);
+  const V3 q1 = select(rb.below, ra.r, ra.q), r1 = select(rb.below, ra.q, ra.r);
+  const Signs o1 = orient(ra.p, q1, rb.p, q2), o2 = orient(ra.p, r1, r2, rb.p);
+  const M straddling = all_certain & ~apart;
+  const M hit = straddling & o1.neg & o2.neg;
+  const M miss = straddling & (o1.pos | o2.pos);
+  deferred = ~(apart | hit | miss);
+  return hit;
+}
+
 #undef CRUMPLE_LANES
 
 }  // namespace
@@ -291,6 +378,24 @@ __attribute__((target("avx2"))) PointTriangleBatchResult point_triangle_x4(const
     }
   }
   return out;
+}
+
+__attribute__((target("avx2"))) unsigned triangles_intersect_x4(const TrianglePairBatch& batch, std::size_t count,
+                                                                unsigned* deferred) {
+  M undecided;
+  const M hit = run_triangles(batch, undecided);
+  const unsigned used = (1u << count) - 1;
+  unsigned hits = static_cast<unsigned>(_mm256_movemask_pd(reinterpret_cast<__m256d>(hit))) & used;
+  const unsigned exact = static_cast<unsigned>(_mm256_movemask_pd(reinterpret_cast<__m256d>(undecided))) & used;
+  for (std::size_t k = 0; k < count; ++k) {
+    if ((exact >> k & 1u) == 0) continue;
+    const auto point = [&](std::size_t i) {
+      return Vec3(batch.coords[3 * i][k], batch.coords[3 * i + 1][k], batch.coords[3 * i + 2][k]);
+    };
+    if (triangles_intersect(point(0), point(1), point(2), point(3), point(4), point(5))) hits |= 1u << k;
+  }
+  if (deferred != nullptr) *deferred = exact;
+  return hits;
 }
 
 }  // namespace crumple::geometry

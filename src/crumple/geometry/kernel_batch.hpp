@@ -22,23 +22,29 @@
 
 namespace crumple::geometry {
 
-/// Up to four pairs of a kernel's inputs, four points each (segment-segment: p0 p1 against
-/// q0 q1; point-triangle: p against a b c), structure of arrays: `coords[k][i]` is coordinate
-/// k % 3 of point k / 3 of pair i. Unused lanes may hold anything finite (their results are not
-/// read).
-struct FourPointBatch {
+/// Up to four pairs of a kernel's inputs, `Points` points each (segment-segment: p0 p1 against
+/// q0 q1; point-triangle: p against a b c; triangle-triangle: a0 a1 a2 against b0 b1 b2),
+/// structure of arrays: `coords[k][i]` is coordinate k % 3 of point k / 3 of pair i. Unused
+/// lanes may hold anything finite (their results are not read).
+template <std::size_t Points>
+struct PointBatch {
   static constexpr std::size_t kLanes = 4;
-  alignas(32) std::array<std::array<Scalar, kLanes>, 12> coords{};
+  alignas(32) std::array<std::array<Scalar, kLanes>, 3 * Points> coords{};
   /// Stores pair i.
-  void set(std::size_t i, const Vec3& x0, const Vec3& x1, const Vec3& x2, const Vec3& x3) {
-    const Vec3* points[4] = {&x0, &x1, &x2, &x3};
-    for (std::size_t k = 0; k < 12; ++k) coords[k][i] = (*points[k / 3])[static_cast<Eigen::Index>(k % 3)];
+  template <class... P>
+  void set(std::size_t i, const P&... x) {
+    static_assert(sizeof...(P) == Points);
+    const Vec3* points[Points] = {&x...};
+    for (std::size_t k = 0; k < 3 * Points; ++k) coords[k][i] = (*points[k / 3])[static_cast<Eigen::Index>(k % 3)];
   }
 };
+using FourPointBatch = PointBatch<4>;
 /// Segment pairs (p0, p1, q0, q1).
 using SegmentBatch = FourPointBatch;
 /// Point-triangle pairs (p, a, b, c).
 using PointTriangleBatch = FourPointBatch;
+/// Triangle pairs (a0, a1, a2, b0, b1, b2).
+using TrianglePairBatch = PointBatch<6>;
 
 /// The squared distances and parameters of the batch's four pairs: exactly what
 /// `segment_segment` returns for each (same bits). With them, the same bits as these
@@ -61,7 +67,7 @@ struct PointTriangleBatchResult {
   alignas(32) std::array<std::array<Scalar, PointTriangleBatch::kLanes>, 3> barycentric{}, normal{};
 };
 
-/// Whether this CPU has AVX2, which `segment_segment_x4` and `point_triangle_x4` need.
+/// Whether this CPU has AVX2, which the `_x4` functions need.
 bool has_avx2();
 
 /// The four pairs of `batch` as `segment_segment` would give them, at once. Only where
@@ -71,5 +77,15 @@ SegmentBatchResult segment_segment_x4(const SegmentBatch& batch);
 /// The four pairs of `batch` as `point_triangle` would give them, at once. Only where
 /// `has_avx2()`.
 PointTriangleBatchResult point_triangle_x4(const PointTriangleBatch& batch);
+
+/// The first `count` pairs of `batch` that `triangles_intersect` says intersect, as a mask (bit
+/// i for pair i). The answers are exact, so they are that function's: the lanes evaluate the
+/// same orientation determinants (each triangle's corners against the other's plane, then Guigue
+/// and Devillers' two for triangles that straddle each other's planes) with the same
+/// floating-point filter, and a lane whose filter cannot decide a sign that its answer needs
+/// (near-degenerate, touching or coplanar triangles) is answered by `triangles_intersect`
+/// itself. Where `deferred` is given, it receives the mask of those lanes. Only where
+/// `has_avx2()`.
+unsigned triangles_intersect_x4(const TrianglePairBatch& batch, std::size_t count, unsigned* deferred = nullptr);
 
 }  // namespace crumple::geometry
