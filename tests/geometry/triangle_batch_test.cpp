@@ -27,11 +27,17 @@ struct Tally {
   int hits = 0;      // intersecting pairs
 };
 
-// Every case of `make`, `lanes` to a batch (the unused lanes keep the previous batch's pairs,
-// which must not be reported).
+// Every case of `make`, `lanes` to a batch (the unused lanes hold an intersecting pair, which
+// must not be reported).
 Tally run(int cases, const std::function<Case(int)>& make, std::size_t lanes = 4) {
   Tally tally;
   TrianglePairBatch batch;
+  // Every lane starts with a pair that intersects in general position, so that a lane past the
+  // count that got reported would show.
+  for (std::size_t k = 0; k < 4; ++k) {
+    batch.set(k, Vec3(0, 0, 0), Vec3(2, 0, 0), Vec3(0, 2, 0), Vec3(0.5, 0.5, -1), Vec3(0.6, 0.4, 1), Vec3(0.4, 0.7, 1));
+  }
+  EXPECT_EQ(triangles_intersect_x4(batch, 4), 15u);
   for (int i = 0; i < cases; i += static_cast<int>(lanes)) {
     std::array<Case, 4> in;
     for (std::size_t k = 0; k < lanes; ++k) {
