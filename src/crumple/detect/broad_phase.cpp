@@ -543,10 +543,14 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
         const auto base = static_cast<std::uint16_t>(n << 4);
         const unsigned vkey = a.vertex_mask | static_cast<unsigned>(b.vertex_mask) << 3;
         const unsigned ekey = a.edge_mask | static_cast<unsigned>(b.edge_mask) << 3;
-        for (std::size_t k = 0; k < 6; ++k) vf_subs[nvf + k] = static_cast<std::uint16_t>(base | kSubPairs.vf[vkey][k]);
-        for (std::size_t k = 0; k < 9; ++k) ee_subs[nee + k] = static_cast<std::uint16_t>(base | kSubPairs.ee[ekey][k]);
-        nvf += kSubPairs.vf_count[vkey];
-        nee += kSubPairs.ee_count[ekey];
+        if (kinds.vf) {
+          for (std::size_t k = 0; k < 6; ++k) vf_subs[nvf + k] = static_cast<std::uint16_t>(base | kSubPairs.vf[vkey][k]);
+          nvf += kSubPairs.vf_count[vkey];
+        }
+        if (kinds.ee) {
+          for (std::size_t k = 0; k < 9; ++k) ee_subs[nee + k] = static_cast<std::uint16_t>(base | kSubPairs.ee[ekey][k]);
+          nee += kSubPairs.ee_count[ekey];
+        }
       }
       if (kinds.vf) {
         // Corner (code & 3) of one face of the pair, against the other face.
