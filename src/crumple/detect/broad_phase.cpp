@@ -245,8 +245,8 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
                                  " contacts exceed max_contacts=" +
                                  std::to_string(params_.max_contacts));
     }
-    // Keep the first max_contacts in canonical order (VF, then EE, then TT): deterministic.
-    out.sort();
+    // Keep the first max_contacts in canonical order (VF, then EE, then TT; the gather's):
+    // deterministic.
     std::size_t keep = params_.max_contacts;
     const auto cut = [&keep](auto& v) {
       if (v.size() > keep) v.resize(keep);
@@ -769,7 +769,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   stats_.set("orphan_refresh", refresh ? 1 : 0);
   stats_.set("narrow_ms", ms_since(narrow_start));
 
-  // The frame's set in canonical order (the base class then finds it sorted).
+  // The frame's set in canonical order (`sorted_output`: the base class does not sort it again).
   const auto gather_start = std::chrono::steady_clock::now();
   std::vector<const std::vector<VertexFaceContact>*> vf_parts;
   std::vector<const std::vector<EdgeEdgeContact>*> ee_parts;

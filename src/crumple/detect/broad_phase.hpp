@@ -189,6 +189,8 @@ class ExactDetector : public Detector {
  protected:
   ExactDetector(DetectorOptions options, ExactParams params);
 
+  /// The contacts are gathered in canonical order (`detail::gather_sorted`).
+  bool sorted_output() const override { return true; }
   /// Per-topology set-up of the broad phase (positions not known yet).
   virtual void on_exact_topology() {}
   /// Adds every candidate (see the file comment) to `out`, each unordered pair once. Sets its

@@ -75,7 +75,7 @@ void Detector::update(PositionsView previous, PositionsView positions, ContactSe
     out.clear();
     throw;
   }
-  out.sort();
+  if (!sorted_output()) out.sort();
 }
 
 void Detector::load_state(std::string_view text) {

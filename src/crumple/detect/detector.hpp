@@ -87,6 +87,11 @@ class Detector {
   /// — rewriting records in place avoids constructing tens of MB of them every frame.
   /// `previous` is empty when no motion is given.
   virtual void detect(PositionsView previous, PositionsView positions, ContactSet& out) = 0;
+  /// Whether `detect` itself leaves `out` in canonical order. `update` sorts the output of the
+  /// detectors that do not; for those that do, it skips even the check (one pass over every
+  /// contact: about 2 ms a frame for cloth-ball's 0.55 M, on one thread), and the tests check
+  /// the order of their output instead.
+  virtual bool sorted_output() const { return false; }
 
   DetectorStats stats_;
 
