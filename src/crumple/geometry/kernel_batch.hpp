@@ -14,6 +14,10 @@
 /// random, degenerate and adversarial inputs). The lanes are one AVX2 register, so the batches
 /// run only on a CPU with AVX2 (`has_avx2()`, asked at run time); elsewhere callers use the
 /// scalar kernels (two 128-bit halves measured slower than the scalar segment kernel).
+///
+/// The triangle-triangle intersection test (`triangles_intersect`) is exact, so its batch
+/// (`triangles_intersect_x4`) gives the same answers by deciding only what its filters certify
+/// and handing the rest to the scalar test (tests/geometry/triangle_batch_test.cpp).
 
 #include <crumple/geometry/distance.hpp>
 
