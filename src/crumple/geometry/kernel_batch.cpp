@@ -362,11 +362,8 @@ __attribute__((target("avx2"))) PointTriangleBatchResult point_triangle_x4(const
   PointTriangleBatchResult out = run_point_triangle(batch, degenerate);
   for (std::size_t k = 0; k < PointTriangleBatch::kLanes; ++k) {
     if (degenerate[k] == 0) continue;
-    const auto point = [&](std::size_t i) {
-      return Vec3(batch.coords[3 * i][k], batch.coords[3 * i + 1][k], batch.coords[3 * i + 2][k]);
-    };
-    const Vec3 p = point(0);
-    const PointTriangleResult r = point_triangle(p, point(1), point(2), point(3));
+    const Vec3 p = batch.get(k, 0);
+    const PointTriangleResult r = point_triangle(p, batch.get(k, 1), batch.get(k, 2), batch.get(k, 3));
     const Vec3 away = p - r.closest;
     const Scalar away_norm = away.norm();
     out.sqr_distance[k] = r.sqr_distance;
@@ -389,10 +386,10 @@ __attribute__((target("avx2"))) unsigned triangles_intersect_x4(const TrianglePa
   const unsigned exact = static_cast<unsigned>(_mm256_movemask_pd(reinterpret_cast<__m256d>(undecided))) & used;
   for (std::size_t k = 0; k < count; ++k) {
     if ((exact >> k & 1u) == 0) continue;
-    const auto point = [&](std::size_t i) {
-      return Vec3(batch.coords[3 * i][k], batch.coords[3 * i + 1][k], batch.coords[3 * i + 2][k]);
-    };
-    if (triangles_intersect(point(0), point(1), point(2), point(3), point(4), point(5))) hits |= 1u << k;
+    if (triangles_intersect(batch.get(k, 0), batch.get(k, 1), batch.get(k, 2), batch.get(k, 3), batch.get(k, 4),
+                            batch.get(k, 5))) {
+      hits |= 1u << k;
+    }
   }
   if (deferred != nullptr) *deferred = exact;
   return hits;

@@ -41,6 +41,10 @@ struct PointBatch {
     const Vec3* points[Points] = {&x...};
     for (std::size_t k = 0; k < 3 * Points; ++k) coords[k][i] = (*points[k / 3])[static_cast<Eigen::Index>(k % 3)];
   }
+  /// Point `point` of pair i, as `set` stored it.
+  Vec3 get(std::size_t i, std::size_t point) const {
+    return Vec3(coords[3 * point][i], coords[3 * point + 1][i], coords[3 * point + 2][i]);
+  }
 };
 using FourPointBatch = PointBatch<4>;
 /// Segment pairs (p0, p1, q0, q1).
