@@ -35,23 +35,25 @@ void inflate(Box& b, Scalar r) {
 /// The owned sub-pairs of a candidate face pair, indexed by `mask_a | mask_b << 3` (the two
 /// faces' ownership masks): vertex-face codes `side << 2 | k` (side 0: corner k of the first
 /// face against the second face; side 1: the other way round) and edge-edge codes `i << 2 | j`
-/// (side i of the first face, side j of the second), with their counts. Unused codes are 0.
+/// (side i of the first face, side j of the second), with their counts. Unused codes are 0. The
+/// codes are 16-bit and the rows padded to 8 and 16, so that listing a candidate's codes is one
+/// or two vector operations (8-bit codes, widened one by one, cost a stall each).
 struct SubPairTable {
-  std::array<std::array<std::uint8_t, 6>, 64> vf{};
+  std::array<std::array<std::uint16_t, 8>, 64> vf{};
   std::array<std::uint8_t, 64> vf_count{};
-  std::array<std::array<std::uint8_t, 9>, 64> ee{};
+  std::array<std::array<std::uint16_t, 16>, 64> ee{};
   std::array<std::uint8_t, 64> ee_count{};
   constexpr SubPairTable() {
     for (unsigned key = 0; key < 64; ++key) {
       const unsigned ma = key & 7u, mb = key >> 3;
       unsigned nv = 0, ne = 0;
       for (unsigned k = 0; k < 3; ++k) {
-        if (ma >> k & 1u) vf[key][nv++] = static_cast<std::uint8_t>(k);
-        if (mb >> k & 1u) vf[key][nv++] = static_cast<std::uint8_t>(4u | k);
+        if (ma >> k & 1u) vf[key][nv++] = static_cast<std::uint16_t>(k);
+        if (mb >> k & 1u) vf[key][nv++] = static_cast<std::uint16_t>(4u | k);
       }
       for (unsigned i = 0; i < 3; ++i) {
         for (unsigned j = 0; j < 3; ++j) {
-          if ((ma >> i & 1u) && (mb >> j & 1u)) ee[key][ne++] = static_cast<std::uint8_t>(i << 2 | j);
+          if ((ma >> i & 1u) && (mb >> j & 1u)) ee[key][ne++] = static_cast<std::uint16_t>(i << 2 | j);
         }
       }
       vf_count[key] = static_cast<std::uint8_t>(nv);
@@ -520,8 +522,9 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   parallel_for_chunks(total, threads, 2048, [&](std::size_t begin, std::size_t end) {
     LocalContacts local{spare_sets_.take()};
     std::array<std::array<const PackedFace*, 2>, kBlock> block;
-    std::array<std::uint16_t, kBlock * 6> vf_subs;
-    std::array<std::uint16_t, kBlock * 9> ee_subs;
+    // Room for a full table row written past the last candidate's codes.
+    std::array<std::uint16_t, kBlock * 6 + 8> vf_subs;
+    std::array<std::uint16_t, kBlock * 9 + 16> ee_subs;
     std::size_t c = static_cast<std::size_t>(
         std::upper_bound(offsets.begin(), offsets.end(), begin) - offsets.begin() - 1);
     for (std::size_t i = begin; i < end;) {
@@ -544,11 +547,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
         const unsigned vkey = a.vertex_mask | static_cast<unsigned>(b.vertex_mask) << 3;
         const unsigned ekey = a.edge_mask | static_cast<unsigned>(b.edge_mask) << 3;
         if (kinds.vf) {
-          for (std::size_t k = 0; k < 6; ++k) vf_subs[nvf + k] = static_cast<std::uint16_t>(base | kSubPairs.vf[vkey][k]);
+          for (std::size_t k = 0; k < 8; ++k) vf_subs[nvf + k] = static_cast<std::uint16_t>(base | kSubPairs.vf[vkey][k]);
           nvf += kSubPairs.vf_count[vkey];
         }
         if (kinds.ee) {
-          for (std::size_t k = 0; k < 9; ++k) ee_subs[nee + k] = static_cast<std::uint16_t>(base | kSubPairs.ee[ekey][k]);
+          for (std::size_t k = 0; k < 16; ++k) ee_subs[nee + k] = static_cast<std::uint16_t>(base | kSubPairs.ee[ekey][k]);
           nee += kSubPairs.ee_count[ekey];
         }
       }
