@@ -95,21 +95,32 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
         const auto k = static_cast<std::size_t>(x.key >> 32);
         if (k >= lo && k < hi) sorted[next[k]++] = x;
       }
-      for (std::size_t k = lo; k < hi; ++k) {  // mostly a few items each: insertion sort
+      // Each first criterion's items, mostly a few, are copied straight to their place among
+      // them: the number of its items with smaller keys (keys are distinct), counted without a
+      // branch. (An insertion sort of the items, then a copy in order, mispredicted a branch
+      // per item: 4-6 of the 13 ms of cloth-ball's edge-edge gather on one thread.) More than
+      // kRanked items: sorted, then copied.
+      constexpr std::size_t kRanked = 16;
+      for (std::size_t k = lo; k < hi; ++k) {
         Item* const first = sorted.data() + start[k];
-        Item* const last = sorted.data() + start[k + 1];
-        if (last - first > 32) {
-          std::sort(first, last, by_key);
+        const std::size_t n = start[k + 1] - start[k];
+        // The records are scattered: fetch ahead (within this range, which no other thread writes).
+        for (std::size_t j = start[k] + 48; j < std::min(start[k + 1] + 48, start[hi]); ++j) {
+          const auto* ahead = static_cast<const char*>(sorted[j].record);
+          __builtin_prefetch(ahead);
+          __builtin_prefetch(ahead + sizeof(T) - 1);
+        }
+        if (n > kRanked) {
+          std::sort(first, first + n, by_key);
+          copy(sorted.data(), start[k], start[k + 1]);
           continue;
         }
-        for (Item* i = first + (first != last); i < last; ++i) {
-          const Item x = *i;
-          Item* j = i;
-          for (; j != first && x.key < (j - 1)->key; --j) *j = *(j - 1);
-          *j = x;
+        for (std::size_t i = 0; i < n; ++i) {
+          std::size_t rank = 0;
+          for (std::size_t j = 0; j < n; ++j) rank += first[j].key < first[i].key ? 1u : 0u;
+          dest[start[k] + rank] = *static_cast<const T*>(first[i].record);
         }
       }
-      copy(sorted.data(), start[lo], start[hi]);
     }
   });
 }
