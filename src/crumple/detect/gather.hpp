@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 namespace crumple::detail {
@@ -22,7 +23,9 @@ struct GatherScratch {
     const void* record;
   };
   std::vector<Item> items, sorted;
-  std::vector<std::size_t> start, cursor;  ///< per first criterion: first place, next free place
+  std::vector<std::size_t> start;  ///< per first criterion: its first place
+  /// Per slice of the items and first criterion: how many items, then the next free place.
+  std::vector<std::size_t> cursor;
 };
 
 /// Gathers the records of every list in `parts` into `dest` in the order of their keys. key(x)
@@ -30,14 +33,17 @@ struct GatherScratch {
 /// [0, keys); no two records may have the same key.
 ///
 /// The records are not moved until their place is known: the (key, address) items are listed
-/// (in parallel over the parts), counted per first criterion, scattered, and each first
-/// criterion's few items sorted, on `threads` threads that each own a range of first criteria
-/// holding about the same number of records; each then copies its range's records to their
-/// final place, once, reading them ahead. (Copying each record as its item is scattered, so that
-/// the records are read in the order they lie, was measured slower on cloth-ball: 25 against 18
-/// ms on one thread. The writes are then the scattered accesses, and fetching them ahead did
-/// not help.) Fewer records than keys / 8 are sorted by key instead of counted: counting would
-/// cost more, over every key.
+/// (in parallel over the parts), counted per first criterion and scattered to their criterion's
+/// places (each thread counting then scattering its own slice of the items), then `threads`
+/// threads that each own a range of first criteria holding about the same number of records
+/// copy each record to its place, once, reading them ahead: among a criterion's few items, its
+/// place is the number of them with smaller keys, counted without a branch (measured against
+/// an insertion sort then a copy in order: the same on cloth-ball, 1-2 ms faster of 15-17 on
+/// rod-twist, one thread). (Copying each record as its item is scattered, so that the records
+/// are read in the order they lie, was measured slower on cloth-ball: 25 against 18 ms on one
+/// thread. The writes are then the scattered accesses, and fetching them ahead did not help.)
+/// Fewer records than keys / 8 are sorted by key instead of counted: counting would cost more,
+/// over every key.
 template <class T, class Key>
 void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*>& parts, Index keys, Key key,
                    int threads, GatherScratch& scratch) {
@@ -74,38 +80,50 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
     parallel_for_chunks(total, threads, 4096, [&](std::size_t begin, std::size_t end) { copy(items.data(), begin, end); });
     return;
   }
-  start.assign(static_cast<std::size_t>(keys) + 1, 0);
-  for (const Item& x : items) ++start[(x.key >> 32) + 1];
-  for (std::size_t k = 1; k < start.size(); ++k) start[k] += start[k - 1];
+  // Each slice of the items is counted, then scattered, by one thread; slice s's items of first
+  // criterion k go to [cursor, ...) of row s, after those of the slices before.
   const auto ranges = static_cast<std::size_t>(resolve_threads(threads));
+  const std::size_t slices = std::min<std::size_t>(ranges, 4);
+  const auto nk = static_cast<std::size_t>(keys);
+  const auto slice = [&](std::size_t s) { return std::pair{total * s / slices, total * (s + 1) / slices}; };
+  next.resize(slices * nk);
+  parallel_for_chunks(slices, threads, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t s = begin; s < end; ++s) {
+      std::size_t* row = next.data() + s * nk;
+      std::fill(row, row + nk, std::size_t{0});
+      const auto [from, to] = slice(s);
+      for (std::size_t i = from; i < to; ++i) ++row[items[i].key >> 32];
+    }
+  });
+  start.resize(nk + 1);
+  std::size_t place = 0;
+  for (std::size_t k = 0; k < nk; ++k) {
+    start[k] = place;
+    for (std::size_t s = 0; s < slices; ++s) place += std::exchange(next[s * nk + k], place);
+  }
+  start[nk] = place;
+  sorted.resize(total);
+  parallel_for_chunks(slices, threads, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t s = begin; s < end; ++s) {
+      std::size_t* row = next.data() + s * nk;
+      const auto [from, to] = slice(s);
+      for (std::size_t i = from; i < to; ++i) sorted[row[items[i].key >> 32]++] = items[i];
+    }
+  });
   std::vector<std::size_t> bound{0};  // ranges of first criteria holding about total / ranges records each
   for (std::size_t r = 1; r < ranges; ++r) {
     const auto it = std::lower_bound(start.begin(), start.end(), total * r / ranges);
     bound.push_back(std::max(bound.back(), static_cast<std::size_t>(it - start.begin())));
   }
-  bound.push_back(static_cast<std::size_t>(keys));
-  sorted.resize(total);
-  next.resize(static_cast<std::size_t>(keys));
+  bound.push_back(nk);
+  constexpr std::size_t kRanked = 16;  // more items under one first criterion: sorted, then copied
   parallel_for_chunks(ranges, threads, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t r = begin; r < end; ++r) {
-      const std::size_t lo = bound[r], hi = std::max(lo, bound[r + 1]);
-      std::copy(start.begin() + static_cast<std::ptrdiff_t>(lo), start.begin() + static_cast<std::ptrdiff_t>(hi),
-                next.begin() + static_cast<std::ptrdiff_t>(lo));
-      for (const Item& x : items) {
-        const auto k = static_cast<std::size_t>(x.key >> 32);
-        if (k >= lo && k < hi) sorted[next[k]++] = x;
-      }
-      // Each first criterion's items, mostly a few, are copied straight to their place among
-      // them: the number of its items with smaller keys (keys are distinct), counted without a
-      // branch. (An insertion sort of the items, then a copy in order, mispredicted a branch
-      // per item: 4-6 of the 13 ms of cloth-ball's edge-edge gather on one thread.) More than
-      // kRanked items: sorted, then copied.
-      constexpr std::size_t kRanked = 16;
-      for (std::size_t k = lo; k < hi; ++k) {
+      for (std::size_t k = bound[r]; k < std::max(bound[r], bound[r + 1]); ++k) {
         Item* const first = sorted.data() + start[k];
         const std::size_t n = start[k + 1] - start[k];
-        // The records are scattered: fetch ahead (within this range, which no other thread writes).
-        for (std::size_t j = start[k] + 48; j < std::min(start[k + 1] + 48, start[hi]); ++j) {
+        // The records are scattered: fetch ahead.
+        for (std::size_t j = start[k] + 48; j < std::min(start[k + 1] + 48, total); ++j) {
           const auto* ahead = static_cast<const char*>(sorted[j].record);
           __builtin_prefetch(ahead);
           __builtin_prefetch(ahead + sizeof(T) - 1);
