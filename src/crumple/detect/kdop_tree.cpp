@@ -19,6 +19,10 @@
 #include <utility>
 #include <vector>
 
+// The lane types' ABI differs with and without AVX, which GCC warns about at every function
+// taking or returning one; those below are inlined.
+#pragma GCC diagnostic ignored "-Wpsabi"
+
 namespace crumple {
 
 namespace {
@@ -72,21 +76,36 @@ class KdopDetector::Tree {
 
 namespace {
 
-/// Four floats / four lane masks (GCC and Clang vector extensions: SSE on x86-64, NEON on Arm).
+/// Members per lane group: eight floats / eight lane masks (GCC and Clang vector extensions:
+/// one AVX register, or two SSE ones on x86-64 where the traversal's clone without AVX2 runs;
+/// NEON pairs on Arm).
+constexpr int kGroup = 8;
+using F8 = float __attribute__((vector_size(4 * kGroup)));
+using I8 = std::int32_t __attribute__((vector_size(4 * kGroup)));
 using F4 = float __attribute__((vector_size(16)));
-using I4 = std::int32_t __attribute__((vector_size(16)));
 
-/// Bit l set when lane l of v is 0 (the lanes of a vector comparison are 0 or -1): one
-/// sign-mask instruction where SSE is there.
-inline std::uint64_t zero_lanes(I4 v) {
+/// Bit l set when lane l of v is 0 (the lanes of a vector comparison are 0 or -1): a sign-mask
+/// instruction per half where SSE is there.
+__attribute__((always_inline)) inline std::uint64_t zero_lanes(I8 v) {
 #if defined(__SSE__)
-  return ~static_cast<std::uint64_t>(__builtin_ia32_movmskps(std::bit_cast<F4>(v))) & 0xFu;
+  const auto half = std::bit_cast<std::array<F4, 2>>(v);
+  const auto signs = static_cast<std::uint64_t>(__builtin_ia32_movmskps(half[0])) |
+                     static_cast<std::uint64_t>(__builtin_ia32_movmskps(half[1])) << 4;
+  return ~signs & 0xFFu;
 #else
   std::uint64_t m = 0;
-  for (int l = 0; l < 4; ++l) m |= static_cast<std::uint64_t>(v[l] == 0) << l;
+  for (int l = 0; l < kGroup; ++l) m |= static_cast<std::uint64_t>(v[l] == 0) << l;
   return m;
 #endif
 }
+
+/// The traversal's recursive functions are compiled twice, with AVX2 (a lane group in one
+/// register) and without, and the CPU picks at load time (GCC's function multiversioning).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define CRUMPLE_TRAVERSAL __attribute__((target_clones("avx2", "default")))
+#else
+#define CRUMPLE_TRAVERSAL
+#endif
 
 /// d as a float, by a non-decreasing map (round to nearest inside the float range, infinity
 /// beyond it; NaN stays NaN). Non-decreasing is all the overlap tests need: slabs that overlap
@@ -103,13 +122,13 @@ template <int K>
 class KdopTree final : public KdopDetector::Tree {
   using Dop = geometry::Kdop<K>;
   static constexpr int kAxes = Dop::kAxes;
-  /// Up to four k-DOPs of a node's members (an internal node's children, a leaf's faces) side
-  /// by side, one lane each, in float (`to_float`), so that a k-DOP is tested against four
+  /// Up to eight k-DOPs of a node's members (an internal node's children, a leaf's faces) side
+  /// by side, one lane each, in float (`to_float`), so that a k-DOP is tested against eight
   /// members with a few vector compares (no branch per slab). Unused lanes are empty (min +inf,
   /// max -inf). Conservative: k-DOPs that overlap in double always overlap here; the face
   /// pairs that pass are then tested in double.
-  struct alignas(16) Lanes {
-    std::array<F4, kAxes> lo, hi;
+  struct alignas(32) Lanes {
+    std::array<F8, kAxes> lo, hi;
   };
   /// A node's or face's k-DOP in float (the query side of a lane test).
   struct FloatDop {
@@ -149,7 +168,7 @@ class KdopTree final : public KdopDetector::Tree {
     Index faces = 0;  ///< faces below the node
     bool leaf = false;
     Index slot_begin = 0, slot_end = 0;  ///< the node's faces: slots [slot_begin, slot_end)
-    Index lanes = 0;  ///< members first + 4g .. first + 4g + 3 are in lanes_[lanes + g]
+    Index lanes = 0;  ///< members first + 8g .. first + 8g + 7 are in lanes_[lanes + g]
   };
 
  public:
@@ -284,7 +303,7 @@ class KdopTree final : public KdopDetector::Tree {
     Index groups = 0;
     for (Node& node : nodes_) {
       node.lanes = groups;
-      groups += (node.count + 3) / 4;
+      groups += (node.count + kGroup - 1) / kGroup;
     }
     lanes_.assign(static_cast<std::size_t>(groups), Lanes{});
     float_dops_.assign(nodes_.size(), FloatDop{});
@@ -647,24 +666,21 @@ class KdopTree final : public KdopDetector::Tree {
   }
 
   /// Writes the float k-DOPs of the node's members (faces of a leaf, children otherwise),
-  /// `members[0, count)`, into its lanes, four per group; lanes past `count` are empty.
+  /// `members[0, count)`, into its lanes, eight per group; lanes past `count` are empty.
   void fill_lanes(const Node& node, const FloatDop* members) {
-    FloatDop empty;
-    empty.lo.fill(std::numeric_limits<float>::infinity());
-    empty.hi.fill(-std::numeric_limits<float>::infinity());
-    for (Index g = 0; g < (node.count + 3) / 4; ++g) {
-      std::array<std::array<float, 4>, kAxes> lo, hi;
-      for (std::size_t l = 0; l < 4; ++l) {
-        const auto m = static_cast<std::size_t>(4 * g) + l;
-        const FloatDop& f = m < static_cast<std::size_t>(node.count) ? members[m] : empty;
+    const F8 none_lo = F8{} + std::numeric_limits<float>::infinity();
+    const F8 none_hi = F8{} - std::numeric_limits<float>::infinity();
+    for (Index g = 0; g < (node.count + kGroup - 1) / kGroup; ++g) {
+      Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
+      lanes.lo.fill(none_lo);
+      lanes.hi.fill(none_hi);
+      for (Index l = 0; l < std::min<Index>(kGroup, node.count - kGroup * g); ++l) {
+        const FloatDop& f = members[kGroup * g + l];
         for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
-          lo[j][l] = f.lo[j];
-          hi[j][l] = f.hi[j];
+          lanes.lo[j][l] = f.lo[j];
+          lanes.hi[j][l] = f.hi[j];
         }
       }
-      Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
-      std::memcpy(&lanes.lo, &lo, sizeof lo);
-      std::memcpy(&lanes.hi, &hi, sizeof hi);
     }
   }
 
@@ -704,9 +720,9 @@ class KdopTree final : public KdopDetector::Tree {
   }
 
   /// The float k-DOP of member i (0-based) of a node, read back from its lanes.
-  FloatDop member(const Node& node, Index i) const {
-    const Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + i / 4)];
-    const int l = i % 4;
+  __attribute__((always_inline)) FloatDop member(const Node& node, Index i) const {
+    const Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + i / kGroup)];
+    const int l = i % kGroup;
     FloatDop f;
     for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
       f.lo[j] = lanes.lo[j][l];
@@ -717,7 +733,7 @@ class KdopTree final : public KdopDetector::Tree {
 
   /// Leaves a and b (node ids); only a's faces that overlap b's k-DOP are tested against b's
   /// faces (adjacent leaves overlap along their shared boundary only).
-  void emit_leaf_pair(Index ia, Index ib, std::vector<FacePair>& out) const {
+  CRUMPLE_TRAVERSAL void emit_leaf_pair(Index ia, Index ib, std::vector<FacePair>& out) const {
     const Node& a = nodes_[static_cast<std::size_t>(ia)];
     const Node& b = nodes_[static_cast<std::size_t>(ib)];
     for (std::uint64_t near = overlapping_node(a, ib); near != 0; near &= near - 1) {
@@ -731,31 +747,32 @@ class KdopTree final : public KdopDetector::Tree {
 
   /// Bit i set: member `first + i` of the node (child or face slot) may overlap the k-DOP f
   /// (float, conservative; NaN never separates, as in `Kdop::overlaps`). Only the members from
-  /// lane group `from_group` on (members 4 * from_group, ...) are tested; the bits below are 0.
-  std::uint64_t overlapping_members(const Node& node, const FloatDop& f, Index from_group = 0) const {
+  /// lane group `from_group` on (members 8 * from_group, ...) are tested; the bits below are 0.
+  __attribute__((always_inline)) std::uint64_t overlapping_members(const Node& node, const FloatDop& f,
+                                                                   Index from_group = 0) const {
     std::uint64_t mask = 0;
-    for (Index g = from_group; g < (node.count + 3) / 4; ++g) {
+    for (Index g = from_group; g < (node.count + kGroup - 1) / kGroup; ++g) {
       const Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
-      I4 apart = {0, 0, 0, 0};
+      I8 apart{};
       for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
-        const F4 lo = {f.lo[j], f.lo[j], f.lo[j], f.lo[j]};
-        const F4 hi = {f.hi[j], f.hi[j], f.hi[j], f.hi[j]};
+        const F8 lo = F8{} + f.lo[j];
+        const F8 hi = F8{} + f.hi[j];
         apart |= (lanes.lo[j] > hi) | (lo > lanes.hi[j]);
       }
-      mask |= zero_lanes(apart) << (4 * g);
+      mask |= zero_lanes(apart) << (kGroup * g);
     }
     // The empty lanes past `count` overlap nothing but a NaN k-DOP: masked.
     return node.count >= 64 ? mask : mask & ((std::uint64_t{1} << node.count) - 1);
   }
   /// Members of `node` that may overlap node q's k-DOP.
-  std::uint64_t overlapping_node(const Node& node, Index q) const {
+  __attribute__((always_inline)) std::uint64_t overlapping_node(const Node& node, Index q) const {
     return overlapping_members(node, float_dops_[static_cast<std::size_t>(q)]);
   }
 
   /// Self-test of node n. With kUnits, the first small node or pair of small nodes reached is a
   /// coherence unit (`unit`); inside a unit, and when coherence is off, kUnits is false.
   template <bool kUnits>
-  void self(Index n, Walk& w) const {
+  CRUMPLE_TRAVERSAL void self(Index n, Walk& w) const {
     if constexpr (kUnits) {
       if (small_[static_cast<std::size_t>(n)]) return unit(n, n, w);
     }
@@ -765,7 +782,7 @@ class KdopTree final : public KdopDetector::Tree {
       for (Index i = 0; i + 1 < node.count; ++i) {
         const Index a = node.first + i;
         // Only the members after i: from the lane group holding member i + 1.
-        const std::uint64_t m0 = (overlapping_members(node, member(node, i), (i + 1) / 4) &
+        const std::uint64_t m0 = (overlapping_members(node, member(node, i), (i + 1) / kGroup) &
                                   ~leaf_adjacent_[static_cast<std::size_t>(a)]) >> (i + 1);
         for (std::uint64_t m = m0; m != 0; m &= m - 1) {
           const Index b = a + 1 + std::countr_zero(m);
@@ -785,7 +802,7 @@ class KdopTree final : public KdopDetector::Tree {
 
   /// Nodes a and b, whose k-DOPs may overlap.
   template <bool kUnits>
-  void pair(Index a, Index b, Walk& w) const {
+  CRUMPLE_TRAVERSAL void pair(Index a, Index b, Walk& w) const {
     if constexpr (kUnits) {
       if (small_[static_cast<std::size_t>(a)] && small_[static_cast<std::size_t>(b)]) return unit(a, b, w);
     }
@@ -808,7 +825,7 @@ class KdopTree final : public KdopDetector::Tree {
   /// displacements of the unit's vertices since the refresh frame differ by at most the slack,
   /// the refresh frame's candidates of the unit are emitted (none when it had none); otherwise,
   /// and on other frames, it is traversed, and recorded on a refresh frame.
-  void unit(Index a, Index b, Walk& w) const {
+  CRUMPLE_TRAVERSAL void unit(Index a, Index b, Walk& w) const {
     const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(std::min(a, b))) << 32) |
                               static_cast<std::uint32_t>(std::max(a, b));
     if (mode_ == Mode::reuse &&

@@ -23,8 +23,9 @@
 ///    rebuilt from the current positions (counted in the `rebuilds` stat).
 ///  - Self-traversal (node against itself, then its children pairwise; descend the larger of
 ///    two overlapping nodes), expanded into many independent tasks run in parallel. A k-DOP is
-///    tested against four of a node's members (children, or a leaf's faces) at once, in float
-///    (a monotone conversion, so never less than the double test keeps); face pairs that pass
+///    tested against eight of a node's members (children, or a leaf's faces) at once, in float
+///    (a monotone conversion, so never less than the double test keeps; one AVX register where
+///    the CPU has AVX2, the traversal being compiled with and without it); face pairs that pass
 ///    are tested in double. Faces that share a vertex are skipped at the leaves (their orphan
 ///    sub-pairs are handled by the pipeline).
 /// Spec: `kdop:k=6|14|18|26,arity=2|4|8,leaf=N,rebuild=R,sweep=on|off,cones=on|off,coherence=on|off`
