@@ -375,37 +375,41 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     tt_tests += local.tt_tests;
   };
   // The distance of a point to a plane, or between two lines, is |wn| / |n| for n the plane's
-  // (the lines') normal and w a vector joining them; |wn| <= sqrt(scale).
+  // (the lines') normal and w a vector joining them; |wn| <= |w| |e1| |e2| <= `size`, the
+  // product of the L1 norms of w and of the two vectors whose cross product n is.
   struct Separation {
     Scalar wn;
     Vec3 n;
-    Scalar scale;
+    Scalar size;
   };
-  // |wn| / |n| > pad with a margin for the rounding of wn. Branch-free: it sifts lists of
-  // sub-pairs of which an unpredictable part is rejected (see `sift`).
+  const auto l1 = [](const Vec3& v) { return std::abs(v.x()) + std::abs(v.y()) + std::abs(v.z()); };
+  // |wn| / |n| > pad with a margin for the rounding of wn (1e-13 size, a hundred times its
+  // bound), compared squared: no square root, the comparison's own rounding being far inside
+  // pad's relative margin over h. NaN: false. Branch-free: it sifts lists of sub-pairs of
+  // which an unpredictable part is rejected (see `sift`).
   const auto beyond = [pad](const Separation& s) {
-    const Scalar nn = s.n.squaredNorm();
-    return ((s.wn * s.wn > pad * pad * nn) & (std::abs(s.wn) > pad * std::sqrt(nn) + 1e-13 * std::sqrt(s.scale))) != 0;
+    const Scalar clear = std::abs(s.wn) - 1e-13 * s.size;
+    return ((clear > 0) & (clear * clear > pad * pad * s.n.squaredNorm())) != 0;
   };
   // A lower bound of |wn| / |n| with the same margin (degenerate n: -inf).
   const auto separation_bound = [](const Separation& s) {
     const Scalar nn = s.n.squaredNorm();
-    return nn > 0 ? (std::abs(s.wn) - 1e-13 * std::sqrt(s.scale)) / std::sqrt(nn) * (1 - 1e-12)
+    return nn > 0 ? (std::abs(s.wn) - 1e-13 * s.size) / std::sqrt(nn) * (1 - 1e-12)
                   : -std::numeric_limits<Scalar>::infinity();
   };
   // Vertex p against the plane of face t: dist(p, triangle) >= dist(p, plane) = |(p - a) . n| /
   // |n| (degenerate n: never rejected).
-  const auto plane = [](const Vec3& p, const PackedFace& t) {
+  const auto plane = [&l1](const Vec3& p, const PackedFace& t) {
     const Vec3& a = t.p[0];
     const Vec3 e1 = t.p[1] - a, e2 = t.p[2] - a, w = p - a;
     const Vec3 n = e1.cross(e2);
-    return Separation{w.dot(n), n, w.squaredNorm() * e1.squaredNorm() * e2.squaredNorm()};
+    return Separation{w.dot(n), n, l1(w) * l1(e1) * l1(e2)};
   };
   // dist(segments) >= dist(lines) = |w . (d0 x d1)| / |d0 x d1| (parallel edges: never rejected).
-  const auto line = [](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
+  const auto line = [&l1](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
     const Vec3 d0 = p1 - p0, d1 = q1 - q0, w = q0 - p0;
     const Vec3 n = d0.cross(d1);
-    return Separation{w.dot(n), n, w.squaredNorm() * d0.squaredNorm() * d1.squaredNorm()};
+    return Separation{w.dot(n), n, l1(w) * l1(d0) * l1(d1)};
   };
   // Vertex v at p against face g, past the cheap rejections: the shared kernel, queued four at
   // a time (the contacts reach local.set.vf at the latest in `merge`), unless the squared
