@@ -83,7 +83,9 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
   // Each slice of the items is counted, then scattered, by one thread; slice s's items of first
   // criterion k go to [cursor, ...) of row s, after those of the slices before.
   const auto ranges = static_cast<std::size_t>(resolve_threads(threads));
-  const std::size_t slices = std::min<std::size_t>(ranges, 4);
+  // (A few tens of thousands of items: one slice, counted and scattered without starting
+  // threads, which costs more than it saves there.)
+  const std::size_t slices = total < (std::size_t{1} << 16) ? 1 : std::min<std::size_t>(ranges, 4);
   const auto nk = static_cast<std::size_t>(keys);
   const auto slice = [&](std::size_t s) { return std::pair{total * s / slices, total * (s + 1) / slices}; };
   next.resize(slices * nk);
