@@ -1,5 +1,5 @@
-// detail::gather_sorted, the exact detectors' last step, against a plain sort. Its order is not
-// seen by the detector tests: Detector::update sorts whatever a detector returns out of order.
+// detail::gather_sorted, the exact detectors' last step, against a plain sort (the detector
+// tests see its order too: the exact detectors' output is not sorted again).
 
 #include <crumple/detect/gather.hpp>
 
@@ -68,6 +68,12 @@ TEST(Gather, CountedPathMatchesASort) {
       expect_gathered(make_parts(rng, 1000, 20000, parts), 1000, threads);
     }
   }
+}
+
+TEST(Gather, CountedPathInSlicesMatchesASort) {
+  // 65,536 items and more are counted and scattered by slices, one per thread (up to four).
+  std::mt19937 rng(5103);
+  for (int threads : {2, 3, 5}) expect_gathered(make_parts(rng, 20000, 70000, 11), 20000, threads);
 }
 
 TEST(Gather, SortedPathMatchesASort) {
