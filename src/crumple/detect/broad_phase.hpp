@@ -5,14 +5,17 @@
 ///  1. broad phase (per method): every unordered pair of faces that share no vertex and whose
 ///     boxes, inflated by `FrameInput::radius` (half the padded thickness) on every side,
 ///     overlap — emitted exactly once (a broad phase may also emit pairs whose boxes are
-///     apart by less than a float rounding: the narrow phase rejects them);
+///     apart by less than a float rounding: the narrow phase rejects them; and, for a
+///     proximity query, it may leave out pairs that own no sub-pair, `FrameInput::owns`);
 ///  2. orphans: pairs of faces that share a vertex are never emitted by a broad phase; their
 ///     vertex–face and edge–edge sub-pairs that are *not* excluded (the vertex opposite a
 ///     shared edge, edges around a shared vertex) are listed once per topology and tested
 ///     every frame (Tang et al.'s orphan sets);
 ///  3. narrow phase: each sub-pair is tested in exactly one place thanks to feature ownership
 ///     ("representative triangles", Curtis, Tamstorf & Manocha 2008): every vertex and every
-///     edge is owned by its incident face of smallest id; VF (v, g) is tested only in the pair
+///     edge is owned by one of its incident faces, chosen so that many faces own no vertex and
+///     many no edge (`ExactDetector::on_topology`; a pair of faces that owns no sub-pair is then
+///     left out of a proximity query's broad phase); VF (v, g) is tested only in the pair
 ///     {owner(v), g}, EE (e1, e2) only in {owner(e1), owner(e2)}. This is exact: a face's
 ///     inflated box holds its features inflated by the same radius, so a sub-pair closer than
 ///     h always lies in an overlapping owner pair. Cheap rejections (vertex against face box,
@@ -34,6 +37,7 @@
 #include <cstddef>
 #include <limits>
 #include <mutex>
+#include <span>
 #include <utility>
 #include <vector>
 
@@ -66,6 +70,10 @@ struct FrameInput {
   /// Only intersections (TT) are asked: no proximity, so a patch that provably cannot
   /// intersect itself may be skipped (normal-cone culling, kdop_tree.hpp).
   bool intersection_only = false;
+  /// Per face, what it owns (step 3 above): bit 0 a vertex, bit 1 an edge. Given when only
+  /// proximity (VF, EE) is asked, empty otherwise: then a pair of faces of which neither owns
+  /// a vertex and not both own an edge holds no sub-pair, and a broad phase may leave it out.
+  std::span<const std::uint8_t> owns;
 };
 
 /// Bytes of storage a container holds (what `Spares` hands out first).
@@ -240,6 +248,7 @@ class ExactDetector : public Detector {
   int orphan_backoff_ = 0;         ///< frames to wait before the next refresh after one that did not pay
   int orphan_wait_ = 0;            ///< frames left to wait (every block tested meanwhile)
   std::vector<Index> isolated_;                  ///< vertices used by no face
+  std::vector<std::uint8_t> face_owns_;          ///< per face: bit 0 owns a vertex, bit 1 an edge
   std::vector<Index> edge_rank_;                 ///< each edge's rank in (first, second vertex) order
   Spares<ContactSet> spare_sets_;                ///< per-chunk contact sets, for reuse
   detail::GatherScratch gather_;  ///< buffers of the final gather, kept across frames

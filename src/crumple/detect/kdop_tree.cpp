@@ -15,6 +15,7 @@
 #include <mutex>
 #include <numbers>
 #include <numeric>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -178,14 +179,14 @@ class KdopTree final : public KdopDetector::Tree {
              DetectorStats& stats) override {
     if (topo.num_faces() == 0) return;
     const auto t0 = std::chrono::steady_clock::now();
-    if (nodes_.empty()) build(topo, in.positions, stats);
+    if (nodes_.empty()) build(topo, in.positions, in.owns, stats);
     const auto tc = std::chrono::steady_clock::now();
     choose_coherence(in);
     stats.set("coherence_ms", ms_since(tc));
     refit(in);
     double q = quality();
     if (q > params_.rebuild * built_quality_) {
-      build(topo, in.positions, stats);  // the node ids change: the cache is dropped
+      build(topo, in.positions, in.owns, stats);  // the node ids change: the cache is dropped
       if (mode_ == Mode::reuse) start_record(in);
       refit(in);
       q = quality();
@@ -225,7 +226,7 @@ class KdopTree final : public KdopDetector::Tree {
 
  private:
   // ---- build -------------------------------------------------------------------------------
-  void build(const Topology& topo, PositionsView x, DetectorStats& stats) {
+  void build(const Topology& topo, PositionsView x, std::span<const std::uint8_t> owns, DetectorStats& stats) {
     const Index nf = topo.num_faces();
     std::vector<Vec3> centroid(static_cast<std::size_t>(nf));
     for (Index f = 0; f < nf; ++f) {
@@ -317,6 +318,24 @@ class KdopTree final : public KdopDetector::Tree {
         for (Index j = 0; j < node.count; ++j) {
           const auto si = static_cast<std::size_t>(node.first + i), sj = static_cast<std::size_t>(node.first + j);
           if (i != j && faces_share_vertex(slot_faces_[si], slot_faces_[sj])) leaf_adjacent_[si] |= std::uint64_t{1} << j;
+        }
+      }
+    }
+    // What the faces own (FrameInput::owns), per slot, and per leaf the members owning no
+    // vertex, no edge: the pairs that own no sub-pair are left out.
+    slot_owns_.clear();
+    leaf_no_vertex_.assign(nodes_.size(), 0);
+    leaf_no_edge_.assign(nodes_.size(), 0);
+    if (!owns.empty()) {
+      slot_owns_.resize(order_.size());
+      for (std::size_t s = 0; s < order_.size(); ++s) slot_owns_[s] = owns[static_cast<std::size_t>(order_[s])];
+      for (std::size_t n = 0; n < nodes_.size(); ++n) {
+        const Node& node = nodes_[n];
+        if (!node.leaf) continue;
+        for (Index i = 0; i < node.count; ++i) {
+          const std::uint8_t o = slot_owns_[static_cast<std::size_t>(node.first + i)];
+          leaf_no_vertex_[n] |= static_cast<std::uint64_t>((o & 1u) == 0) << i;
+          leaf_no_edge_[n] |= static_cast<std::uint64_t>((o & 2u) == 0) << i;
         }
       }
     }
@@ -714,6 +733,15 @@ class KdopTree final : public KdopDetector::Tree {
     return !now_dops_[static_cast<std::size_t>(i)].overlaps(now_dops_[static_cast<std::size_t>(j)]);
   }
 
+  /// The members of leaf n that, with slot i, own no sub-pair (neither owns a vertex, and not
+  /// both an edge): left out of a proximity query (`slot_owns_` empty otherwise).
+  std::uint64_t idle_with(Index n, Index i) const {
+    if (slot_owns_.empty()) return 0;
+    const std::uint8_t o = slot_owns_[static_cast<std::size_t>(i)];
+    const std::uint64_t no_vertex = (o & 1u) != 0 ? 0 : leaf_no_vertex_[static_cast<std::size_t>(n)];
+    return no_vertex & ((o & 2u) != 0 ? leaf_no_edge_[static_cast<std::size_t>(n)] : ~std::uint64_t{0});
+  }
+
   void emit(Index i, Index j, std::vector<FacePair>& out) const {
     const Index f = order_[static_cast<std::size_t>(i)], g = order_[static_cast<std::size_t>(j)];
     out.push_back({std::min(f, g), std::max(f, g)});
@@ -738,7 +766,7 @@ class KdopTree final : public KdopDetector::Tree {
     const Node& b = nodes_[static_cast<std::size_t>(ib)];
     for (std::uint64_t near = overlapping_node(a, ib); near != 0; near &= near - 1) {
       const Index i = a.first + std::countr_zero(near);
-      for (std::uint64_t m = overlapping_members(b, member(a, i - a.first)); m != 0; m &= m - 1) {
+      for (std::uint64_t m = overlapping_members(b, member(a, i - a.first)) & ~idle_with(ib, i); m != 0; m &= m - 1) {
         const Index j = b.first + std::countr_zero(m);
         if (candidate(i, j)) emit(i, j, out);
       }
@@ -783,7 +811,8 @@ class KdopTree final : public KdopDetector::Tree {
         const Index a = node.first + i;
         // Only the members after i: from the lane group holding member i + 1.
         const std::uint64_t m0 = (overlapping_members(node, member(node, i), (i + 1) / kGroup) &
-                                  ~leaf_adjacent_[static_cast<std::size_t>(a)]) >> (i + 1);
+                                  ~leaf_adjacent_[static_cast<std::size_t>(a)] & ~idle_with(n, a)) >>
+                                 (i + 1);
         for (std::uint64_t m = m0; m != 0; m &= m - 1) {
           const Index b = a + 1 + std::countr_zero(m);
           if (!(swept_ && now_apart(a, b))) emit(a, b, w.out);
@@ -1068,6 +1097,9 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<Lanes> lanes_;          ///< per node, its members (children or faces) by four
   std::vector<Index> order_;     ///< face of each leaf slot
   std::vector<Face> slot_faces_;  ///< corners of each slot's face (adjacency test locality)
+  std::vector<std::uint8_t> slot_owns_;        ///< per slot, FrameInput::owns (proximity queries)
+  std::vector<std::uint64_t> leaf_no_vertex_;  ///< per leaf: bit j, member j owns no vertex
+  std::vector<std::uint64_t> leaf_no_edge_;    ///< per leaf: bit j, member j owns no edge
   std::vector<std::uint64_t> leaf_adjacent_;  ///< per slot: bit j, member j of its leaf shares a vertex
   std::vector<Dop> now_dops_;     ///< per slot, current positions only, inflated (when swept)
   bool swept_ = false;            ///< this frame's boxes cover the motion
