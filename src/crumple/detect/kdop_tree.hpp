@@ -27,7 +27,8 @@
 ///    (a monotone conversion, so never less than the double test keeps; one AVX register where
 ///    the CPU has AVX2, the traversal being compiled with and without it); face pairs that pass
 ///    are tested in double. Faces that share a vertex are skipped at the leaves (their orphan
-///    sub-pairs are handled by the pipeline).
+///    sub-pairs are handled by the pipeline), and so, in a proximity query, are the pairs that
+///    own no sub-pair (`FrameInput::owns`), by two masks per leaf.
 /// Spec: `kdop:k=6|14|18|26,arity=2|4|8,leaf=N,rebuild=R,sweep=on|off,cones=on|off,coherence=on|off`
 /// plus `max_contacts`, `overflow`.
 ///  - Normal-cone culling (ALGORITHMS.md §3; Volino & Magnenat-Thalmann), for intersection-only
