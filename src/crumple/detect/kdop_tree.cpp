@@ -87,7 +87,7 @@ using F4 = float __attribute__((vector_size(16)));
 
 /// Bit l set when lane l of v is 0 (the lanes of a vector comparison are 0 or -1): a sign-mask
 /// instruction per half where SSE is there.
-__attribute__((always_inline)) inline std::uint64_t zero_lanes(I8 v) {
+__attribute__((always_inline)) inline std::uint64_t zero_lanes(const I8& v) {
 #if defined(__SSE__)
   const auto half = std::bit_cast<std::array<F4, 2>>(v);
   const auto signs = static_cast<std::uint64_t>(__builtin_ia32_movmskps(half[0])) |
