@@ -10,7 +10,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 #include <limits>
 #include <mutex>
 #include <numbers>
@@ -19,10 +18,6 @@
 #include <string>
 #include <utility>
 #include <vector>
-
-// The lane types' ABI differs with and without AVX, which GCC warns about at every function
-// taking or returning one; those below are inlined.
-#pragma GCC diagnostic ignored "-Wpsabi"
 
 namespace crumple {
 
