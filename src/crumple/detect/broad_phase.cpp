@@ -195,16 +195,25 @@ void ExactDetector::on_topology() {
       }
     }
   }
-  // Orphan blocks and the vertices each uses.
-  const auto cut = [](OrphanBlocks& blocks, std::size_t items, const auto& verts_of) {
+  std::sort(orphan_vf_.begin(), orphan_vf_.end(),
+            [](const auto& a, const auto& b) { return std::pair{a[1], a[0]} < std::pair{b[1], b[0]}; });
+  std::sort(orphan_ee_.begin(), orphan_ee_.end(), [](const OrphanEdges& a, const OrphanEdges& b) { return a.e < b.e; });
+  // Orphan blocks, the vertices each uses, and its runs of sub-pairs of the same key(i).
+  const auto cut = [](OrphanBlocks& blocks, std::size_t items, const auto& verts_of, const auto& key) {
     const std::size_t count = (items + kOrphanBlock - 1) / kOrphanBlock;
     blocks.begin.assign(1, 0);
     blocks.verts.clear();
+    blocks.run_begin.assign(1, 0);
+    blocks.runs.clear();
     for (std::size_t b = 0; b < count; ++b) {
       const std::size_t first = blocks.verts.size();
-      for (std::size_t i = b * kOrphanBlock; i < std::min(items, (b + 1) * kOrphanBlock); ++i) {
+      const std::size_t end = std::min(items, (b + 1) * kOrphanBlock);
+      for (std::size_t i = b * kOrphanBlock; i < end; ++i) {
         for (const Index v : verts_of(i)) blocks.verts.push_back(v);
+        if (i == b * kOrphanBlock || key(i) != key(i - 1)) blocks.runs.push_back(0);
+        ++blocks.runs.back();
       }
+      blocks.run_begin.push_back(blocks.runs.size());
       std::sort(blocks.verts.begin() + static_cast<std::ptrdiff_t>(first), blocks.verts.end());
       blocks.verts.erase(std::unique(blocks.verts.begin() + static_cast<std::ptrdiff_t>(first), blocks.verts.end()),
                          blocks.verts.end());
@@ -213,15 +222,21 @@ void ExactDetector::on_topology() {
     blocks.bound.assign(count, 0);
     blocks.awake.assign(count, 1);
   };
-  cut(vf_blocks_, orphan_vf_.size(), [&](std::size_t i) {
-    const auto [v, g] = orphan_vf_[i];
-    const Face& t = topo.face(g);
-    return std::array<Index, 4>{v, t[0], t[1], t[2]};
-  });
-  cut(ee_blocks_, orphan_ee_.size(), [&](std::size_t i) {
-    const OrphanEdges& o = orphan_ee_[i];
-    return std::array<Index, 4>{o.a[0], o.a[1], o.b[0], o.b[1]};
-  });
+  cut(
+      vf_blocks_, orphan_vf_.size(),
+      [&](std::size_t i) {
+        const auto [v, g] = orphan_vf_[i];
+        const Face& t = topo.face(g);
+        return std::array<Index, 4>{v, t[0], t[1], t[2]};
+      },
+      [&](std::size_t i) { return orphan_vf_[i][1]; });
+  cut(
+      ee_blocks_, orphan_ee_.size(),
+      [&](std::size_t i) {
+        const OrphanEdges& o = orphan_ee_[i];
+        return std::array<Index, 4>{o.a[0], o.a[1], o.b[0], o.b[1]};
+      },
+      [&](std::size_t i) { return orphan_ee_[i].e[0]; });
   face_owns_.resize(static_cast<std::size_t>(nf));
   for (std::size_t f = 0; f < face_owns_.size(); ++f) {
     face_owns_[f] = static_cast<std::uint8_t>((vertex_mask[f] != 0 ? 1u : 0u) | (edge_mask[f] != 0 ? 2u : 0u));
@@ -746,11 +761,26 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     orphan_pass(
         vf_blocks_, orphan_vf_.size(),
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
+          // The box sift (in_box) run by run: a run's face box is bounded once.
           std::array<std::uint16_t, kBlock> list;
-          iota(list, n);
-          n = sift_vertex_face(
-              list.data(), n, [&](std::uint16_t k) -> const Vec3& { return point(i + k); },
-              [&](std::uint16_t k) -> const PackedFace& { return face(i + k); });
+          const std::size_t b = i / kOrphanBlock;
+          std::size_t kept = 0, k = 0;
+          for (std::size_t r = vf_blocks_.run_begin[b]; r < vf_blocks_.run_begin[b + 1]; ++r) {
+            const PackedFace& t = face(i + k);
+            Vec3 lo, hi;
+            for (int a = 0; a < 3; ++a) {
+              lo[a] = std::min({t.p[0][a], t.p[1][a], t.p[2][a]}) - pad;
+              hi[a] = std::max({t.p[0][a], t.p[1][a], t.p[2][a]}) + pad;
+            }
+            for (const std::size_t run_end = k + vf_blocks_.runs[r]; k < run_end; ++k) {
+              const Vec3& p = point(i + k);
+              bool outside = false;
+              for (int a = 0; a < 3; ++a) outside |= !(lo[a] <= p[a]) | !(p[a] <= hi[a]);
+              list[kept] = static_cast<std::uint16_t>(k);
+              kept += outside ? 0u : 1u;
+            }
+          }
+          n = sift(list.data(), kept, [&](std::uint16_t code) { return !beyond(plane(point(i + code), face(i + code))); });
           for (std::size_t s = 0; s < n; ++s) vf_test(i + list[s], local);
         },
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
@@ -796,9 +826,35 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     orphan_pass(
         ee_blocks_, orphan_ee_.size(),
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
+          // The box sift (boxes_meet) run by run: a run's first edge is bounded once.
           std::array<std::uint16_t, kBlock> list;
-          iota(list, n);
-          n = sift_edge_edge(list.data(), n, [&](std::uint16_t code) { return ends(i + code); });
+          const std::size_t b = i / kOrphanBlock;
+          std::size_t kept = 0, k = 0;
+          for (std::size_t r = ee_blocks_.run_begin[b]; r < ee_blocks_.run_begin[b + 1]; ++r) {
+            const OrphanEdges& first = orphan_ee_[i + k];
+            const Vec3& p0 = narrow::at(x, first.a[0]);
+            const Vec3& p1 = narrow::at(x, first.a[1]);
+            Vec3 lo, hi;
+            for (int a = 0; a < 3; ++a) {
+              lo[a] = std::min(p0[a], p1[a]) - half;
+              hi[a] = std::max(p0[a], p1[a]) + half;
+            }
+            for (const std::size_t run_end = k + ee_blocks_.runs[r]; k < run_end; ++k) {
+              const OrphanEdges& o = orphan_ee_[i + k];
+              const Vec3& q0 = narrow::at(x, o.b[0]);
+              const Vec3& q1 = narrow::at(x, o.b[1]);
+              bool apart = false;
+              for (int a = 0; a < 3; ++a) {
+                apart |= !(lo[a] <= std::max(q0[a], q1[a]) + half) | !(std::min(q0[a], q1[a]) - half <= hi[a]);
+              }
+              list[kept] = static_cast<std::uint16_t>(k);
+              kept += apart ? 0u : 1u;
+            }
+          }
+          n = sift(list.data(), kept, [&](std::uint16_t code) {
+            const auto p = ends(i + code);
+            return !beyond(line(*p[0], *p[1], *p[2], *p[3]));
+          });
           for (std::size_t s = 0; s < n; ++s) ee_test(i + list[s], local);
         },
         [&](std::size_t i, std::size_t n, LocalContacts& local) {

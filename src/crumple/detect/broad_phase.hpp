@@ -221,9 +221,12 @@ class ExactDetector : public Detector {
   ExactParams params_;
   bool overflowed_ = false;
   CandidateBuffer candidates_;
-  std::vector<std::array<Index, 2>> orphan_vf_;  ///< (vertex, face) sub-pairs of adjacent faces
+  /// (vertex, face) sub-pairs of adjacent faces, by face (then vertex): a run of one face's
+  /// sub-pairs shares its box test's bounds.
+  std::vector<std::array<Index, 2>> orphan_vf_;
   /// An orphan edge pair, first < second, with both edges' vertices (read without going
-  /// through the topology's edge list, 1.5 M times a frame on n-body).
+  /// through the topology's edge list, 1.5 M times a frame on n-body). By first edge (then
+  /// second), so that a run of them shares the first edge's box.
   struct OrphanEdges {
     std::array<Index, 2> e;
     Edge a, b;
@@ -240,6 +243,10 @@ class ExactDetector : public Detector {
     std::vector<Index> verts;         ///< sorted, distinct, per block
     std::vector<Scalar> bound;        ///< lower bound of the block's distances at orphan_ref_
     std::vector<std::uint8_t> awake;  ///< tested this frame
+    /// Block b's sub-pairs are runs of one face (VF) or first edge (EE), of lengths
+    /// runs[run_begin[b], run_begin[b + 1]).
+    std::vector<std::size_t> run_begin;
+    std::vector<std::uint8_t> runs;
     std::size_t size() const { return bound.size(); }
   };
   OrphanBlocks vf_blocks_, ee_blocks_;
