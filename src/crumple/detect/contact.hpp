@@ -13,8 +13,10 @@
 
 namespace crumple {
 
-/// Vertex closer than the thickness to a face it is not a corner of.
-struct VertexFaceContact {
+/// Vertex closer than the thickness to a face it is not a corner of. Aligned to its size (64
+/// bytes, a cache line): a record read out of order, as the exact detectors' final gather
+/// reads them, then costs one line instead of two.
+struct alignas(64) VertexFaceContact {
   Index vertex = -1;
   Index face = -1;
   Scalar distance = 0;  ///< Euclidean distance from the vertex to the closest point of the face
@@ -23,6 +25,8 @@ struct VertexFaceContact {
   /// the face's geometric normal (or zero for a degenerate face).
   Vec3 normal = Vec3::Zero();
 };
+
+static_assert(sizeof(VertexFaceContact) == 64, "the alignment must not pad the record");
 
 /// Two edges, sharing no vertex, closer than the thickness. `a` is the edge with the smaller
 /// (first vertex, second vertex) pair; each edge's vertices are increasing (mesh edge order).
