@@ -257,6 +257,60 @@ TEST(ExactDetectors, OrphanBlocksSleepOnlyWhileTheyCannotTouch) {
   EXPECT_GT(orphan_contacts, 0u) << "the fold should bring orphan pairs within h";
 }
 
+// The wake check's sample decides a frame (more than 1024 blocks, a sample of every 16th): a
+// fine lattice whose blocks all hold orphan pairs within h (its right-angle corners are 0.71
+// edge lengths from the hypotenuse's other face, h is 0.8), 85% of the blocks, always awake; a
+// coarse one far off whose blocks sleep on frame 1 (no motion, the sample's awake share below
+// 7/8: every block checked). On frame 2 the coarse lattice's right part folds 179.5 degrees
+// onto its left part, waking its blocks (less than a quarter of all: not stale): the sample is
+// then nearly all awake, the frame tests every block, and the folded pairs of adjacent faces
+// (0.0087 apart) are found. A block left with its frame-1 flag would sleep through them.
+TEST(ExactDetectors, OrphanWakeSampleWakesEveryBlock) {
+  const TriMesh fine = shapes::lattice(64, 64);
+  const TriMesh coarse = shapes::lattice(27, 27, 27, 27);
+  const Scalar h = 0.8 / 64;
+  const Vec3 off(100, 0, 0);
+  std::vector<Face> faces(fine.topology().faces().begin(), fine.topology().faces().end());
+  const Index base = static_cast<Index>(fine.positions().size());
+  for (Face f : coarse.topology().faces()) faces.push_back({f[0] + base, f[1] + base, f[2] + base});
+  const auto frame = [&](double fold) {
+    Positions x = fine.positions();
+    for (const Vec3& p : coarse.positions()) {
+      const double u = p.x() - 13;  // folded about x = 13
+      x.push_back(off + (u > 0 ? Vec3(13 + u * std::cos(fold), p.y(), u * std::sin(fold)) : p));
+    }
+    return x;
+  };
+  const TriMesh mesh = TriMesh::create(frame(0), faces);
+  const std::vector<Positions> frames{frame(0), frame(0), frame(std::numbers::pi * 179.5 / 180)};
+  const std::size_t n = expect_sequence_exact(mesh, frames, h, {"kdop"}, ContactKinds::parse("vf,ee"), {1, 2});
+  if (HasFatalFailure()) return;
+  EXPECT_GT(n, 0u);
+
+  auto d = make("kdop", h, ContactKinds::parse("vf,ee"), 1);
+  d->set_topology(mesh.topology_ptr());
+  ContactSet got;
+  d->update(frames[0], got);
+  ASSERT_GT(d->stats().get("orphan_blocks"), 1024);
+  d->update(frames[0], frames[1], got);
+  EXPECT_EQ(d->stats().get("orphan_sampled"), 0) << "frame 1: the sample should not decide";
+  EXPECT_LT(d->stats().get("orphan_blocks_tested"), d->stats().get("orphan_blocks")) << "the coarse blocks sleep";
+  d->update(frames[1], frames[2], got);
+  EXPECT_EQ(d->stats().get("orphan_sampled"), 1) << "frame 2: nearly all of the sample is awake";
+  EXPECT_EQ(d->stats().get("orphan_refresh"), 0) << "the frame should not be stale";
+  EXPECT_EQ(d->stats().get("orphan_blocks_tested"), d->stats().get("orphan_blocks"));
+  const Topology& topo = mesh.topology();
+  std::size_t orphan_contacts = 0;  // a vertex against a face next to one of its own faces
+  for (const auto& c : got.vf) {
+    bool orphan = false;
+    for (Index f : topo.vertex_faces()[c.vertex]) {
+      for (Index w : topo.face(f)) orphan |= topo.face_has_vertex(c.face, w);
+    }
+    orphan_contacts += orphan ? 1u : 0u;
+  }
+  EXPECT_GT(orphan_contacts, 0u) << "the fold should bring orphan pairs within h";
+}
+
 // Two triangles sharing only vertex w: every sub-pair between them is an orphan, in one block
 // of each kind. A static lattice far off adds blocks that sleep, so that the frame does not
 // count as stale (which would test every block); it is coarse, so that its sub-pairs, which

@@ -394,6 +394,7 @@ bool ExactDetector::wake_orphan_blocks(PositionsView x, Scalar pad, int threads)
   const bool partial = 2 * count.woken > count.blocks ||
                        (sampled && (4 * count.woken > count.blocks || 8 * count.awake > 7 * count.blocks));
   if (!partial) count = check(1);
+  stats_.set("orphan_sampled", partial ? 1 : 0);
   const std::size_t woken = count.woken, blocks = count.blocks;
   // Blocks that hold a pair within pad are awake whatever the motion; when the motion wakes more
   // than a quarter of the others, the bounds are stale: refresh, unless the previous frame was
