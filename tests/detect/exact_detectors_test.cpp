@@ -154,6 +154,20 @@ std::size_t expect_sequence_exact(const TriMesh& mesh, const std::vector<Positio
   return total;
 }
 
+/// The vertex-face contacts of `set` between a vertex and a face next to one of its own faces
+/// (orphan pairs).
+std::size_t orphan_vertex_face_contacts(const Topology& topo, const ContactSet& set) {
+  std::size_t n = 0;
+  for (const auto& c : set.vf) {
+    bool orphan = false;
+    for (Index f : topo.vertex_faces()[c.vertex]) {
+      for (Index w : topo.face(f)) orphan |= topo.face_has_vertex(c.face, w);
+    }
+    n += orphan ? 1u : 0u;
+  }
+  return n;
+}
+
 std::vector<Positions> blend(PositionsView a, PositionsView b, int steps) {
   std::vector<Positions> out;
   for (int s = 0; s <= steps; ++s) {
@@ -245,13 +259,7 @@ TEST(ExactDetectors, OrphanBlocksSleepOnlyWhileTheyCannotTouch) {
     ContactSet got;
     d->update(frames[i], got);
     if (d->stats().get("orphan_blocks_tested") < d->stats().get("orphan_blocks")) ++asleep_frames;
-    for (const auto& c : got.vf) {
-      bool orphan = false;
-      for (Index f : topo.vertex_faces()[c.vertex]) {
-        for (Index w : topo.face(f)) orphan |= topo.face_has_vertex(c.face, w);
-      }
-      orphan_contacts += orphan ? 1u : 0u;
-    }
+    orphan_contacts += orphan_vertex_face_contacts(topo, got);
   }
   EXPECT_GE(asleep_frames, 5u) << "the blocks should sleep while the lattice moves rigidly";
   EXPECT_GT(orphan_contacts, 0u) << "the fold should bring orphan pairs within h";
@@ -299,16 +307,7 @@ TEST(ExactDetectors, OrphanWakeSampleWakesEveryBlock) {
   EXPECT_EQ(d->stats().get("orphan_sampled"), 1) << "frame 2: nearly all of the sample is awake";
   EXPECT_EQ(d->stats().get("orphan_refresh"), 0) << "the frame should not be stale";
   EXPECT_EQ(d->stats().get("orphan_blocks_tested"), d->stats().get("orphan_blocks"));
-  const Topology& topo = mesh.topology();
-  std::size_t orphan_contacts = 0;  // a vertex against a face next to one of its own faces
-  for (const auto& c : got.vf) {
-    bool orphan = false;
-    for (Index f : topo.vertex_faces()[c.vertex]) {
-      for (Index w : topo.face(f)) orphan |= topo.face_has_vertex(c.face, w);
-    }
-    orphan_contacts += orphan ? 1u : 0u;
-  }
-  EXPECT_GT(orphan_contacts, 0u) << "the fold should bring orphan pairs within h";
+  EXPECT_GT(orphan_vertex_face_contacts(mesh.topology(), got), 0u) << "the fold should bring orphan pairs within h";
 }
 
 // Two triangles sharing only vertex w: every sub-pair between them is an orphan, in one block
