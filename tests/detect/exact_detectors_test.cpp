@@ -272,42 +272,81 @@ TEST(ExactDetectors, OrphanBlocksSleepOnlyWhileTheyCannotTouch) {
 // 7/8: every block checked). On frame 2 the coarse lattice's right part folds 179.5 degrees
 // onto its left part, waking its blocks (less than a quarter of all: not stale): the sample is
 // then nearly all awake, the frame tests every block, and the folded pairs of adjacent faces
-// (0.0087 apart) are found. A block left with its frame-1 flag would sleep through them.
+// (0.0087 apart) are found. A block left with its frame-1 flag would sleep through them. The
+// lattices are apart, so the reference is `naive` on the coarse lattice alone (the fine one
+// alone would take minutes under the sanitizers), and the fine lattice, which does not move,
+// keeps the contacts of frame 0 (a refresh: every block tested).
 TEST(ExactDetectors, OrphanWakeSampleWakesEveryBlock) {
   const TriMesh fine = shapes::lattice(64, 64);
   const TriMesh coarse = shapes::lattice(27, 27, 27, 27);
   const Scalar h = 0.8 / 64;
   const Vec3 off(100, 0, 0);
-  std::vector<Face> faces(fine.topology().faces().begin(), fine.topology().faces().end());
-  const Index base = static_cast<Index>(fine.positions().size());
-  for (Face f : coarse.topology().faces()) faces.push_back({f[0] + base, f[1] + base, f[2] + base});
-  const auto frame = [&](double fold) {
-    Positions x = fine.positions();
+  const auto folded = [&](double fold) {  // the coarse lattice, folded about x = 13
+    Positions x;
     for (const Vec3& p : coarse.positions()) {
-      const double u = p.x() - 13;  // folded about x = 13
+      const double u = p.x() - 13;
       x.push_back(off + (u > 0 ? Vec3(13 + u * std::cos(fold), p.y(), u * std::sin(fold)) : p));
     }
     return x;
   };
+  const auto frame = [&](double fold) {
+    Positions x = fine.positions();
+    for (const Vec3& p : folded(fold)) x.push_back(p);
+    return x;
+  };
+  std::vector<Face> faces(fine.topology().faces().begin(), fine.topology().faces().end());
+  const Index base = static_cast<Index>(fine.positions().size());
+  const Index fine_faces = fine.topology().num_faces(), fine_edges = fine.topology().num_edges();
+  for (Face f : coarse.topology().faces()) faces.push_back({f[0] + base, f[1] + base, f[2] + base});
   const TriMesh mesh = TriMesh::create(frame(0), faces);
-  const std::vector<Positions> frames{frame(0), frame(0), frame(std::numbers::pi * 179.5 / 180)};
-  const std::size_t n = expect_sequence_exact(mesh, frames, h, {"kdop"}, ContactKinds::parse("vf,ee"), {1, 2});
-  if (HasFatalFailure()) return;
-  EXPECT_GT(n, 0u);
+  const double fold = std::numbers::pi * 179.5 / 180;
+  const std::vector<Positions> frames{frame(0), frame(0), frame(fold)};
 
-  auto d = make("kdop", h, ContactKinds::parse("vf,ee"), 1);
-  d->set_topology(mesh.topology_ptr());
-  ContactSet got;
-  d->update(frames[0], got);
-  ASSERT_GT(d->stats().get("orphan_blocks"), 1024);
-  d->update(frames[0], frames[1], got);
-  EXPECT_EQ(d->stats().get("orphan_sampled"), 0) << "frame 1: the sample should not decide";
-  EXPECT_LT(d->stats().get("orphan_blocks_tested"), d->stats().get("orphan_blocks")) << "the coarse blocks sleep";
-  d->update(frames[1], frames[2], got);
-  EXPECT_EQ(d->stats().get("orphan_sampled"), 1) << "frame 2: nearly all of the sample is awake";
-  EXPECT_EQ(d->stats().get("orphan_refresh"), 0) << "the frame should not be stale";
-  EXPECT_EQ(d->stats().get("orphan_blocks_tested"), d->stats().get("orphan_blocks"));
-  EXPECT_GT(orphan_vertex_face_contacts(mesh.topology(), got), 0u) << "the fold should bring orphan pairs within h";
+  const TriMesh alone = TriMesh::create(folded(0), std::vector<Face>(coarse.topology().faces().begin(),
+                                                                     coarse.topology().faces().end()));
+  const ContactSet want = run("naive", alone, {}, folded(fold), h, ContactKinds::parse("vf,ee"));
+  ASSERT_GT(orphan_vertex_face_contacts(alone.topology(), want), 0u) << "the fold should bring orphan pairs within h";
+  // A frame's contacts on the coarse lattice (renumbered as `alone`), or on the fine one.
+  const auto part = [&](const ContactSet& set, bool on_coarse) {
+    ContactSet out;
+    for (VertexFaceContact c : set.vf) {
+      if ((c.vertex >= base) != on_coarse) continue;
+      if (on_coarse) {
+        c.vertex -= base;
+        c.face -= fine_faces;
+      }
+      out.vf.push_back(c);
+    }
+    for (EdgeEdgeContact c : set.ee) {
+      if ((c.a[0] >= base) != on_coarse) continue;
+      if (on_coarse) {
+        c.edge0 -= fine_edges;
+        c.edge1 -= fine_edges;
+        c.a = {c.a[0] - base, c.a[1] - base};
+        c.b = {c.b[0] - base, c.b[1] - base};
+      }
+      out.ee.push_back(c);
+    }
+    return out;
+  };
+  for (int threads : {1, 2}) {
+    SCOPED_TRACE("threads " + std::to_string(threads));
+    auto d = make("kdop", h, ContactKinds::parse("vf,ee"), threads);
+    d->set_topology(mesh.topology_ptr());
+    ContactSet first, got;
+    d->update(frames[0], first);
+    ASSERT_GT(d->stats().get("orphan_blocks"), 1024);
+    d->update(frames[0], frames[1], got);
+    EXPECT_EQ(d->stats().get("orphan_sampled"), 0) << "frame 1: the sample should not decide";
+    EXPECT_LT(d->stats().get("orphan_blocks_tested"), d->stats().get("orphan_blocks")) << "the coarse blocks sleep";
+    d->update(frames[1], frames[2], got);
+    EXPECT_EQ(d->stats().get("orphan_sampled"), 1) << "frame 2: nearly all of the sample is awake";
+    EXPECT_EQ(d->stats().get("orphan_refresh"), 0) << "the frame should not be stale";
+    EXPECT_EQ(d->stats().get("orphan_blocks_tested"), d->stats().get("orphan_blocks"));
+    expect_same(want, part(got, true), "coarse lattice, frame 2");
+    expect_same(part(first, false), part(got, false), "fine lattice, frame 2 against frame 0");
+    EXPECT_GT(part(got, false).size(), 0u);
+  }
 }
 
 // Two triangles sharing only vertex w: every sub-pair between them is an orphan, in one block
