@@ -502,16 +502,23 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
       local.set.vf.push_back(*c);
     }
   };
-  // The box of face t padded by pad holds p (branch-free).
-  const auto in_box = [pad](const Vec3& p, const PackedFace& t) {
-    bool outside = false;
+  // The box of face t padded by pad holds p (branch-free; NaN: it does not), in two steps that
+  // the orphans' sift takes apart to bound a face once for several points.
+  using Bounds = std::array<Vec3, 2>;  // lo, hi
+  const auto padded_face_box = [pad](const PackedFace& t) {
+    Bounds box;
     for (int i = 0; i < 3; ++i) {
-      const Scalar lo = std::min({t.p[0][i], t.p[1][i], t.p[2][i]}) - pad;
-      const Scalar hi = std::max({t.p[0][i], t.p[1][i], t.p[2][i]}) + pad;
-      outside |= !(lo <= p[i]) | !(p[i] <= hi);
+      box[0][i] = std::min({t.p[0][i], t.p[1][i], t.p[2][i]}) - pad;
+      box[1][i] = std::max({t.p[0][i], t.p[1][i], t.p[2][i]}) + pad;
     }
+    return box;
+  };
+  const auto inside = [](const Vec3& p, const Bounds& box) {
+    bool outside = false;
+    for (int i = 0; i < 3; ++i) outside |= !(box[0][i] <= p[i]) | !(p[i] <= box[1][i]);
     return !outside;
   };
+  const auto in_box = [&](const Vec3& p, const PackedFace& t) { return inside(p, padded_face_box(t)); };
   // The gap between p and the box of face t (negative inside; in_box: not beyond pad), as a
   // lower bound of their distance (rounded down by 1e-12 of itself).
   const auto vertex_box_gap = [](const Vec3& p, const PackedFace& t) {
@@ -538,14 +545,23 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
       local.set.ee.push_back(*c);
     }
   };
-  // The boxes of edges (p0, p1) and (q0, q1) padded by pad / 2 overlap (branch-free).
-  const auto boxes_meet = [half](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
-    bool apart = false;
+  // The boxes of edges (p0, p1) and (q0, q1) padded by pad / 2 overlap (branch-free), in two
+  // steps that the orphans' sift takes apart to bound a first edge once for several others.
+  const auto half_padded_edge_box = [half](const Vec3& p0, const Vec3& p1) {
+    Bounds box;
     for (int i = 0; i < 3; ++i) {
-      apart |= !(std::min(p0[i], p1[i]) - half <= std::max(q0[i], q1[i]) + half) |
-               !(std::min(q0[i], q1[i]) - half <= std::max(p0[i], p1[i]) + half);
+      box[0][i] = std::min(p0[i], p1[i]) - half;
+      box[1][i] = std::max(p0[i], p1[i]) + half;
     }
+    return box;
+  };
+  const auto meet = [](const Bounds& a, const Bounds& b) {
+    bool apart = false;
+    for (int i = 0; i < 3; ++i) apart |= !(a[0][i] <= b[1][i]) | !(b[0][i] <= a[1][i]);
     return !apart;
+  };
+  const auto boxes_meet = [&](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
+    return meet(half_padded_edge_box(p0, p1), half_padded_edge_box(q0, q1));
   };
   // The gap between the boxes of edges (p0, p1) and (q0, q1) (negative if they overlap;
   // boxes_meet: not beyond pad), as a lower bound of their distance.
@@ -785,18 +801,10 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           const std::size_t b = i / kOrphanBlock;
           std::size_t kept = 0, k = 0;
           for (std::size_t r = vf_blocks_.run_begin[b]; r < vf_blocks_.run_begin[b + 1]; ++r) {
-            const PackedFace& t = face(i + k);
-            Vec3 lo, hi;
-            for (int a = 0; a < 3; ++a) {
-              lo[a] = std::min({t.p[0][a], t.p[1][a], t.p[2][a]}) - pad;
-              hi[a] = std::max({t.p[0][a], t.p[1][a], t.p[2][a]}) + pad;
-            }
+            const Bounds box = padded_face_box(face(i + k));
             for (const std::size_t run_end = k + vf_blocks_.runs[r]; k < run_end; ++k) {
-              const Vec3& p = point(i + k);
-              bool outside = false;
-              for (int a = 0; a < 3; ++a) outside |= !(lo[a] <= p[a]) | !(p[a] <= hi[a]);
               list[kept] = static_cast<std::uint16_t>(k);
-              kept += outside ? 0u : 1u;
+              kept += inside(point(i + k), box) ? 1u : 0u;
             }
           }
           n = sift(list.data(), kept, [&](std::uint16_t code) { return !beyond(plane(point(i + code), face(i + code))); });
@@ -851,23 +859,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           std::size_t kept = 0, k = 0;
           for (std::size_t r = ee_blocks_.run_begin[b]; r < ee_blocks_.run_begin[b + 1]; ++r) {
             const OrphanEdges& first = orphan_ee_[i + k];
-            const Vec3& p0 = narrow::at(x, first.a[0]);
-            const Vec3& p1 = narrow::at(x, first.a[1]);
-            Vec3 lo, hi;
-            for (int a = 0; a < 3; ++a) {
-              lo[a] = std::min(p0[a], p1[a]) - half;
-              hi[a] = std::max(p0[a], p1[a]) + half;
-            }
+            const Bounds box = half_padded_edge_box(narrow::at(x, first.a[0]), narrow::at(x, first.a[1]));
             for (const std::size_t run_end = k + ee_blocks_.runs[r]; k < run_end; ++k) {
               const OrphanEdges& o = orphan_ee_[i + k];
-              const Vec3& q0 = narrow::at(x, o.b[0]);
-              const Vec3& q1 = narrow::at(x, o.b[1]);
-              bool apart = false;
-              for (int a = 0; a < 3; ++a) {
-                apart |= !(lo[a] <= std::max(q0[a], q1[a]) + half) | !(std::min(q0[a], q1[a]) - half <= hi[a]);
-              }
               list[kept] = static_cast<std::uint16_t>(k);
-              kept += apart ? 0u : 1u;
+              kept += meet(box, half_padded_edge_box(narrow::at(x, o.b[0]), narrow::at(x, o.b[1]))) ? 1u : 0u;
             }
           }
           n = sift(list.data(), kept, [&](std::uint16_t code) {
