@@ -1,10 +1,18 @@
 #pragma once
 /// \file
-/// Minimal parallel loop used by detectors. Uses oneTBB when crumple is built with it, a plain
-/// serial loop otherwise; callers must not depend on the order in which chunks run.
+/// Minimal parallel loop used by detectors, on crumple's own team of threads that spin between
+/// loops (the default), or on oneTBB when crumple is built with it; a plain serial loop
+/// otherwise. Callers must not depend on the order in which chunks run.
+///
+/// Why a team of its own: an exact detector's frame is some twenty parallel loops of 0.05-5 ms
+/// separated by short serial steps, and oneTBB's workers go to sleep in those steps; waking them
+/// costs tens of microseconds a loop on a virtual machine. The team's workers spin for
+/// `kTeamSpin` after each loop before they sleep, so the next loop of the frame finds them awake
+/// (docs/benchmarks/exact.md: 3-8% of a frame on two threads).
 
 #include <crumple/core/types.hpp>
 
+#include <chrono>
 #include <cstddef>
 #include <functional>
 
@@ -14,8 +22,29 @@ namespace crumple {
 int resolve_threads(int threads);
 
 /// Calls `body(begin, end)` on disjoint chunks covering [0, n), at most `threads` at a time
-/// (0 = all hardware threads, 1 = serial in the calling thread). `grain` is the smallest chunk.
+/// (0 = all hardware threads, 1 = serial in the calling thread). `grain` is the smallest chunk
+/// (the last one may be smaller). An exception thrown by `body` is rethrown here once every
+/// chunk has run or been abandoned. A call made from inside a body, or while the team serves
+/// another thread's loop, runs serially in the calling thread.
 void parallel_for_chunks(std::size_t n, int threads, std::size_t grain,
                          const std::function<void(std::size_t begin, std::size_t end)>& body);
+
+/// Which threads `parallel_for_chunks` runs on.
+enum class ParallelBackend {
+  team,  ///< crumple's team: workers spin for `kTeamSpin` after each loop, then sleep
+  tbb,   ///< oneTBB's task arenas (only when crumple is built with TBB)
+};
+
+/// How long a team worker keeps spinning for the next loop before it sleeps. Only while the
+/// loop's thread count fits the hardware threads; oversubscribed workers sleep at once.
+inline constexpr std::chrono::microseconds kTeamSpin{500};
+
+/// Chooses the backend for the whole process (default: `team`, or what the environment
+/// variable CRUMPLE_PARALLEL says, `team` or `tbb`, read at the first loop). Throws
+/// std::invalid_argument for `tbb` in a build without TBB. Not to be called while a loop runs.
+void set_parallel_backend(ParallelBackend backend);
+ParallelBackend parallel_backend();
+/// Whether this build can run `backend`.
+bool has_parallel_backend(ParallelBackend backend);
 
 }  // namespace crumple
