@@ -8,7 +8,8 @@
 /// separated by short serial steps, and oneTBB's workers go to sleep in those steps; waking them
 /// costs tens of microseconds a loop on a virtual machine. The team's workers spin for
 /// `kTeamSpin` after each loop before they sleep, so the next loop of the frame finds them awake
-/// (docs/benchmarks/exact.md: 3-8% of a frame on two threads).
+/// (docs/benchmarks/exact.md: 3-8% less time for the small meshes' frames on two threads,
+/// within the measurement's noise for the large ones).
 
 #include <crumple/core/types.hpp>
 
