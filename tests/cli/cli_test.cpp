@@ -1,4 +1,5 @@
 // Runs the `crumple` binary as a user would and checks what it prints and writes.
+#include <crumple/core/parallel.hpp>
 #include <crumple/io/mesh_io.hpp>
 #include <support/meshes.hpp>
 #include <support/oracle.hpp>
@@ -68,6 +69,39 @@ TEST(Cli, BadInputGivesOneLineErrorAndNonZeroExit) {
   EXPECT_NE(r.status, 0) << "the two thickness options exclude each other";
   r = run("info " + (dir / "broken.obj").string());
   EXPECT_NE(r.status, 0);
+}
+
+// `crumple detect` with CRUMPLE_PARALLEL set (inherited by the program) to `value`.
+Result detect_with_backend(const char* value, const std::string& args) {
+  ::setenv("CRUMPLE_PARALLEL", value, 1);
+  Result r = run("detect " + args);
+  ::unsetenv("CRUMPLE_PARALLEL");
+  return r;
+}
+
+TEST(Cli, ParallelBackendFromTheEnvironment) {
+  // A bad value is a user error naming it, even on one thread (no loop runs in parallel).
+  for (const char* threads : {"1", "2"}) {
+    const Result r = detect_with_backend("bogus", std::string("--method kdop --threads ") + threads);
+    EXPECT_EQ(r.status, 1) << r.out;
+    EXPECT_NE(r.out.find("crumple: error: CRUMPLE_PARALLEL='bogus': expected 'team' or 'tbb'"), std::string::npos)
+        << r.out;
+  }
+  // Both backends find the same contacts: the frame line's "vf N  ee N  tt N" (then its time).
+  const auto counts = [](const Result& r) {
+    std::istringstream line(r.out.substr(r.out.find("frame 0")));
+    std::string word, counted;
+    for (int k = 0; k < 9 && line >> word; ++k) counted += word + " ";
+    return counted;
+  };
+  const Result team = detect_with_backend("team", "--method kdop --threads 2");
+  ASSERT_EQ(team.status, 0) << team.out;
+  EXPECT_NE(counts(team).find(" vf "), std::string::npos) << team.out;
+  if (has_parallel_backend(ParallelBackend::tbb)) {
+    const Result tbb = detect_with_backend("tbb", "--method kdop --threads 2");
+    ASSERT_EQ(tbb.status, 0) << tbb.out;
+    EXPECT_EQ(counts(tbb), counts(team));
+  }
 }
 
 TEST(Cli, InfoPrintsCountsAndReport) {

@@ -2,6 +2,8 @@
 // really use several threads, exceptions, nested and concurrent calls.
 #include <crumple/core/parallel.hpp>
 
+#include <crumple/core/error.hpp>
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -159,7 +161,7 @@ TEST(ParallelForChunks, LoopsFromSeveralThreadsAtOnce) {
 TEST(ParallelForChunks, BackendChoice) {
   EXPECT_TRUE(has_parallel_backend(ParallelBackend::team));
   if (!has_parallel_backend(ParallelBackend::tbb)) {
-    EXPECT_THROW(set_parallel_backend(ParallelBackend::tbb), std::invalid_argument);
+    EXPECT_THROW(set_parallel_backend(ParallelBackend::tbb), InputError);
   }
   for (const ParallelBackend backend : backends()) {
     const BackendScope scope(backend);

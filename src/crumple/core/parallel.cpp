@@ -1,5 +1,7 @@
 #include <crumple/core/parallel.hpp>
 
+#include <crumple/core/error.hpp>
+
 #include <algorithm>
 #include <atomic>
 #include <cstdint>
@@ -9,7 +11,6 @@
 #include <map>
 #include <memory>
 #include <mutex>
-#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -175,16 +176,17 @@ tbb::task_arena& arena(int threads) {
 }
 #endif
 
+/// `backend`, after checking that this build has it (`who` names the request in the error).
+ParallelBackend available(ParallelBackend backend, const std::string& who) {
+  if (!has_parallel_backend(backend)) throw InputError(who + ": this build of crumple has no TBB (CRUMPLE_WITH_TBB=OFF)");
+  return backend;
+}
+
 ParallelBackend backend_from_environment() {
   const char* name = std::getenv("CRUMPLE_PARALLEL");
   if (name == nullptr || std::string(name).empty() || std::string(name) == "team") return ParallelBackend::team;
-  if (std::string(name) == "tbb") {
-    if (!has_parallel_backend(ParallelBackend::tbb)) {
-      throw std::invalid_argument("CRUMPLE_PARALLEL=tbb: this build of crumple has no TBB (CRUMPLE_WITH_TBB=OFF)");
-    }
-    return ParallelBackend::tbb;
-  }
-  throw std::invalid_argument("CRUMPLE_PARALLEL='" + std::string(name) + "': expected 'team' or 'tbb'");
+  if (std::string(name) == "tbb") return available(ParallelBackend::tbb, "CRUMPLE_PARALLEL=tbb");
+  throw InputError("CRUMPLE_PARALLEL='" + std::string(name) + "': expected 'team' or 'tbb'");
 }
 
 std::atomic<ParallelBackend>& chosen_backend() {
@@ -204,10 +206,7 @@ bool has_parallel_backend(ParallelBackend backend) {
 }
 
 void set_parallel_backend(ParallelBackend backend) {
-  if (!has_parallel_backend(backend)) {
-    throw std::invalid_argument("set_parallel_backend(tbb): this build of crumple has no TBB (CRUMPLE_WITH_TBB=OFF)");
-  }
-  chosen_backend().store(backend);
+  chosen_backend().store(available(backend, "set_parallel_backend(tbb)"));
 }
 
 ParallelBackend parallel_backend() { return chosen_backend().load(); }
@@ -222,11 +221,14 @@ int resolve_threads(int threads) {
 }
 
 void parallel_for_chunks(std::size_t n, int threads, std::size_t grain, const Body& body) {
+  // Read on every call, so that a bad CRUMPLE_PARALLEL is reported by the first loop of any
+  // size, serial ones included.
+  const ParallelBackend backend = parallel_backend();
   if (n == 0) return;
   grain = std::max<std::size_t>(grain, 1);
   threads = resolve_threads(threads);
   if (threads != 1 && n > grain) {
-    if (parallel_backend() == ParallelBackend::tbb) {
+    if (backend == ParallelBackend::tbb) {
 #ifdef CRUMPLE_HAVE_TBB
       arena(threads).execute([&] {
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain),

@@ -41,8 +41,9 @@ enum class ParallelBackend {
 inline constexpr std::chrono::microseconds kTeamSpin{500};
 
 /// Chooses the backend for the whole process (default: `team`, or what the environment
-/// variable CRUMPLE_PARALLEL says, `team` or `tbb`, read at the first loop). Throws
-/// std::invalid_argument for `tbb` in a build without TBB. Not to be called while a loop runs.
+/// variable CRUMPLE_PARALLEL says, `team` or `tbb`, read at the first loop; any other value
+/// makes every loop throw `InputError` naming it). Throws `InputError` for `tbb` in a build
+/// without TBB. Not to be called while a loop runs.
 void set_parallel_backend(ParallelBackend backend);
 ParallelBackend parallel_backend();
 /// Whether this build can run `backend`.
