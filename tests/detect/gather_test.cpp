@@ -42,17 +42,19 @@ std::vector<std::vector<Record>> make_parts(std::mt19937& rng, Index keys, std::
 }
 
 void expect_gathered(const std::vector<std::vector<Record>>& lists, Index keys, int threads) {
-  std::vector<const std::vector<Record>*> parts;
+  std::vector<std::vector<std::uint64_t>> keys_of(lists.size());
+  std::vector<detail::KeyedList<Record>> parts;
   std::vector<Record> want;
-  for (const auto& l : lists) {
-    parts.push_back(&l);
-    want.insert(want.end(), l.begin(), l.end());
+  for (std::size_t i = 0; i < lists.size(); ++i) {
+    for (const Record& r : lists[i]) keys_of[i].push_back(r.key());
+    parts.push_back({&lists[i], &keys_of[i]});
+    want.insert(want.end(), lists[i].begin(), lists[i].end());
   }
   std::sort(want.begin(), want.end(), [](const Record& a, const Record& b) { return a.key() < b.key(); });
   detail::GatherScratch scratch;
   std::vector<Record> got{{7, 7, 7}};  // stale content is replaced
   for (int round = 0; round < 2; ++round) {  // the scratch is reused
-    detail::gather_sorted(got, parts, keys, [](const Record& r) { return r.key(); }, threads, scratch);
+    detail::gather_sorted(got, parts, keys, threads, scratch);
     ASSERT_EQ(got.size(), want.size());
     for (std::size_t i = 0; i < want.size(); ++i) {
       ASSERT_EQ(got[i].key(), want[i].key()) << "place " << i << " of " << want.size();

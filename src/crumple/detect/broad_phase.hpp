@@ -85,6 +85,22 @@ inline std::size_t storage_bytes(const ContactSet& s) {
   return storage_bytes(s.vf) + storage_bytes(s.ee) + storage_bytes(s.tt);
 }
 
+/// Contacts found by one chunk of the narrow phase, each list with its records' keys (their
+/// places in canonical order, for `detail::gather_sorted`).
+struct KeyedContacts {
+  ContactSet set;
+  std::vector<std::uint64_t> vf_keys, ee_keys, tt_keys;
+  void clear() {
+    set.clear();
+    vf_keys.clear();
+    ee_keys.clear();
+    tt_keys.clear();
+  }
+};
+inline std::size_t storage_bytes(const KeyedContacts& c) {
+  return storage_bytes(c.set) + storage_bytes(c.vf_keys) + storage_bytes(c.ee_keys) + storage_bytes(c.tt_keys);
+}
+
 /// Cleared containers (anything with `clear()` and `storage_bytes`) kept for reuse, thread-safe:
 /// a frame fills millions of candidates and tens of MB of contacts, and fresh allocations of
 /// that size cost page faults.
@@ -257,7 +273,7 @@ class ExactDetector : public Detector {
   std::vector<Index> isolated_;                  ///< vertices used by no face
   std::vector<std::uint8_t> face_owns_;          ///< per face: bit 0 owns a vertex, bit 1 an edge
   std::vector<Index> edge_rank_;                 ///< each edge's rank in (first, second vertex) order
-  Spares<ContactSet> spare_sets_;                ///< per-chunk contact sets, for reuse
+  Spares<KeyedContacts> spare_sets_;             ///< per-chunk contacts and their keys, for reuse
   detail::GatherScratch gather_;  ///< buffers of the final gather, kept across frames
   /// What the narrow phase reads of one face, packed so that a candidate pair touches two
   /// records (the corners' positions are copied in every frame).

@@ -3,6 +3,7 @@
 /// The exact detectors' last step: the contacts that the narrow phase's chunks found, in
 /// whatever order they were found, put into one list in canonical order.
 
+#include <crumple/core/error.hpp>
 #include <crumple/core/parallel.hpp>
 #include <crumple/core/types.hpp>
 
@@ -22,48 +23,67 @@ struct GatherScratch {
     std::uint64_t key;
     const void* record;
   };
-  std::vector<Item> items, sorted;
+  std::vector<Item> items;   ///< few records: listed, then sorted
+  std::vector<Item> sorted;  ///< by first criterion
   std::vector<std::size_t> start;  ///< per first criterion: its first place
   /// Per slice of the items and first criterion: how many items, then the next free place.
   std::vector<std::size_t> cursor;
 };
 
-/// Gathers the records of every list in `parts` into `dest` in the order of their keys. key(x)
-/// is x's place in that order as one integer, first criterion << 32 | second, the first in
-/// [0, keys); no two records may have the same key.
+/// One list of records to gather and their keys (keys[i]: records[i]'s place in the order, as
+/// `gather_sorted` says), listed by whoever wrote the records.
+template <class T>
+struct KeyedList {
+  const std::vector<T>* records;
+  const std::vector<std::uint64_t>* keys;
+};
+
+/// Gathers the records of every list in `parts` into `dest` in the order of their keys. A key
+/// is a record's place in that order as one integer, first criterion << 32 | second, the first
+/// in [0, keys); no two records may have the same key.
 ///
-/// The records are not moved until their place is known: the (key, address) items are listed
-/// (in parallel over the parts), counted per first criterion and scattered to their criterion's
-/// places (each thread counting then scattering its own slice of the items), then `threads`
-/// threads that each own a range of first criteria holding about the same number of records
-/// copy each record to its place, once, reading them ahead: among a criterion's few items, its
-/// place is the number of them with smaller keys, counted without a branch (measured against
-/// an insertion sort then a copy in order: the same on cloth-ball, 1-2 ms faster of 15-17 on
-/// rod-twist, one thread). (Copying each record as its item is scattered, so that the records
-/// are read in the order they lie, was measured slower on cloth-ball: 25 against 18 ms on one
-/// thread. The writes are then the scattered accesses, and fetching them ahead did not help.)
-/// Fewer records than keys / 8 are sorted by key instead of counted: counting would cost more,
-/// over every key.
-template <class T, class Key>
-void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*>& parts, Index keys, Key key,
-                   int threads, GatherScratch& scratch) {
+/// The records are not moved until their place is known: the keys are counted per first
+/// criterion and the (key, address) items scattered to their criterion's places (each thread
+/// counting then scattering its own slice of the keys), then `threads` threads that each own a
+/// range of first criteria holding about the same number of records copy each record to its
+/// place, once, reading them ahead: among a criterion's few items, its place is the number of
+/// them with smaller keys, counted without a branch (measured against an insertion sort then a
+/// copy in order: the same on cloth-ball, 1-2 ms faster of 15-17 on rod-twist, one thread).
+///
+/// The gather is bound by memory traffic (cloth-ball's 550 k contacts are 38 MB): the keys come
+/// with the records, so that the records are read once here, by the copy (reading them for
+/// their keys was 4.1 ms of 14 on cloth-ball, on one thread or two alike), and the counting
+/// reads the keys where they are instead of a list of (key, address) items made first. (Copying each record as its item is scattered, so
+/// that the records are read in the order they lie, was measured slower on cloth-ball: 25
+/// against 18 ms on one thread. The writes are then the scattered accesses, and fetching them
+/// ahead did not help; non-temporal stores for the copy changed nothing.) Fewer records than
+/// keys / 8 are sorted by key instead of counted: counting would cost more, over every key.
+template <class T>
+void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, Index keys, int threads,
+                   GatherScratch& scratch) {
   using Item = GatherScratch::Item;
   auto& items = scratch.items;
   auto& sorted = scratch.sorted;
   auto& start = scratch.start;
   auto& next = scratch.cursor;
   std::vector<std::size_t> offset(parts.size() + 1, 0);
-  for (std::size_t i = 0; i < parts.size(); ++i) offset[i + 1] = offset[i] + parts[i]->size();
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    CRUMPLE_ASSERT(parts[i].keys->size() == parts[i].records->size());
+    offset[i + 1] = offset[i] + parts[i].records->size();
+  }
   const std::size_t total = offset.back();
   dest.resize(total);
   if (total == 0) return;
-  items.resize(total);
-  parallel_for_chunks(parts.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      Item* to = items.data() + offset[i];
-      for (const T& x : *parts[i]) *to++ = {key(x), &x};
+  // Calls f(key, record) on the items [from, to) of the parts put end to end, in order.
+  const auto each_item = [&](std::size_t from, std::size_t to, const auto& f) {
+    auto i = static_cast<std::size_t>(std::upper_bound(offset.begin(), offset.end(), from) - offset.begin() - 1);
+    for (std::size_t j = from; j < to; ++i) {
+      const std::size_t stop = std::min(to, offset[i + 1]);
+      const std::uint64_t* key = parts[i].keys->data() + (j - offset[i]);
+      const T* record = parts[i].records->data() + (j - offset[i]);
+      for (; j < stop; ++j) f(*key++, record++);
     }
-  });
+  };
   const auto copy = [&](const Item* from, std::size_t begin, std::size_t end) {
     for (std::size_t j = begin; j < end; ++j) {
       if (j + 48 < end) {  // the records are scattered: fetch ahead
@@ -76,6 +96,9 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
   };
   const auto by_key = [](const Item& a, const Item& b) { return a.key < b.key; };
   if (total < static_cast<std::size_t>(keys) / 8) {
+    items.resize(total);
+    Item* to = items.data();
+    each_item(0, total, [&to](std::uint64_t key, const T* record) { *to++ = {key, record}; });
     std::sort(items.begin(), items.end(), by_key);
     parallel_for_chunks(total, threads, 4096, [&](std::size_t begin, std::size_t end) { copy(items.data(), begin, end); });
     return;
@@ -94,7 +117,7 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
       std::size_t* row = next.data() + s * nk;
       std::fill(row, row + nk, std::size_t{0});
       const auto [from, to] = slice(s);
-      for (std::size_t i = from; i < to; ++i) ++row[items[i].key >> 32];
+      each_item(from, to, [row](std::uint64_t key, const T*) { ++row[key >> 32]; });
     }
   });
   start.resize(nk + 1);
@@ -109,7 +132,7 @@ void gather_sorted(std::vector<T>& dest, const std::vector<const std::vector<T>*
     for (std::size_t s = begin; s < end; ++s) {
       std::size_t* row = next.data() + s * nk;
       const auto [from, to] = slice(s);
-      for (std::size_t i = from; i < to; ++i) sorted[row[items[i].key >> 32]++] = items[i];
+      each_item(from, to, [&, row](std::uint64_t key, const T* record) { sorted[row[key >> 32]++] = {key, record}; });
     }
   });
   std::vector<std::size_t> bound{0};  // ranges of first criteria holding about total / ranges records each
