@@ -6,8 +6,10 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numeric>
 #include <string>
@@ -62,6 +64,95 @@ struct SubPairTable {
   }
 };
 constexpr SubPairTable kSubPairs{};
+
+/// Edge-edge codes `i << 2 | j` of the sub-pairs in a 9-bit mask (bit 3i + j: side i of the
+/// first face with side j of the second), rows padded to 16 as in `SubPairTable`.
+struct EdgePairTable {
+  std::array<std::array<std::uint16_t, 16>, 512> codes{};
+  std::array<std::uint8_t, 512> count{};
+  constexpr EdgePairTable() {
+    for (unsigned m = 0; m < 512; ++m) {
+      unsigned n = 0;
+      for (unsigned b = 0; b < 9; ++b) {
+        if (m >> b & 1u) codes[m][n++] = static_cast<std::uint16_t>((b / 3) << 2 | b % 3);
+      }
+      count[m] = static_cast<std::uint8_t>(n);
+    }
+  }
+};
+constexpr EdgePairTable kEdgePairs{};
+
+/// Four float lanes (GCC's vector extensions: SSE on x86-64 without asking for more).
+using F4 = float __attribute__((vector_size(16)));
+using I4 = std::int32_t __attribute__((vector_size(16)));
+
+__attribute__((always_inline)) inline F4 load4(const std::array<float, 4>& a) {
+  F4 v;
+  std::memcpy(&v, a.data(), sizeof v);
+  return v;
+}
+/// Bit l set: lane l of v is true (all ones), for the lanes 0-2.
+__attribute__((always_inline)) inline unsigned lanes3(const I4& v) {
+#if defined(__SSE__)
+  return static_cast<unsigned>(__builtin_ia32_movmskps(std::bit_cast<F4>(v))) & 7u;
+#else
+  return (v[0] != 0 ? 1u : 0u) | (v[1] != 0 ? 2u : 0u) | (v[2] != 0 ? 4u : 0u);
+#endif
+}
+__attribute__((always_inline)) inline F4 min4(const F4& a, const F4& b) { return a < b ? a : b; }
+__attribute__((always_inline)) inline F4 max4(const F4& a, const F4& b) { return a > b ? a : b; }
+template <int L>
+__attribute__((always_inline)) inline F4 lane(const F4& v) {
+  return __builtin_shufflevector(v, v, L, L, L, L);
+}
+
+/// The box rejections of a candidate face pair's sub-pairs, in float lanes on the faces'
+/// `coarse` corners. `vf`: bit k, corner k of the first face lies in the second face's box
+/// padded by `pad` (bit 3 + k: corner k of the second in the first's box); `ee`: bit 3i + j,
+/// the boxes of side i of the first face and side j of the second, each padded by `half`,
+/// meet. The pads must cover the float rounding (`coarse_pad`), so that these boxes hold the
+/// exact ones: a bit that is 0 is a sub-pair beyond the padded thickness. NaN: 0.
+struct CoarseMasks {
+  unsigned vf = 0, ee = 0;
+};
+template <class Face>
+__attribute__((always_inline)) inline CoarseMasks coarse_masks(const Face& a, const Face& b, float half, float pad) {
+  I4 in_a = {-1, -1, -1, -1}, in_b = in_a, meet0 = in_a, meet1 = in_a, meet2 = in_a;
+  for (std::size_t d = 0; d < 3; ++d) {
+    const F4 ca = load4(a.coarse[d]), cb = load4(b.coarse[d]);
+    // Side k joins corners k and k + 1.
+    const F4 na = __builtin_shufflevector(ca, ca, 1, 2, 0, 3), nb = __builtin_shufflevector(cb, cb, 1, 2, 0, 3);
+    const F4 alo = min4(ca, na) - half, ahi = max4(ca, na) + half;
+    const F4 blo = min4(cb, nb) - half, bhi = max4(cb, nb) + half;
+    meet0 &= (lane<0>(alo) <= bhi) & (blo <= lane<0>(ahi));
+    meet1 &= (lane<1>(alo) <= bhi) & (blo <= lane<1>(ahi));
+    meet2 &= (lane<2>(alo) <= bhi) & (blo <= lane<2>(ahi));
+    // The faces' boxes, in every lane (lane 3 repeats corner 0).
+    const auto least = [](const F4& v) {
+      const F4 m = min4(v, __builtin_shufflevector(v, v, 2, 3, 0, 1));
+      return min4(m, __builtin_shufflevector(m, m, 1, 0, 3, 2));
+    };
+    const auto most = [](const F4& v) {
+      const F4 m = max4(v, __builtin_shufflevector(v, v, 2, 3, 0, 1));
+      return max4(m, __builtin_shufflevector(m, m, 1, 0, 3, 2));
+    };
+    in_a &= (least(cb) - pad <= ca) & (ca <= most(cb) + pad);
+    in_b &= (least(ca) - pad <= cb) & (cb <= most(ca) + pad);
+  }
+  return {lanes3(in_a) | lanes3(in_b) << 3, lanes3(meet0) | lanes3(meet1) << 3 | lanes3(meet2) << 6};
+}
+
+/// A pad for `coarse_masks` that covers the float rounding of coordinates up to `extent` in
+/// magnitude: the boxes it pads then hold the exact ones padded by `pad`. Corners are rounded
+/// by at most u * extent (u = 2^-24), and a box's bound once more by u of itself: (pad + 3u
+/// extent) / (1 - u) is enough, rounded up to a float; 8u is used.
+float coarse_pad(Scalar pad, Scalar extent) {
+  constexpr Scalar u = 0x1p-24;
+  const Scalar wide = (pad + 8 * u * extent) * (1 + 8 * u) + 1e-37;
+  auto f = static_cast<float>(wide);
+  if (static_cast<Scalar>(f) < wide) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
+}
 
 /// Contacts found by one chunk of work, kept until the frame's set is gathered.
 struct LocalContacts {
@@ -295,7 +386,7 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
   stats_.set("candidates", static_cast<double>(candidates_.total()));
   stats_.set("broad_ms", ms_since(t0));
 
-  narrow_phase(x, pad, candidates_, out);  // sets narrow_ms and sort_ms
+  narrow_phase(x, pad, magnitude, candidates_, out);  // sets narrow_ms and sort_ms
   candidates_.clear();
 
   const std::size_t total = out.size();
@@ -419,7 +510,7 @@ bool ExactDetector::wake_orphan_blocks(PositionsView x, Scalar pad, int threads)
   return true;
 }
 
-void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuffer& candidates,
+void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, const CandidateBuffer& candidates,
                                  ContactSet& out) {
   const Topology& topo = topology();
   const int threads = options().threads;
@@ -431,11 +522,24 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   const auto narrow_start = std::chrono::steady_clock::now();
 
   parallel_for_chunks(nf, threads, 4096, [&](std::size_t begin, std::size_t end) {
+    constexpr Scalar kMax = std::numeric_limits<float>::max();
     for (std::size_t f = begin; f < end; ++f) {
       PackedFace& pf = packed_[f];
-      for (int k = 0; k < 3; ++k) pf.p[static_cast<std::size_t>(k)] = narrow::at(x, pf.v[static_cast<std::size_t>(k)]);
+      for (std::size_t k = 0; k < 3; ++k) {
+        const Vec3& q = narrow::at(x, pf.v[k]);
+        pf.p[k] = q;
+        // (Beyond the float range, clamped: the coarse tests are then off.)
+        for (std::size_t a = 0; a < 3; ++a) pf.coarse[a][k] = static_cast<float>(std::clamp(q[a], -kMax, kMax));
+      }
+      for (std::size_t a = 0; a < 3; ++a) pf.coarse[a][3] = pf.coarse[a][0];
     }
   });
+  // The candidates' box rejections in float lanes (`coarse_masks`), unless the coordinates or
+  // the pad are too large for floats (or NaN): then none, and the plane and line tests and the
+  // kernels decide alone.
+  const bool coarse = magnitude <= 1e30 && pad <= 1e30;
+  const float coarse_half = coarse ? coarse_pad(half, magnitude) : 0;
+  const float coarse_full = coarse ? coarse_pad(pad, magnitude) : 0;
 
   std::mutex mutex;
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
@@ -567,8 +671,9 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
       local.set.ee.push_back(*c);
     }
   };
-  // The boxes of edges (p0, p1) and (q0, q1) padded by pad / 2 overlap (branch-free), in two
-  // steps that the orphans' sift takes apart to bound a first edge once for several others.
+  // Whether the boxes of two edges padded by pad / 2 overlap (branch-free; NaN: they do not):
+  // meet(half_padded_edge_box(p0, p1), half_padded_edge_box(q0, q1)), two steps that the
+  // orphans' sift takes apart to bound a first edge once for several others.
   const auto half_padded_edge_box = [half](const Vec3& p0, const Vec3& p1) {
     Bounds box;
     for (int i = 0; i < 3; ++i) {
@@ -582,11 +687,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     for (int i = 0; i < 3; ++i) apart |= !(a[0][i] <= b[1][i]) | !(b[0][i] <= a[1][i]);
     return !apart;
   };
-  const auto boxes_meet = [&](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
-    return meet(half_padded_edge_box(p0, p1), half_padded_edge_box(q0, q1));
-  };
-  // The gap between the boxes of edges (p0, p1) and (q0, q1) (negative if they overlap;
-  // boxes_meet: not beyond pad), as a lower bound of their distance.
+  // The gap between the boxes of edges (p0, p1) and (q0, q1) (negative if they overlap: not
+  // beyond pad), as a lower bound of their distance.
   const auto edge_box_gap = [](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
     Scalar gap = -std::numeric_limits<Scalar>::infinity();
     for (int a = 0; a < 3; ++a) {
@@ -607,22 +709,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     }
     return kept;
   };
-  // The cheap rejections of a list of sub-pairs, in order, leaving those the kernels must test:
-  // vertex-face sub-pairs, point(code) giving the vertex's position and face(code) the face;
-  // edge-edge ones, ends(code) pointers to the four ends (first edge, then second).
+  // The cheap rejections of a list of vertex-face sub-pairs, in order, leaving those the kernel
+  // must test: point(code) gives the vertex's position and face(code) the face.
   const auto sift_vertex_face = [&](std::uint16_t* list, std::size_t n, const auto& point, const auto& face) {
     n = sift(list, n, [&](std::uint16_t code) { return in_box(point(code), face(code)); });
     return sift(list, n, [&](std::uint16_t code) { return !beyond(plane(point(code), face(code))); });
-  };
-  const auto sift_edge_edge = [&](std::uint16_t* list, std::size_t n, const auto& ends) {
-    n = sift(list, n, [&](std::uint16_t code) {
-      const auto p = ends(code);
-      return boxes_meet(*p[0], *p[1], *p[2], *p[3]);
-    });
-    return sift(list, n, [&](std::uint16_t code) {
-      const auto p = ends(code);
-      return !beyond(line(*p[0], *p[1], *p[2], *p[3]));
-    });
   };
   // Sub-pairs are taken in blocks: the block's sub-pairs are listed, then the rejections sift
   // the list, and the exact kernels run over what is left.
@@ -637,8 +728,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
   std::vector<std::size_t> offsets(chunks.size() + 1, 0);
   for (std::size_t i = 0; i < chunks.size(); ++i) offsets[i + 1] = offsets[i] + chunks[i].size();
   const std::size_t total = offsets.back();
-  // The owned sub-pairs of a block of candidates are listed from the table without a branch.
-  // Code: the candidate's place in the block << 4 | the table's code.
+  // The owned sub-pairs of a block of candidates whose boxes meet (`coarse_masks`, all of a
+  // pair's box tests in a few float-lane operations: 9% of cloth-ball's frame against those
+  // tests in double, sub-pair by sub-pair) are listed from a table without a branch, then the
+  // plane and line tests sift the list. Code: the candidate's place in the block << 4 | the
+  // table's code.
   static constexpr std::array<std::size_t, 3> kNext{1, 2, 0};
   parallel_for_chunks(total, threads, 2048, [&](std::size_t begin, std::size_t end) {
     LocalContacts local{spare_sets_.take()};
@@ -657,7 +751,9 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           // The records of the next block's candidates, read while this block is processed.
           for (const Index f : chunks[c][ahead]) {
             const auto* r = reinterpret_cast<const char*>(&packed_[static_cast<std::size_t>(f)]);
+            static_assert(sizeof(PackedFace) <= 192);
             __builtin_prefetch(r);
+            __builtin_prefetch(r + 64);
             __builtin_prefetch(r + sizeof(PackedFace) - 1);
           }
         }
@@ -665,15 +761,22 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
         const PackedFace& b = packed_[static_cast<std::size_t>(pair[1])];
         block[n] = {&a, &b};
         const auto base = static_cast<std::uint16_t>(n << 4);
-        const unsigned vkey = a.vertex_mask | static_cast<unsigned>(b.vertex_mask) << 3;
-        const unsigned ekey = a.edge_mask | static_cast<unsigned>(b.edge_mask) << 3;
+        // The owned sub-pairs whose boxes meet.
+        const CoarseMasks box = !coarse ? CoarseMasks{0x3Fu, 0x1FFu}
+                                : kinds.vf || kinds.ee ? coarse_masks(a, b, coarse_half, coarse_full)
+                                                       : CoarseMasks{};
         if (kinds.vf) {
+          const unsigned vkey = (a.vertex_mask | static_cast<unsigned>(b.vertex_mask) << 3) & box.vf;
           for (std::size_t k = 0; k < 8; ++k) vf_subs[nvf + k] = static_cast<std::uint16_t>(base | kSubPairs.vf[vkey][k]);
           nvf += kSubPairs.vf_count[vkey];
         }
         if (kinds.ee) {
-          for (std::size_t k = 0; k < 16; ++k) ee_subs[nee + k] = static_cast<std::uint16_t>(base | kSubPairs.ee[ekey][k]);
-          nee += kSubPairs.ee_count[ekey];
+          // Bit 3i + j: side i of a and side j of b are both owned (b's mask, repeated at bits
+          // 0, 3 and 6 where a owns side 0, 1, 2).
+          const unsigned spread = (a.edge_mask & 1u) | (a.edge_mask & 2u) << 2 | (a.edge_mask & 4u) << 4;
+          const unsigned ekey = (spread * b.edge_mask) & box.ee;
+          for (std::size_t k = 0; k < 16; ++k) ee_subs[nee + k] = static_cast<std::uint16_t>(base | kEdgePairs.codes[ekey][k]);
+          nee += kEdgePairs.count[ekey];
         }
       }
       if (kinds.vf) {
@@ -683,9 +786,10 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           return code & 4u ? std::pair<const PackedFace*, const PackedFace*>{b, a}
                            : std::pair<const PackedFace*, const PackedFace*>{a, b};
         };
-        nvf = sift_vertex_face(
-            vf_subs.data(), nvf, [&](std::uint16_t code) -> const Vec3& { return sides(code).first->p[code & 3u]; },
-            [&](std::uint16_t code) -> const PackedFace& { return *sides(code).second; });
+        nvf = sift(vf_subs.data(), nvf, [&](std::uint16_t code) {
+          const auto [from, t] = sides(code);
+          return !beyond(plane(from->p[code & 3u], *t));
+        });
         for (std::size_t s = 0; s < nvf; ++s) {
           const auto [from, t] = sides(vf_subs[s]);
           const std::size_t k = vf_subs[s] & 3u;
@@ -698,10 +802,10 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
           const std::size_t i2 = code >> 2 & 3u, j = code & 3u;
           return std::array<std::size_t, 4>{i2, kNext[i2], j, kNext[j]};
         };
-        nee = sift_edge_edge(ee_subs.data(), nee, [&](std::uint16_t code) {
+        nee = sift(ee_subs.data(), nee, [&](std::uint16_t code) {
           const auto& [a, b] = block[code >> 4];
           const auto k = ends(code);
-          return std::array<const Vec3*, 4>{&a->p[k[0]], &a->p[k[1]], &b->p[k[2]], &b->p[k[3]]};
+          return !beyond(line(a->p[k[0]], a->p[k[1]], b->p[k[2]], b->p[k[3]]));
         });
         for (std::size_t s = 0; s < nee; ++s) {
           const auto& [a, b] = block[ee_subs[s] >> 4];
@@ -875,7 +979,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, const CandidateBuf
     orphan_pass(
         ee_blocks_, orphan_ee_.size(),
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
-          // The box sift (boxes_meet) run by run: a run's first edge is bounded once.
+          // The box sift (the half-padded edge boxes meet) run by run: a run's first edge is
+          // bounded once.
           std::array<std::uint16_t, kBlock> list;
           const std::size_t b = i / kOrphanBlock;
           std::size_t kept = 0, k = 0;

@@ -228,7 +228,8 @@ class ExactDetector : public Detector {
  private:
   void on_topology() final;
   void detect(PositionsView previous, PositionsView positions, ContactSet& out) final;
-  void narrow_phase(PositionsView x, Scalar pad, const CandidateBuffer& candidates,
+  /// `magnitude`: the largest coordinate magnitude of the frame (or more).
+  void narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, const CandidateBuffer& candidates,
                     ContactSet& out);
   /// Marks the orphan blocks to test this frame (all of them on a refresh); returns whether
   /// this frame refreshes the blocks' bounds.
@@ -278,6 +279,10 @@ class ExactDetector : public Detector {
   /// What the narrow phase reads of one face, packed so that a candidate pair touches two
   /// records (the corners' positions are copied in every frame).
   struct PackedFace {
+    /// The corners' coordinates rounded to float, axis by axis: coordinate a of corner k in
+    /// coarse[a][k], and of corner 0 again in coarse[a][3]. The candidate loop's box rejections
+    /// run on them four lanes at a time, with pads widened to cover the rounding.
+    alignas(16) std::array<std::array<float, 4>, 3> coarse;
     std::array<Vec3, 3> p;         ///< corner positions
     Face v;                        ///< corner ids
     std::array<Index, 3> e;        ///< side ids (side k joins corners k and k+1)
