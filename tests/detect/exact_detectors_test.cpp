@@ -648,6 +648,34 @@ TEST(ExactDetectors, FloatBoxTestsCoverTheRounding) {
   EXPECT_EQ(placements, 100u);
 }
 
+// The same for the orphans (sub-pairs of faces that share a vertex), whose box tests also run
+// in float lanes on frames that do not refresh their bounds: two faces sharing a corner, the
+// second lying just under h above (below) the first.
+TEST(ExactDetectors, FloatBoxTestsOfOrphansCoverTheRounding) {
+  const Scalar u = std::ldexp(1.0, -13);
+  std::size_t placements = 0;
+  for (int ti = 0; ti < 10; ++ti) {
+    for (const Scalar s : {0.1, 0.3, 0.5, 0.7, 0.9}) {
+      for (const Scalar side : {1.0, -1.0}) {
+        const Scalar h = (81 + s) * u;
+        const Vec3 o(512, 256, 1024 + (0.05 + 0.1 * ti) * u);
+        const Scalar gap = side * h * (1 - 1e-9);
+        SCOPED_TRACE("t " + std::to_string(ti) + " s " + std::to_string(s) + " side " + std::to_string(side));
+        // Vertex 3 over face 0; side (3, 4) crosses over side (1, 2), and side (0, 4) too.
+        const TriMesh m = TriMesh::create(
+            {o, o + Vec3(1, 0, 0), o + Vec3(0, 1, 0), o + Vec3(0.3, 0.3, gap), o + Vec3(0.8, 0.8, gap)},
+            {{0, 1, 2}, {0, 3, 4}});
+        // Identical frames: the first refreshes the orphans' bounds, the next ones test them.
+        const std::vector<Positions> frames(3, m.positions());
+        EXPECT_EQ(expect_sequence_exact(m, frames, h, {"kdop", "hash", "sap"}, ContactKinds::parse("vf,ee")), 9u);
+        if (HasFailure()) return;
+        ++placements;
+      }
+    }
+  }
+  EXPECT_EQ(placements, 100u);
+}
+
 TEST(ExactDetectors, IsolatedVerticesAndDegenerateFaces) {
   // Vertex 3 is used by no face and hovers over face 0; vertex 7 is isolated and far; face 2 is
   // degenerate (collinear corners) and close to face 0; vertex 8 duplicates vertex 0's position.

@@ -534,12 +534,23 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
       for (std::size_t a = 0; a < 3; ++a) pf.coarse[a][3] = pf.coarse[a][0];
     }
   });
-  // The candidates' box rejections in float lanes (`coarse_masks`), unless the coordinates or
-  // the pad are too large for floats (or NaN): then none, and the plane and line tests and the
-  // kernels decide alone.
+  // The box rejections of the candidates (`coarse_masks`) and of the orphans, in float lanes,
+  // unless the coordinates or the pad are too large for floats (or NaN): then infinite pads,
+  // no box rejects, and the plane and line tests and the kernels decide alone.
   const bool coarse = magnitude <= 1e30 && pad <= 1e30;
-  const float coarse_half = coarse ? coarse_pad(half, magnitude) : 0;
-  const float coarse_full = coarse ? coarse_pad(pad, magnitude) : 0;
+  constexpr float kNoPad = std::numeric_limits<float>::infinity();
+  const float coarse_half = coarse ? coarse_pad(half, magnitude) : kNoPad;
+  const float coarse_full = coarse ? coarse_pad(pad, magnitude) : kNoPad;
+  if (kinds.vf || kinds.ee) {
+    coarse_x_.resize(x.size());
+    parallel_for_chunks(x.size(), threads, 8192, [&](std::size_t begin, std::size_t end) {
+      constexpr Scalar kMax = std::numeric_limits<float>::max();
+      for (std::size_t v = begin; v < end; ++v) {
+        for (std::size_t a = 0; a < 3; ++a) coarse_x_[v][a] = static_cast<float>(std::clamp(x[v][a], -kMax, kMax));
+        coarse_x_[v][3] = 0;
+      }
+    });
+  }
 
   std::mutex mutex;
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
@@ -671,22 +682,6 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
       local.set.ee.push_back(*c);
     }
   };
-  // Whether the boxes of two edges padded by pad / 2 overlap (branch-free; NaN: they do not):
-  // meet(half_padded_edge_box(p0, p1), half_padded_edge_box(q0, q1)), two steps that the
-  // orphans' sift takes apart to bound a first edge once for several others.
-  const auto half_padded_edge_box = [half](const Vec3& p0, const Vec3& p1) {
-    Bounds box;
-    for (int i = 0; i < 3; ++i) {
-      box[0][i] = std::min(p0[i], p1[i]) - half;
-      box[1][i] = std::max(p0[i], p1[i]) + half;
-    }
-    return box;
-  };
-  const auto meet = [](const Bounds& a, const Bounds& b) {
-    bool apart = false;
-    for (int i = 0; i < 3; ++i) apart |= !(a[0][i] <= b[1][i]) | !(b[0][i] <= a[1][i]);
-    return !apart;
-  };
   // The gap between the boxes of edges (p0, p1) and (q0, q1) (negative if they overlap: not
   // beyond pad), as a lower bound of their distance.
   const auto edge_box_gap = [](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
@@ -762,9 +757,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
         block[n] = {&a, &b};
         const auto base = static_cast<std::uint16_t>(n << 4);
         // The owned sub-pairs whose boxes meet.
-        const CoarseMasks box = !coarse ? CoarseMasks{0x3Fu, 0x1FFu}
-                                : kinds.vf || kinds.ee ? coarse_masks(a, b, coarse_half, coarse_full)
-                                                       : CoarseMasks{};
+        const CoarseMasks box = kinds.vf || kinds.ee ? coarse_masks(a, b, coarse_half, coarse_full) : CoarseMasks{};
         if (kinds.vf) {
           const unsigned vkey = (a.vertex_mask | static_cast<unsigned>(b.vertex_mask) << 3) & box.vf;
           for (std::size_t k = 0; k < 8; ++k) vf_subs[nvf + k] = static_cast<std::uint16_t>(base | kSubPairs.vf[vkey][k]);
@@ -845,6 +838,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // sub-pairs the box rejects, the plane (line) distance of those that the plane (line)
   // rejects, and the kernel's distance, less the pad's rounding margin (pad - h, which covers
   // the kernel's rounding at either frame), of the others.
+  const auto coarse_point = [&](Index v) { return load4(coarse_x_[static_cast<std::size_t>(v)]); };
   const auto orphans_start = std::chrono::steady_clock::now();
   const bool refresh = (kinds.vf || kinds.ee) && wake_orphan_blocks(x, pad, threads);
   stats_.set("orphan_wake_ms", ms_since(orphans_start));
@@ -922,15 +916,19 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
     orphan_pass(
         vf_blocks_, orphan_vf_.size(),
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
-          // The box sift (in_box) run by run: a run's face box is bounded once.
+          // The box sift run by run, in float lanes as the candidates' (`coarse_masks`): a run's
+          // face box is bounded once.
           std::array<std::uint16_t, kBlock> list;
           const std::size_t b = i / kOrphanBlock;
           std::size_t kept = 0, k = 0;
           for (std::size_t r = vf_blocks_.run_begin[b]; r < vf_blocks_.run_begin[b + 1]; ++r) {
-            const Bounds box = padded_face_box(face(i + k));
+            const Face& t = face(i + k).v;
+            const F4 c0 = coarse_point(t[0]), c1 = coarse_point(t[1]), c2 = coarse_point(t[2]);
+            const F4 lo = min4(min4(c0, c1), c2) - coarse_full, hi = max4(max4(c0, c1), c2) + coarse_full;
             for (const std::size_t run_end = k + vf_blocks_.runs[r]; k < run_end; ++k) {
+              const F4 p = coarse_point(orphan_vf_[i + k][0]);
               list[kept] = static_cast<std::uint16_t>(k);
-              kept += inside(point(i + k), box) ? 1u : 0u;
+              kept += lanes3((lo <= p) & (p <= hi)) == 7u ? 1u : 0u;
             }
           }
           n = sift(list.data(), kept, [&](std::uint16_t code) { return !beyond(plane(point(i + code), face(i + code))); });
@@ -979,18 +977,20 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
     orphan_pass(
         ee_blocks_, orphan_ee_.size(),
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
-          // The box sift (the half-padded edge boxes meet) run by run: a run's first edge is
-          // bounded once.
+          // The box sift (the half-padded edge boxes meet) run by run, in float lanes: a run's
+          // first edge is bounded once.
           std::array<std::uint16_t, kBlock> list;
           const std::size_t b = i / kOrphanBlock;
           std::size_t kept = 0, k = 0;
           for (std::size_t r = ee_blocks_.run_begin[b]; r < ee_blocks_.run_begin[b + 1]; ++r) {
             const OrphanEdges& first = orphan_ee_[i + k];
-            const Bounds box = half_padded_edge_box(narrow::at(x, first.a[0]), narrow::at(x, first.a[1]));
+            const F4 a0 = coarse_point(first.a[0]), a1 = coarse_point(first.a[1]);
+            const F4 alo = min4(a0, a1) - coarse_half, ahi = max4(a0, a1) + coarse_half;
             for (const std::size_t run_end = k + ee_blocks_.runs[r]; k < run_end; ++k) {
               const OrphanEdges& o = orphan_ee_[i + k];
+              const F4 b0 = coarse_point(o.b[0]), b1 = coarse_point(o.b[1]);
               list[kept] = static_cast<std::uint16_t>(k);
-              kept += meet(box, half_padded_edge_box(narrow::at(x, o.b[0]), narrow::at(x, o.b[1]))) ? 1u : 0u;
+              kept += lanes3((alo <= max4(b0, b1) + coarse_half) & (min4(b0, b1) - coarse_half <= ahi)) == 7u ? 1u : 0u;
             }
           }
           n = sift(list.data(), kept, [&](std::uint16_t code) {
