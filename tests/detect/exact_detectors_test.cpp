@@ -613,66 +613,60 @@ TEST(ExactDetectors, FloatLanesKeepPairsJustUnderTheThickness) {
   }
 }
 
-// The candidates' box tests run in float lanes on the corners rounded to float, with pads
-// widened to cover that rounding. Placed on the float grid near 1024 (spacing u = 2^-13), at a
-// fraction t of a spacing from a grid point, with a thickness of 81 + s spacings: in 14 of these
-// 100 placements of a vertex just under h above (below) a face, the rounded corners alone fall
-// apart by more than the unwidened pad. Likewise for two crossing edges just under h apart.
-TEST(ExactDetectors, FloatBoxTestsCoverTheRounding) {
+// The candidates' and orphans' box tests run in float lanes on the corners rounded to float,
+// with pads widened to cover that rounding. Calls place(h, o, gap) on 100 placements on the float
+// grid near 1024 (spacing u = 2^-13): o at a fraction t of a spacing from a grid point, a
+// thickness of 81 + s spacings, and a gap just under h, upwards or downwards. A vertex gap above
+// a face at o falls outside the face's box padded by the unwidened pad in 14 of them.
+void for_each_rounding_placement(const std::function<void(Scalar, const Vec3&, Scalar)>& place) {
   const Scalar u = std::ldexp(1.0, -13);
-  std::size_t placements = 0;
   for (int ti = 0; ti < 10; ++ti) {
     for (const Scalar s : {0.1, 0.3, 0.5, 0.7, 0.9}) {
       for (const Scalar side : {1.0, -1.0}) {
         const Scalar h = (81 + s) * u;
-        const Vec3 o(512, 256, 1024 + (0.05 + 0.1 * ti) * u);
-        const Scalar gap = side * h * (1 - 1e-9);
         SCOPED_TRACE("t " + std::to_string(ti) + " s " + std::to_string(s) + " side " + std::to_string(side));
-        // Vertex 3 over face 0.
-        const Vec3 v = o + Vec3(0.25, 0.25, gap);
-        const TriMesh vf = TriMesh::create(
-            {o, o + Vec3(1, 0, 0), o + Vec3(0, 1, 0), v, v + Vec3(1, 0, side), v + Vec3(0, 1, side)}, {{0, 1, 2}, {3, 4, 5}});
-        EXPECT_EQ(expect_sequence_exact(vf, {vf.positions()}, h, {"kdop", "hash", "sap"}, ContactKinds::parse("vf")), 1u);
-        // Side (0, 1) of face 0 along x, side (3, 4) of face 1 along y, crossing gap above it;
-        // the third corners lean away.
-        const Vec3 w = o + Vec3(0, 0, gap);
-        const TriMesh ee = TriMesh::create({o + Vec3(-0.5, 0, 0), o + Vec3(0.5, 0, 0), o + Vec3(0, -1, -side),
-                                            w + Vec3(0, -0.5, 0), w + Vec3(0, 0.5, 0), w + Vec3(1, 0, side)},
-                                           {{0, 1, 2}, {3, 4, 5}});
-        EXPECT_EQ(expect_sequence_exact(ee, {ee.positions()}, h, {"kdop", "hash", "sap"}, ContactKinds::parse("ee")), 1u);
-        if (HasFailure()) return;
-        ++placements;
+        place(h, Vec3(512, 256, 1024 + (0.05 + 0.1 * ti) * u), side * h * (1 - 1e-9));
+        if (::testing::Test::HasFailure()) return;
       }
     }
   }
+}
+
+TEST(ExactDetectors, FloatBoxTestsCoverTheRounding) {
+  std::size_t placements = 0;
+  for_each_rounding_placement([&](Scalar h, const Vec3& o, Scalar gap) {
+    const Scalar side = gap > 0 ? 1 : -1;
+    // Vertex 3 over face 0.
+    const Vec3 v = o + Vec3(0.25, 0.25, gap);
+    const TriMesh vf = TriMesh::create(
+        {o, o + Vec3(1, 0, 0), o + Vec3(0, 1, 0), v, v + Vec3(1, 0, side), v + Vec3(0, 1, side)}, {{0, 1, 2}, {3, 4, 5}});
+    EXPECT_EQ(expect_sequence_exact(vf, {vf.positions()}, h, {"kdop", "hash", "sap"}, ContactKinds::parse("vf")), 1u);
+    // Side (0, 1) of face 0 along x, side (3, 4) of face 1 along y, crossing gap above it; the
+    // third corners lean away.
+    const Vec3 w = o + Vec3(0, 0, gap);
+    const TriMesh ee = TriMesh::create({o + Vec3(-0.5, 0, 0), o + Vec3(0.5, 0, 0), o + Vec3(0, -1, -side),
+                                        w + Vec3(0, -0.5, 0), w + Vec3(0, 0.5, 0), w + Vec3(1, 0, side)},
+                                       {{0, 1, 2}, {3, 4, 5}});
+    EXPECT_EQ(expect_sequence_exact(ee, {ee.positions()}, h, {"kdop", "hash", "sap"}, ContactKinds::parse("ee")), 1u);
+    ++placements;
+  });
   EXPECT_EQ(placements, 100u);
 }
 
-// The same for the orphans (sub-pairs of faces that share a vertex), whose box tests also run
-// in float lanes on frames that do not refresh their bounds: two faces sharing a corner, the
-// second lying just under h above (below) the first.
+// The same for the orphans (sub-pairs of faces that share a vertex), whose box tests run in
+// float lanes on the frames that do not refresh their bounds: two faces sharing a corner.
 TEST(ExactDetectors, FloatBoxTestsOfOrphansCoverTheRounding) {
-  const Scalar u = std::ldexp(1.0, -13);
   std::size_t placements = 0;
-  for (int ti = 0; ti < 10; ++ti) {
-    for (const Scalar s : {0.1, 0.3, 0.5, 0.7, 0.9}) {
-      for (const Scalar side : {1.0, -1.0}) {
-        const Scalar h = (81 + s) * u;
-        const Vec3 o(512, 256, 1024 + (0.05 + 0.1 * ti) * u);
-        const Scalar gap = side * h * (1 - 1e-9);
-        SCOPED_TRACE("t " + std::to_string(ti) + " s " + std::to_string(s) + " side " + std::to_string(side));
-        // Vertex 3 over face 0; side (3, 4) crosses over side (1, 2), and side (0, 4) too.
-        const TriMesh m = TriMesh::create(
-            {o, o + Vec3(1, 0, 0), o + Vec3(0, 1, 0), o + Vec3(0.3, 0.3, gap), o + Vec3(0.8, 0.8, gap)},
-            {{0, 1, 2}, {0, 3, 4}});
-        // Identical frames: the first refreshes the orphans' bounds, the next ones test them.
-        const std::vector<Positions> frames(3, m.positions());
-        EXPECT_EQ(expect_sequence_exact(m, frames, h, {"kdop", "hash", "sap"}, ContactKinds::parse("vf,ee")), 9u);
-        if (HasFailure()) return;
-        ++placements;
-      }
-    }
-  }
+  for_each_rounding_placement([&](Scalar h, const Vec3& o, Scalar gap) {
+    // Vertex 3 over face 0; side (3, 4) crosses over side (1, 2), and side (0, 4) too.
+    const TriMesh m = TriMesh::create(
+        {o, o + Vec3(1, 0, 0), o + Vec3(0, 1, 0), o + Vec3(0.3, 0.3, gap), o + Vec3(0.8, 0.8, gap)},
+        {{0, 1, 2}, {0, 3, 4}});
+    // Identical frames: the first refreshes the orphans' bounds, the next ones test them.
+    const std::vector<Positions> frames(3, m.positions());
+    EXPECT_EQ(expect_sequence_exact(m, frames, h, {"kdop", "hash", "sap"}, ContactKinds::parse("vf,ee")), 9u);
+    ++placements;
+  });
   EXPECT_EQ(placements, 100u);
 }
 
