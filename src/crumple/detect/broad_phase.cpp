@@ -521,17 +521,18 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   const Scalar half = pad / 2;
   const auto narrow_start = std::chrono::steady_clock::now();
 
+  const bool proximity = kinds.vf || kinds.ee;
   parallel_for_chunks(nf, threads, 4096, [&](std::size_t begin, std::size_t end) {
     constexpr Scalar kMax = std::numeric_limits<float>::max();
     for (std::size_t f = begin; f < end; ++f) {
       PackedFace& pf = packed_[f];
-      for (std::size_t k = 0; k < 3; ++k) {
-        const Vec3& q = narrow::at(x, pf.v[k]);
-        pf.p[k] = q;
+      for (std::size_t k = 0; k < 3; ++k) pf.p[k] = narrow::at(x, pf.v[k]);
+      if (!proximity) continue;  // the float corners serve the proximity tests only
+      for (std::size_t a = 0; a < 3; ++a) {
         // (Beyond the float range, clamped: the coarse tests are then off.)
-        for (std::size_t a = 0; a < 3; ++a) pf.coarse[a][k] = static_cast<float>(std::clamp(q[a], -kMax, kMax));
+        for (std::size_t k = 0; k < 3; ++k) pf.coarse[a][k] = static_cast<float>(std::clamp(pf.p[k][a], -kMax, kMax));
+        pf.coarse[a][3] = pf.coarse[a][0];
       }
-      for (std::size_t a = 0; a < 3; ++a) pf.coarse[a][3] = pf.coarse[a][0];
     }
   });
   // The box rejections of the candidates (`coarse_masks`) and of the orphans, in float lanes,
@@ -541,7 +542,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   constexpr float kNoPad = std::numeric_limits<float>::infinity();
   const float coarse_half = coarse ? coarse_pad(half, magnitude) : kNoPad;
   const float coarse_full = coarse ? coarse_pad(pad, magnitude) : kNoPad;
-  if (kinds.vf || kinds.ee) {
+  if (proximity) {
     coarse_x_.resize(x.size());
     parallel_for_chunks(x.size(), threads, 8192, [&](std::size_t begin, std::size_t end) {
       constexpr Scalar kMax = std::numeric_limits<float>::max();
@@ -757,7 +758,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
         block[n] = {&a, &b};
         const auto base = static_cast<std::uint16_t>(n << 4);
         // The owned sub-pairs whose boxes meet.
-        const CoarseMasks box = kinds.vf || kinds.ee ? coarse_masks(a, b, coarse_half, coarse_full) : CoarseMasks{};
+        const CoarseMasks box = proximity ? coarse_masks(a, b, coarse_half, coarse_full) : CoarseMasks{};
         if (kinds.vf) {
           const unsigned vkey = (a.vertex_mask | static_cast<unsigned>(b.vertex_mask) << 3) & box.vf;
           for (std::size_t k = 0; k < 8; ++k) vf_subs[nvf + k] = static_cast<std::uint16_t>(base | kSubPairs.vf[vkey][k]);
@@ -812,19 +813,14 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
           const PackedFace& a = *block[m][0];
           const PackedFace& b = *block[m][1];
           const auto f = static_cast<Index>(&a - packed_.data()), g = static_cast<Index>(&b - packed_.data());
-          // Boxes of the faces padded by pad overlap.
-          bool apart = false;
-          for (int k = 0; k < 3; ++k) {
-            apart |= std::min({a.p[0][k], a.p[1][k], a.p[2][k]}) - pad > std::max({b.p[0][k], b.p[1][k], b.p[2][k]}) + pad;
-            apart |= std::min({b.p[0][k], b.p[1][k], b.p[2][k]}) - pad > std::max({a.p[0][k], a.p[1][k], a.p[2][k]}) + pad;
-          }
-          if (!apart) {
-            ++local.tt_tests;
-            if (f < g) {
-              local.tt_batch.push(f, a.p, g, b.p, local.set.tt);
-            } else {
-              local.tt_batch.push(g, b.p, f, a.p, local.set.tt);
-            }
+          // No box test first: every broad phase's candidates have boxes that overlap once padded
+          // (measured: a test of the boxes padded by pad kept all 432,600 of cloth-ball's, and
+          // all of the funnel's for kdop, hash and sap alike).
+          ++local.tt_tests;
+          if (f < g) {
+            local.tt_batch.push(f, a.p, g, b.p, local.set.tt);
+          } else {
+            local.tt_batch.push(g, b.p, f, a.p, local.set.tt);
           }
         }
       }
