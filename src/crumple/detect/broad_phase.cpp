@@ -34,43 +34,36 @@ void inflate(Box& b, Scalar r) {
   }
 }
 
-/// The owned sub-pairs of a candidate face pair, indexed by `mask_a | mask_b << 3` (the two
-/// faces' ownership masks): vertex-face codes `side << 2 | k` (side 0: corner k of the first
-/// face against the second face; side 1: the other way round) and edge-edge codes `i << 2 | j`
-/// (side i of the first face, side j of the second), with their counts. Unused codes are 0. The
-/// codes are 16-bit and the rows padded to 8 and 16, so that listing a candidate's codes is one
-/// or two vector operations (8-bit codes, widened one by one, cost a stall each).
-struct SubPairTable {
-  std::array<std::array<std::uint16_t, 8>, 64> vf{};
-  std::array<std::uint8_t, 64> vf_count{};
-  std::array<std::array<std::uint16_t, 16>, 64> ee{};
-  std::array<std::uint8_t, 64> ee_count{};
-  constexpr SubPairTable() {
+/// The vertex-face sub-pairs of a candidate face pair, indexed by `mask_a | mask_b << 3` (bit k
+/// of each: the face owns corner k, and it lies in the other face's box): codes `side << 2 | k`
+/// (side 0: corner k of the first face against the second face; side 1: the other way round),
+/// with their counts. Unused codes are 0. The codes are 16-bit and the rows padded to 8, so that
+/// listing a candidate's codes is one vector operation (8-bit codes, widened one by one, cost a
+/// stall each).
+struct VertexFaceTable {
+  std::array<std::array<std::uint16_t, 8>, 64> codes{};
+  std::array<std::uint8_t, 64> count{};
+  constexpr VertexFaceTable() {
     for (unsigned key = 0; key < 64; ++key) {
       const unsigned ma = key & 7u, mb = key >> 3;
-      unsigned nv = 0, ne = 0;
+      unsigned n = 0;
       for (unsigned k = 0; k < 3; ++k) {
-        if (ma >> k & 1u) vf[key][nv++] = static_cast<std::uint16_t>(k);
-        if (mb >> k & 1u) vf[key][nv++] = static_cast<std::uint16_t>(4u | k);
+        if (ma >> k & 1u) codes[key][n++] = static_cast<std::uint16_t>(k);
+        if (mb >> k & 1u) codes[key][n++] = static_cast<std::uint16_t>(4u | k);
       }
-      for (unsigned i = 0; i < 3; ++i) {
-        for (unsigned j = 0; j < 3; ++j) {
-          if ((ma >> i & 1u) && (mb >> j & 1u)) ee[key][ne++] = static_cast<std::uint16_t>(i << 2 | j);
-        }
-      }
-      vf_count[key] = static_cast<std::uint8_t>(nv);
-      ee_count[key] = static_cast<std::uint8_t>(ne);
+      count[key] = static_cast<std::uint8_t>(n);
     }
   }
 };
-constexpr SubPairTable kSubPairs{};
+constexpr VertexFaceTable kVertexFace{};
 
-/// Edge-edge codes `i << 2 | j` of the sub-pairs in a 9-bit mask (bit 3i + j: side i of the
-/// first face with side j of the second), rows padded to 16 as in `SubPairTable`.
-struct EdgePairTable {
+/// The edge-edge sub-pairs of a candidate face pair, indexed by a 9-bit mask (bit 3i + j: side i
+/// of the first face and side j of the second are both owned and their boxes meet): codes
+/// `i << 2 | j`, with their counts, rows padded to 16 as above.
+struct EdgeEdgeTable {
   std::array<std::array<std::uint16_t, 16>, 512> codes{};
   std::array<std::uint8_t, 512> count{};
-  constexpr EdgePairTable() {
+  constexpr EdgeEdgeTable() {
     for (unsigned m = 0; m < 512; ++m) {
       unsigned n = 0;
       for (unsigned b = 0; b < 9; ++b) {
@@ -80,7 +73,7 @@ struct EdgePairTable {
     }
   }
 };
-constexpr EdgePairTable kEdgePairs{};
+constexpr EdgeEdgeTable kEdgeEdge{};
 
 /// Four float lanes (GCC's vector extensions: SSE on x86-64 without asking for more).
 using F4 = float __attribute__((vector_size(16)));
@@ -761,16 +754,16 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
         const CoarseMasks box = proximity ? coarse_masks(a, b, coarse_half, coarse_full) : CoarseMasks{};
         if (kinds.vf) {
           const unsigned vkey = (a.vertex_mask | static_cast<unsigned>(b.vertex_mask) << 3) & box.vf;
-          for (std::size_t k = 0; k < 8; ++k) vf_subs[nvf + k] = static_cast<std::uint16_t>(base | kSubPairs.vf[vkey][k]);
-          nvf += kSubPairs.vf_count[vkey];
+          for (std::size_t k = 0; k < 8; ++k) vf_subs[nvf + k] = static_cast<std::uint16_t>(base | kVertexFace.codes[vkey][k]);
+          nvf += kVertexFace.count[vkey];
         }
         if (kinds.ee) {
           // Bit 3i + j: side i of a and side j of b are both owned (b's mask, repeated at bits
           // 0, 3 and 6 where a owns side 0, 1, 2).
           const unsigned spread = (a.edge_mask & 1u) | (a.edge_mask & 2u) << 2 | (a.edge_mask & 4u) << 4;
           const unsigned ekey = (spread * b.edge_mask) & box.ee;
-          for (std::size_t k = 0; k < 16; ++k) ee_subs[nee + k] = static_cast<std::uint16_t>(base | kEdgePairs.codes[ekey][k]);
-          nee += kEdgePairs.count[ekey];
+          for (std::size_t k = 0; k < 16; ++k) ee_subs[nee + k] = static_cast<std::uint16_t>(base | kEdgeEdge.codes[ekey][k]);
+          nee += kEdgeEdge.count[ekey];
         }
       }
       if (kinds.vf) {

@@ -53,11 +53,12 @@ struct KeyedList {
 /// The gather is bound by memory traffic (cloth-ball's 550 k contacts are 38 MB): the keys come
 /// with the records, so that the records are read once here, by the copy (reading them for
 /// their keys was 4.1 ms of 14 on cloth-ball, on one thread or two alike), and the counting
-/// reads the keys where they are instead of a list of (key, address) items made first. (Copying each record as its item is scattered, so
-/// that the records are read in the order they lie, was measured slower on cloth-ball: 25
-/// against 18 ms on one thread. The writes are then the scattered accesses, and fetching them
-/// ahead did not help; non-temporal stores for the copy changed nothing.) Fewer records than
-/// keys / 8 are sorted by key instead of counted: counting would cost more, over every key.
+/// reads the keys where they are instead of a list of (key, address) items made first.
+/// (Copying each record as its item is scattered, so that the records are read in the order
+/// they lie, was measured slower on cloth-ball: 25 against 18 ms on one thread. The writes are
+/// then the scattered accesses, and fetching them ahead did not help; non-temporal stores for
+/// the copy changed nothing.) Fewer records than keys / 8 are sorted by key instead of counted:
+/// counting would cost more, over every key.
 template <class T>
 void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, Index keys, int threads,
                    GatherScratch& scratch) {
