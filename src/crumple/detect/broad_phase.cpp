@@ -147,6 +147,13 @@ float coarse_pad(Scalar pad, Scalar extent) {
   return f;
 }
 
+/// c rounded to float, for the float-lane box tests; beyond the float range clamped to it (the
+/// tests are then off: `coarse_pad`'s caller gives infinite pads).
+inline float coarse_coordinate(Scalar c) {
+  constexpr Scalar kMax = std::numeric_limits<float>::max();
+  return static_cast<float>(std::clamp(c, -kMax, kMax));
+}
+
 /// Contacts found by one chunk of work, kept until the frame's set is gathered.
 struct LocalContacts {
   explicit LocalContacts(KeyedContacts&& spare) : keyed(std::move(spare)) {}
@@ -516,14 +523,12 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
 
   const bool proximity = kinds.vf || kinds.ee;
   parallel_for_chunks(nf, threads, 4096, [&](std::size_t begin, std::size_t end) {
-    constexpr Scalar kMax = std::numeric_limits<float>::max();
     for (std::size_t f = begin; f < end; ++f) {
       PackedFace& pf = packed_[f];
       for (std::size_t k = 0; k < 3; ++k) pf.p[k] = narrow::at(x, pf.v[k]);
       if (!proximity) continue;  // the float corners serve the proximity tests only
       for (std::size_t a = 0; a < 3; ++a) {
-        // (Beyond the float range, clamped: the coarse tests are then off.)
-        for (std::size_t k = 0; k < 3; ++k) pf.coarse[a][k] = static_cast<float>(std::clamp(pf.p[k][a], -kMax, kMax));
+        for (std::size_t k = 0; k < 3; ++k) pf.coarse[a][k] = coarse_coordinate(pf.p[k][a]);
         pf.coarse[a][3] = pf.coarse[a][0];
       }
     }
@@ -535,16 +540,6 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   constexpr float kNoPad = std::numeric_limits<float>::infinity();
   const float coarse_half = coarse ? coarse_pad(half, magnitude) : kNoPad;
   const float coarse_full = coarse ? coarse_pad(pad, magnitude) : kNoPad;
-  if (proximity) {
-    coarse_x_.resize(x.size());
-    parallel_for_chunks(x.size(), threads, 8192, [&](std::size_t begin, std::size_t end) {
-      constexpr Scalar kMax = std::numeric_limits<float>::max();
-      for (std::size_t v = begin; v < end; ++v) {
-        for (std::size_t a = 0; a < 3; ++a) coarse_x_[v][a] = static_cast<float>(std::clamp(x[v][a], -kMax, kMax));
-        coarse_x_[v][3] = 0;
-      }
-    });
-  }
 
   std::mutex mutex;
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
@@ -827,10 +822,20 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // sub-pairs the box rejects, the plane (line) distance of those that the plane (line)
   // rejects, and the kernel's distance, less the pad's rounding margin (pad - h, which covers
   // the kernel's rounding at either frame), of the others.
-  const auto coarse_point = [&](Index v) { return load4(coarse_x_[static_cast<std::size_t>(v)]); };
   const auto orphans_start = std::chrono::steady_clock::now();
-  const bool refresh = (kinds.vf || kinds.ee) && wake_orphan_blocks(x, pad, threads);
+  const bool refresh = proximity && wake_orphan_blocks(x, pad, threads);
   stats_.set("orphan_wake_ms", ms_since(orphans_start));
+  // Off a refresh, the awake blocks' box tests run in float lanes on the positions rounded once.
+  if (proximity && !refresh) {
+    coarse_x_.resize(x.size());
+    parallel_for_chunks(x.size(), threads, 8192, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t v = begin; v < end; ++v) {
+        for (std::size_t a = 0; a < 3; ++a) coarse_x_[v][a] = coarse_coordinate(x[v][a]);
+        coarse_x_[v][3] = 0;
+      }
+    });
+  }
+  const auto coarse_point = [&](Index v) { return load4(coarse_x_[static_cast<std::size_t>(v)]); };
   const Scalar kernel_margin = pad - h;
   constexpr Scalar kInf = std::numeric_limits<Scalar>::infinity();
   // NaN-sticky minimum: a NaN bound keeps its block awake.

@@ -290,7 +290,8 @@ class ExactDetector : public Detector {
     std::uint8_t edge_mask = 0;    ///< bit k: this face owns side k
   };
   std::vector<PackedFace> packed_;
-  /// Per vertex, its position rounded to float (then 0), for the orphans' box tests.
+  /// Per vertex, its position rounded to float (then 0), for the orphans' box tests (updated
+  /// on the frames that do not refresh the orphans' bounds).
   std::vector<std::array<float, 4>> coarse_x_;
 };
 
