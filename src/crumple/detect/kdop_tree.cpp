@@ -84,9 +84,13 @@ using F4 = float __attribute__((vector_size(16)));
 /// instruction per half where SSE is there.
 __attribute__((always_inline)) inline std::uint64_t zero_lanes(const I8& v) {
 #if defined(__SSE__)
-  const auto half = std::bit_cast<std::array<F4, 2>>(v);
-  const auto signs = static_cast<std::uint64_t>(__builtin_ia32_movmskps(half[0])) |
-                     static_cast<std::uint64_t>(__builtin_ia32_movmskps(half[1])) << 4;
+  // The halves by shuffles, in registers: a bit_cast to two F4 went through the stack, and
+  // the AVX2 clone's 32-byte store then 16-byte loads stalled the store forwarding.
+  const F8 f = reinterpret_cast<F8>(v);
+  const F4 lo = __builtin_shufflevector(f, f, 0, 1, 2, 3);
+  const F4 hi = __builtin_shufflevector(f, f, 4, 5, 6, 7);
+  const auto signs = static_cast<std::uint64_t>(__builtin_ia32_movmskps(lo)) |
+                     static_cast<std::uint64_t>(__builtin_ia32_movmskps(hi)) << 4;
   return ~signs & 0xFFu;
 #else
   std::uint64_t m = 0;
@@ -682,8 +686,8 @@ class KdopTree final : public KdopDetector::Tree {
   /// Writes the float k-DOPs of the node's members (faces of a leaf, children otherwise),
   /// `members[0, count)`, into its lanes, eight per group; lanes past `count` are empty.
   void fill_lanes(const Node& node, const FloatDop* members) {
-    const F8 none_lo = F8{} + std::numeric_limits<float>::infinity();
-    const F8 none_hi = F8{} - std::numeric_limits<float>::infinity();
+    const F8 none_lo = std::numeric_limits<float>::infinity() - F8{};
+    const F8 none_hi = -std::numeric_limits<float>::infinity() - F8{};
     for (Index g = 0; g < (node.count + kGroup - 1) / kGroup; ++g) {
       Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
       lanes.lo.fill(none_lo);
@@ -759,33 +763,42 @@ class KdopTree final : public KdopDetector::Tree {
   CRUMPLE_TRAVERSAL void emit_leaf_pair(Index ia, Index ib, std::vector<FacePair>& out) const {
     const Node& a = nodes_[static_cast<std::size_t>(ia)];
     const Node& b = nodes_[static_cast<std::size_t>(ib)];
-    for (std::uint64_t near = overlapping_node(a, ib); near != 0; near &= near - 1) {
+    std::uint64_t near = overlapping_node(a, ib);
+    if (near == 0) return;
+    // b's faces that overlap a's k-DOP: only their lane groups are tested against a's faces.
+    const std::uint64_t near_b = overlapping_node(b, ia);
+    for (; near != 0; near &= near - 1) {
       const Index i = a.first + std::countr_zero(near);
-      for (std::uint64_t m = overlapping_members(b, member(a, i - a.first)) & ~idle_with(ib, i); m != 0; m &= m - 1) {
+      for (std::uint64_t m = overlapping_members(b, member(a, i - a.first), near_b & ~idle_with(ib, i)); m != 0;
+           m &= m - 1) {
         const Index j = b.first + std::countr_zero(m);
         if (candidate(i, j)) emit(i, j, out);
       }
     }
   }
 
-  /// Bit i set: member `first + i` of the node (child or face slot) may overlap the k-DOP f
-  /// (float, conservative; NaN never separates, as in `Kdop::overlaps`). Only the members from
-  /// lane group `from_group` on (members 8 * from_group, ...) are tested; the bits below are 0.
+  /// Bit i set: member `first + i` of the node (child or face slot) is in `only` and may overlap
+  /// the k-DOP f (float, conservative; NaN never separates, as in `Kdop::overlaps`). A lane
+  /// group with no member in `only` is not tested.
   __attribute__((always_inline)) std::uint64_t overlapping_members(const Node& node, const FloatDop& f,
-                                                                   Index from_group = 0) const {
+                                                                   std::uint64_t only = ~std::uint64_t{0}) const {
+    // The empty lanes past `count` overlap nothing but a NaN k-DOP: masked.
+    if (node.count < 64) only &= (std::uint64_t{1} << node.count) - 1;
     std::uint64_t mask = 0;
-    for (Index g = from_group; g < (node.count + kGroup - 1) / kGroup; ++g) {
+    for (Index g = 0; g < (node.count + kGroup - 1) / kGroup; ++g) {
+      if (((only >> (kGroup * g)) & 0xFFu) == 0) continue;
       const Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
       I8 apart{};
       for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
-        const F8 lo = F8{} + f.lo[j];
-        const F8 hi = F8{} + f.hi[j];
+        // Broadcasts: x - 0 is x for every x, so the subtraction folds away (x + 0 would not:
+        // -0 + 0 is +0).
+        const F8 lo = f.lo[j] - F8{};
+        const F8 hi = f.hi[j] - F8{};
         apart |= (lanes.lo[j] > hi) | (lo > lanes.hi[j]);
       }
       mask |= zero_lanes(apart) << (kGroup * g);
     }
-    // The empty lanes past `count` overlap nothing but a NaN k-DOP: masked.
-    return node.count >= 64 ? mask : mask & ((std::uint64_t{1} << node.count) - 1);
+    return mask & only;
   }
   /// Members of `node` that may overlap node q's k-DOP.
   __attribute__((always_inline)) std::uint64_t overlapping_node(const Node& node, Index q) const {
@@ -804,9 +817,12 @@ class KdopTree final : public KdopDetector::Tree {
     if (node.leaf) {
       for (Index i = 0; i + 1 < node.count; ++i) {
         const Index a = node.first + i;
-        // Only the members after i: from the lane group holding member i + 1.
-        const std::uint64_t m0 = (overlapping_members(node, member(node, i), (i + 1) / kGroup) &
-                                  ~leaf_adjacent_[static_cast<std::size_t>(a)] & ~idle_with(n, a)) >>
+        // Only the members after i that are not its neighbours and own a sub-pair with it
+        // (i + 1 < count <= 64).
+        const std::uint64_t later = ~std::uint64_t{0} << (i + 1);
+        const std::uint64_t m0 = overlapping_members(node, member(node, i),
+                                                     later & ~leaf_adjacent_[static_cast<std::size_t>(a)] &
+                                                         ~idle_with(n, a)) >>
                                  (i + 1);
         for (std::uint64_t m = m0; m != 0; m &= m - 1) {
           const Index b = a + 1 + std::countr_zero(m);
