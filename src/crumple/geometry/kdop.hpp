@@ -137,6 +137,14 @@ class Kdop {
     return k;
   }
 
+  /// The k-DOP with these slabs, as given (min_j, max_j along axis j).
+  static Kdop from_slabs(const Slabs& mins, const Slabs& maxs) {
+    Kdop k{Uninitialized{}};
+    k.min_ = mins;
+    k.max_ = maxs;
+    return k;
+  }
+
   /// Smallest k-DOP holding the triangle (a,b,c) (a convex hull: its corners suffice).
   static Kdop from_triangle(const Vec3& a, const Vec3& b, const Vec3& c) {
     Kdop k{Uninitialized{}};
