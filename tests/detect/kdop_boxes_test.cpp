@@ -4,6 +4,11 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstring>
+
+#include "support/meshes.hpp"
+
 namespace crumple {
 namespace {
 
@@ -46,6 +51,45 @@ TEST(KdopBoxes, LevelsCoverTheMeshAndNest) {
   }
   EXPECT_TRUE(d.node_boxes(d.levels()).empty());
   EXPECT_TRUE(d.node_boxes(-1).empty());
+}
+
+// The default 18-DOP's leaves are refitted by a vectorised path, a swept tree's by the generic
+// one; swept with no motion, the generic one gives the same slabs, so every node's box (its
+// x, y and z slabs, bit for bit) must be the same, NaN corners included (both skip them).
+TEST(KdopBoxes, VectorisedLeafRefitMatchesTheGenericOne) {
+  const TriMesh sheet = shapes::lattice(20, 20);
+  for (int variant = 0; variant < 3; ++variant) {
+    SCOPED_TRACE("variant " + std::to_string(variant));
+    Positions x = testing::crumple_lattice(sheet, 0.3, 11 + static_cast<std::uint64_t>(variant));
+    if (variant == 1) {
+      for (Vec3& p : x) p = 1e35 * p + Vec3(1e36, -3e35, 0);  // beyond float range once inflated
+    }
+    if (variant == 2) {
+      x[7].y() = std::nan("");
+      x[30] = Vec3(-0.0, 0.0, -0.0);
+    }
+    KdopParams plain, swept;
+    plain.coherence = swept.coherence = false;
+    plain.leaf = swept.leaf = 16;
+    swept.sweep = true;
+    const Scalar h = 0.02 * (variant == 1 ? 1e35 : 1);
+    KdopDetector fast({.thickness = h, .threads = 1}, plain), generic({.thickness = h, .threads = 1}, swept);
+    fast.set_topology(sheet.topology_ptr());
+    generic.set_topology(sheet.topology_ptr());
+    ContactSet out;
+    fast.update(x, out);
+    generic.update(x, x, out);
+    ASSERT_EQ(fast.levels(), generic.levels());
+    ASSERT_GE(fast.levels(), 3);
+    for (int depth = 0; depth < fast.levels(); ++depth) {
+      const std::vector<Bounds> a = fast.node_boxes(depth), b = generic.node_boxes(depth);
+      ASSERT_EQ(a.size(), b.size());
+      for (std::size_t n = 0; n < a.size(); ++n) {
+        EXPECT_EQ(std::memcmp(&a[n], &b[n], sizeof(Bounds)), 0)
+            << "depth " << depth << " node " << n << ": " << a[n].min.transpose() << " / " << b[n].min.transpose();
+      }
+    }
+  }
 }
 
 }  // namespace
