@@ -55,14 +55,16 @@ TEST(KdopBoxes, LevelsCoverTheMeshAndNest) {
 
 // The default 18-DOP's leaves are refitted by a vectorised path, a swept tree's by the generic
 // one; swept with no motion, the generic one gives the same slabs, so every node's box (its
-// x, y and z slabs, bit for bit) must be the same, NaN corners included (both skip them).
+// x, y and z slabs in double, bit for bit) must be the same, NaN corners included (both skip
+// them). The diagonal slabs and the float lanes are not visible here (they were compared leaf
+// by leaf on the real scenes with a throw-away build).
 TEST(KdopBoxes, VectorisedLeafRefitMatchesTheGenericOne) {
   const TriMesh sheet = shapes::lattice(20, 20);
   for (int variant = 0; variant < 3; ++variant) {
     SCOPED_TRACE("variant " + std::to_string(variant));
     Positions x = testing::crumple_lattice(sheet, 0.3, 11 + static_cast<std::uint64_t>(variant));
     if (variant == 1) {
-      for (Vec3& p : x) p = 1e35 * p + Vec3(1e36, -3e35, 0);  // beyond float range once inflated
+      for (Vec3& p : x) p = 1e35 * p + Vec3(1e36, -3e35, 0);  // large coordinates, far from the origin
     }
     if (variant == 2) {
       x[7].y() = std::nan("");
