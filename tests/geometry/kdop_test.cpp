@@ -13,6 +13,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <type_traits>
 #include <vector>
 
@@ -92,6 +94,39 @@ TYPED_TEST(KdopTest, EmptyIsTheIdentity) {
   e.inflate(1.0);
   e.sweep(Vec3(1, 2, 3));
   EXPECT_TRUE(e.empty());
+}
+
+// from_triangle is from_points of the three corners, bit for bit, also when a corner has a
+// NaN coordinate (skipped on the axes it spoils, as extend skips it; the finite corners stay
+// inside) or every corner is NaN (empty).
+TYPED_TEST(KdopTest, TriangleIsItsCornersEvenWithNaN) {
+  constexpr int K = TypeParam::value;
+  using D = Kdop<K>;
+  const auto same = [](const D& x, const D& y) {
+    for (int j = 0; j < D::kAxes; ++j) {
+      if (std::memcmp(&x.mins()[j], &y.mins()[j], sizeof(Scalar)) != 0 ||
+          std::memcmp(&x.maxs()[j], &y.maxs()[j], sizeof(Scalar)) != 0) {
+        return false;
+      }
+    }
+    return true;
+  };
+  Rng rng("KdopTest.TriangleIsItsCornersEvenWithNaN", 300 + K);
+  const Scalar nan = std::numeric_limits<Scalar>::quiet_NaN();
+  for (int it = 0; it < 500; ++it) {
+    std::vector<Vec3> c = random_points(rng, 3, 1, Vec3::Zero());
+    const int spoilt = it % 4;  // 0-2: that corner gets a NaN coordinate; 3: none
+    if (spoilt < 3) c[static_cast<std::size_t>(spoilt)][it % 3] = nan;
+    const D t = D::from_triangle(c[0], c[1], c[2]);
+    ASSERT_TRUE(same(t, D::from_points(c))) << "iteration " << it;
+    for (int k = 0; k < 3; ++k) {
+      if (k != spoilt) {
+        ASSERT_TRUE(t.contains(c[static_cast<std::size_t>(k)])) << "iteration " << it << " corner " << k;
+      }
+    }
+  }
+  const Vec3 all_nan(nan, nan, nan);
+  EXPECT_TRUE(D::from_triangle(all_nan, all_nan, all_nan).empty());
 }
 
 TYPED_TEST(KdopTest, ContainsItsPointsTightly) {

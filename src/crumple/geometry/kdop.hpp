@@ -145,15 +145,18 @@ class Kdop {
     return k;
   }
 
-  /// Smallest k-DOP holding the triangle (a,b,c) (a convex hull: its corners suffice).
+  /// Smallest k-DOP holding the triangle (a,b,c) (a convex hull: its corners suffice). The same
+  /// slabs as `from_points` of the three, bit for bit: a NaN projection is skipped, as `extend`
+  /// skips it (`lo(u, lo(v, w))` took u alone when v was NaN, and then left out c).
   static Kdop from_triangle(const Vec3& a, const Vec3& b, const Vec3& c) {
     Kdop k{Uninitialized{}};
+    constexpr Scalar inf = std::numeric_limits<Scalar>::infinity();
     for_each_axis([&](auto j) {
       const Scalar u = along<j>(a.x(), a.y(), a.z());
       const Scalar v = along<j>(b.x(), b.y(), b.z());
       const Scalar w = along<j>(c.x(), c.y(), c.z());
-      k.min_[j] = lo(u, lo(v, w));
-      k.max_[j] = hi(u, hi(v, w));
+      k.min_[j] = lo(lo(lo(inf, u), v), w);
+      k.max_[j] = hi(hi(hi(-inf, u), v), w);
     });
     return k;
   }
