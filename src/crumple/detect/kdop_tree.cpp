@@ -99,12 +99,13 @@ __attribute__((always_inline)) inline std::uint64_t zero_lanes(const I8& v) {
 #endif
 }
 
-/// The traversal's recursive functions are compiled twice, with AVX2 (a lane group in one
-/// register) and without, and the CPU picks at load time (GCC's function multiversioning).
+/// The traversal's recursive functions and the refit's loop are compiled twice, with AVX2 (a lane
+/// group in one register) and without, and the CPU picks at load time (GCC's function
+/// multiversioning).
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-#define CRUMPLE_TRAVERSAL __attribute__((target_clones("avx2", "default")))
+#define CRUMPLE_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
 #else
-#define CRUMPLE_TRAVERSAL
+#define CRUMPLE_AVX2_CLONES
 #endif
 
 /// d as a float, by a non-decreasing map (round to nearest inside the float range, infinity
@@ -626,36 +627,40 @@ class KdopTree final : public KdopDetector::Tree {
       const auto leaf_faces = static_cast<std::size_t>(level_leaf_faces_[l]);
       const std::size_t grain = leaf_faces > 0 ? std::max<std::size_t>(1, 2048 * count / leaf_faces) : 1024;
       parallel_for_chunks(count, in.threads, grain, [&](std::size_t begin, std::size_t end) {
-        std::array<FloatDop, 64> faces;  // a leaf's face k-DOPs, for its lanes
-        for (std::size_t i = begin; i < end; ++i) {
-          const std::size_t n = static_cast<std::size_t>(lb) + i;
-          const Node& node = nodes_[n];
-          Dop d;
-          Box mv = Box::empty();
-          if (node.leaf) {
-            d = refit_leaf(node, in, swept, radius, faces.data());
-            fill_lanes(node, faces.data());
-            if (moves) {
-              for (std::size_t k = leaf_verts_[n]; k < leaf_verts_[n + 1]; ++k) {
-                const auto v = static_cast<std::size_t>(verts_[k]);
-                mv.grow(in.positions[v] - cache_ref_[v]);
-              }
-            }
-          } else {
-            for (Index c = node.first; c < node.first + node.count; ++c) d.merge(dops_[static_cast<std::size_t>(c)]);
-            if (moves) {
-              for (Index c = node.first; c < node.first + node.count; ++c) mv.merge(moved_[static_cast<std::size_t>(c)]);
-            }
-            // Its children are refitted: levels go bottom-up.
-            fill_lanes(node, &float_dops_[static_cast<std::size_t>(node.first)]);
-          }
-          dops_[n] = d;
-          if (moves) moved_[n] = mv;
-          float_dops_[n] = float_dop(d);
-        }
+        refit_nodes(static_cast<std::size_t>(lb) + begin, static_cast<std::size_t>(lb) + end, in, swept, radius, moves);
       });
     }
     if (built_quality_ == 0) built_quality_ = std::max(quality(), 1e-300);
+  }
+
+  /// Refits nodes [first, last) of one level, whose children (if any) are refitted.
+  CRUMPLE_AVX2_CLONES void refit_nodes(std::size_t first, std::size_t last, const FrameInput& in, bool swept,
+                                       Scalar radius, bool moves) {
+    std::array<FloatDop, 64> faces;  // a leaf's face k-DOPs, for its lanes
+    for (std::size_t n = first; n < last; ++n) {
+      const Node& node = nodes_[n];
+      Dop d;
+      Box mv = Box::empty();
+      if (node.leaf) {
+        d = refit_leaf(node, in, swept, radius, faces.data());
+        fill_lanes(node, faces.data());
+        if (moves) {
+          for (std::size_t k = leaf_verts_[n]; k < leaf_verts_[n + 1]; ++k) {
+            const auto v = static_cast<std::size_t>(verts_[k]);
+            mv.grow(in.positions[v] - cache_ref_[v]);
+          }
+        }
+      } else {
+        for (Index c = node.first; c < node.first + node.count; ++c) d.merge(dops_[static_cast<std::size_t>(c)]);
+        if (moves) {
+          for (Index c = node.first; c < node.first + node.count; ++c) mv.merge(moved_[static_cast<std::size_t>(c)]);
+        }
+        fill_lanes(node, &float_dops_[static_cast<std::size_t>(node.first)]);
+      }
+      dops_[n] = d;
+      if (moves) moved_[n] = mv;
+      float_dops_[n] = float_dop(d);
+    }
   }
 
   /// Requests the corners of the face four slots after slot s (in this leaf or the next): a
@@ -669,7 +674,8 @@ class KdopTree final : public KdopDetector::Tree {
 
   /// Leaf `node`'s k-DOP, and its faces' float k-DOPs into `faces` (and their k-DOPs at the
   /// current positions into `now_dops_` when swept).
-  Dop refit_leaf(const Node& node, const FrameInput& in, bool swept, Scalar radius, FloatDop* faces) {
+  __attribute__((always_inline)) Dop refit_leaf(const Node& node, const FrameInput& in, bool swept, Scalar radius,
+                                                FloatDop* faces) {
     if constexpr (K == 18) {
       if (!swept) return refit_leaf18(node, in.positions, radius, faces);
     }
@@ -700,7 +706,8 @@ class KdopTree final : public KdopDetector::Tree {
   /// `Kdop::along`, x - y as x + (-y), which IEEE defines it to be; minima and maxima that skip
   /// a NaN corner like `extend`; then `inflate`, `merge`, `to_float`). The generic path's scalar
   /// slabs were most of the refit's time (armadillo, one thread: 1.4 ms for k = 18, 0.4 for k = 6).
-  Dop refit_leaf18(const Node& node, std::span<const Vec3> x, Scalar radius, FloatDop* faces) const
+  __attribute__((always_inline)) Dop refit_leaf18(const Node& node, std::span<const Vec3> x, Scalar radius,
+                                                  FloatDop* faces) const
     requires(K == 18)
   {
     using D2 = double __attribute__((vector_size(16)));
@@ -847,7 +854,7 @@ class KdopTree final : public KdopDetector::Tree {
 
   /// Leaves a and b (node ids); only a's faces that overlap b's k-DOP are tested against b's
   /// faces (adjacent leaves overlap along their shared boundary only).
-  CRUMPLE_TRAVERSAL void emit_leaf_pair(Index ia, Index ib, std::vector<FacePair>& out) const {
+  CRUMPLE_AVX2_CLONES void emit_leaf_pair(Index ia, Index ib, std::vector<FacePair>& out) const {
     const Node& a = nodes_[static_cast<std::size_t>(ia)];
     const Node& b = nodes_[static_cast<std::size_t>(ib)];
     std::uint64_t near = overlapping_node(a, ib);
@@ -895,7 +902,7 @@ class KdopTree final : public KdopDetector::Tree {
   /// Self-test of node n. With kUnits, the first small node or pair of small nodes reached is a
   /// coherence unit (`unit`); inside a unit, and when coherence is off, kUnits is false.
   template <bool kUnits>
-  CRUMPLE_TRAVERSAL void self(Index n, Walk& w) const {
+  CRUMPLE_AVX2_CLONES void self(Index n, Walk& w) const {
     if constexpr (kUnits) {
       if (small_[static_cast<std::size_t>(n)]) return unit(n, n, w);
     }
@@ -929,7 +936,7 @@ class KdopTree final : public KdopDetector::Tree {
 
   /// Nodes a and b, whose k-DOPs may overlap.
   template <bool kUnits>
-  CRUMPLE_TRAVERSAL void pair(Index a, Index b, Walk& w) const {
+  CRUMPLE_AVX2_CLONES void pair(Index a, Index b, Walk& w) const {
     if constexpr (kUnits) {
       if (small_[static_cast<std::size_t>(a)] && small_[static_cast<std::size_t>(b)]) return unit(a, b, w);
     }
@@ -952,7 +959,7 @@ class KdopTree final : public KdopDetector::Tree {
   /// displacements of the unit's vertices since the refresh frame differ by at most the slack,
   /// the refresh frame's candidates of the unit are emitted (none when it had none); otherwise,
   /// and on other frames, it is traversed, and recorded on a refresh frame.
-  CRUMPLE_TRAVERSAL void unit(Index a, Index b, Walk& w) const {
+  CRUMPLE_AVX2_CLONES void unit(Index a, Index b, Walk& w) const {
     const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(std::min(a, b))) << 32) |
                               static_cast<std::uint32_t>(std::max(a, b));
     if (mode_ == Mode::reuse &&
