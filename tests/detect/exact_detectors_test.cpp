@@ -407,6 +407,56 @@ TEST(ExactDetectors, OrphanBoundsHoldAtEveryKindOfRejection) {
   }
 }
 
+// A NaN vertex must not put its orphan blocks to sleep: the wake check measures the motion
+// relative to a block's first vertex, its smallest, here the shared vertex w of two triangles
+// A = (w, a1, a2) and B = (w, b1, b2). On frame 0 (a refresh) B's far edge b1-b2 crosses 4h
+// above A's far edge a1-a2; on frame 1 w is NaN and b1, b2 have come down to 0.5h. The
+// sub-pairs with w have NaN distances and no contact, but a1-a2 against b1-b2 is one, of
+// finite vertices, and its block must be tested. (A motion that skipped the NaN, as a maximum
+// by `<` does, counted the block unmoved, and it slept through the contact.) The static
+// lattice far off keeps the frame from counting as stale, as above.
+TEST(ExactDetectors, OrphanBlocksWakeWhenTheirFirstVertexIsNaN) {
+  const Scalar h = 0.01;
+  const TriMesh far = shapes::lattice(12, 12, 100, 100);
+  const auto at = [&](Scalar z, Scalar w) {
+    Positions x{Vec3(w, w, w), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0.8, 0.6, z), Vec3(0.3, 0.4, z)};
+    for (const Vec3& p : far.positions()) x.push_back(p + Vec3(200, 0, 0));
+    return x;
+  };
+  std::vector<Face> faces{{0, 1, 2}, {0, 3, 4}};
+  for (Face f : far.topology().faces()) faces.push_back({f[0] + 5, f[1] + 5, f[2] + 5});
+  const TriMesh mesh = TriMesh::create(at(4 * h, 0), faces);
+  const std::vector<Positions> frames{at(4 * h, 0), at(0.5 * h, std::nan(""))};
+  const ContactSet want = run("naive", mesh, {}, frames[1], h, ContactKinds::parse("vf,ee"));
+  ASSERT_EQ(want.ee.size(), 1u);
+  EXPECT_EQ(want.ee[0].a, (Edge{1, 2}));
+  EXPECT_EQ(want.ee[0].b, (Edge{3, 4}));
+  expect_sequence_exact(mesh, frames, h, default_specs(), ContactKinds::parse("vf,ee"), {1, 2});
+}
+
+// A face with a NaN corner keeps the contacts of its finite side: two triangles apart, the first
+// with its first corner NaN, whose far edge crosses 0.5h above two sides of the second; and the same with
+// every corner of the first NaN (no contact). Its box (for sap and hash) once started at the
+// NaN corner and stayed NaN, meeting nothing (sap) or refused as too large for the cells
+// (hash).
+TEST(ExactDetectors, FaceWithANaNCornerKeepsItsFiniteSide) {
+  const Scalar h = 0.01, nan = std::nan("");
+  const Positions x{Vec3(nan, nan, nan), Vec3(1, 0, 0.5 * h), Vec3(0, 1, 0.5 * h),
+                    Vec3(0.2, 0.2, 0),   Vec3(0.9, 0.8, 0),   Vec3(0.1, 0.5, 0)};
+  Positions rest = x;  // a mesh is created from finite positions
+  rest[0] = Vec3(0, 0, 0.5 * h);
+  const TriMesh mesh = TriMesh::create(rest, {{0, 1, 2}, {3, 4, 5}});
+  const ContactSet want = run("naive", mesh, {}, x, h, ContactKinds::parse("vf,ee"));
+  ASSERT_EQ(want.ee.size(), 2u);  // a1-a2 crosses two sides of the second triangle
+  EXPECT_EQ(want.ee[0].a, (Edge{1, 2}));
+  EXPECT_EQ(want.ee[1].a, (Edge{1, 2}));
+  expect_sequence_exact(mesh, {x}, h, all_specs(), ContactKinds::parse("vf,ee,tt"), {1, 2});
+  Positions all_nan = x;
+  for (std::size_t i = 0; i < 3; ++i) all_nan[i] = Vec3(nan, nan, nan);
+  EXPECT_EQ(run("naive", mesh, {}, all_nan, h, ContactKinds::parse("vf,ee,tt")).size(), 0u);
+  expect_sequence_exact(mesh, {all_nan}, h, all_specs(), ContactKinds::parse("vf,ee,tt"), {1, 2});
+}
+
 // Temporal coherence of the k-DOP traversal (`coherence=on`, the default): units whose
 // vertices moved by the same vector since the refresh frame reuse its candidates. Two stacks of
 // 6x6 lattices 0.6h apart (contacts inside each stack on every frame): stack A carried rigidly

@@ -25,8 +25,6 @@ double ms_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-Box point_box(const Vec3& p) { return {{p.x(), p.y(), p.z()}, {p.x(), p.y(), p.z()}}; }
-
 void inflate(Box& b, Scalar r) {
   for (int i = 0; i < 3; ++i) {
     b.lo[i] -= r;
@@ -353,9 +351,11 @@ void ExactDetector::face_boxes(const FrameInput& in, bool sweep, std::vector<Box
   parallel_for_chunks(nf, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
     for (std::size_t f = begin; f < end; ++f) {
       const Face& t = topo.face(static_cast<Index>(f));
-      Box b = point_box(narrow::at(in.positions, t[0]));
-      b.grow(narrow::at(in.positions, t[1]));
-      b.grow(narrow::at(in.positions, t[2]));
+      // From the empty box, so that a NaN corner is skipped (`grow`'s minimum and maximum keep
+      // the box's side), as the k-DOPs skip it: a box started at a NaN first corner stayed NaN
+      // and met nothing, losing the contacts of the face's finite side. All corners NaN: empty.
+      Box b = Box::empty();
+      for (Index v : t) b.grow(narrow::at(in.positions, v));
       if (swept) {
         for (Index v : t) b.grow(narrow::at(in.previous, v));
       }
@@ -452,11 +452,15 @@ bool ExactDetector::wake_orphan_blocks(PositionsView x, Scalar pad, int threads)
           const Index* v = bl.verts.data() + bl.begin[b];
           const Index* v_end = bl.verts.data() + bl.begin[b + 1];
           const Vec3 c = x[static_cast<std::size_t>(*v)], c_ref = orphan_ref_[static_cast<std::size_t>(*v)];
+          // A NaN coordinate, now or then, keeps the block awake: NaN-sticky maximum (one by
+          // `<` skips a NaN, and with the first vertex NaN every difference is NaN: the block
+          // counted unmoved while its finite vertices may have closed in).
           Scalar moved2 = 0, extent2 = 0;
           for (; v != v_end; ++v) {
             const Vec3 now = x[static_cast<std::size_t>(*v)] - c;
             const Vec3 then = orphan_ref_[static_cast<std::size_t>(*v)] - c_ref;
-            moved2 = std::max(moved2, (now - then).squaredNorm());
+            const Scalar d2 = (now - then).squaredNorm();
+            moved2 = d2 > moved2 || d2 != d2 ? d2 : moved2;
             extent2 = std::max({extent2, now.squaredNorm(), then.squaredNorm()});
           }
           const Scalar moved = std::sqrt(moved2) * (1 + 1e-12) + 1e-12 * std::sqrt(extent2);

@@ -176,7 +176,8 @@ struct Box {
     return (lo[0] <= p.x()) & (p.x() <= hi[0]) & (lo[1] <= p.y()) & (p.y() <= hi[1]) &
            (lo[2] <= p.z()) & (p.z() <= hi[2]);
   }
-  /// The empty box (lo = +inf, hi = -inf): `grow` and `merge` start from it.
+  /// The empty box (lo = +inf, hi = -inf): `grow` and `merge` start from it, and keep a side as
+  /// it is for a NaN coordinate.
   static Box empty() {
     constexpr Scalar inf = std::numeric_limits<Scalar>::infinity();
     return {{inf, inf, inf}, {-inf, -inf, -inf}};

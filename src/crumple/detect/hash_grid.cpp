@@ -80,8 +80,9 @@ void HashDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
   parallel_for_chunks(nf, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
     bool bad = false;
     for (std::size_t f = begin; f < end; ++f) {
-      std::array<std::int32_t, 6> r{};
-      for (int a = 0; a < 3; ++a) {
+      std::array<std::int32_t, 6> r{0, 0, 0, -1, -1, -1};  // no cell
+      // An empty box (every corner NaN) is in no cell.
+      for (int a = 0; a < 3 && boxes_[f].lo[0] <= boxes_[f].hi[0]; ++a) {
         const Scalar lo = std::floor(boxes_[f].lo[a] * inv);
         const Scalar hi = std::floor(boxes_[f].hi[a] * inv);
         bad |= !(std::fabs(lo) < 1e9 && std::fabs(hi) < 1e9 && hi - lo < 1e6);
