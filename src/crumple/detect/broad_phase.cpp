@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <chrono>
 #include <cmath>
@@ -467,16 +468,31 @@ bool ExactDetector::wake_orphan_blocks(PositionsView x, Scalar pad, int threads)
   struct Count {
     std::size_t woken = 0, awake = 0, blocks = 0;
   };
+  // The check stops once more than a quarter of the blocks it is to look at are woken by the
+  // motion, when that decides the frame whatever the rest hold: stale, every flag then set
+  // awake (`wake_all` below), as on the deforming scenes, where the first frames after a refresh
+  // paid the whole sample (armadillo: 0.5 ms, on one thread at any thread count). That is so for
+  // the whole check, and for a sample of at least 64 blocks (a smaller sample decides at half).
   const auto check = [&](std::size_t stride) {
     std::mutex mutex;
     Count count;
+    for (const OrphanBlocks* set : {&vf_blocks_, &ee_blocks_}) count.blocks += (set->size() + stride - 1) / stride;
+    const bool can_stop = stride == 1 || count.blocks >= 64;
+    const std::size_t deciding = count.blocks / 4 + 1;  // woken blocks that make 4 woken > blocks
+    std::atomic<std::size_t> woken_so_far{0};
+    const auto decided = [&] { return can_stop && woken_so_far.load(std::memory_order_relaxed) >= deciding; };
     for (OrphanBlocks* set : {&vf_blocks_, &ee_blocks_}) {
       OrphanBlocks& bl = *set;
       const std::size_t looked = (bl.size() + stride - 1) / stride;
-      count.blocks += looked;
-      parallel_for_chunks(looked, threads, 256, [&](std::size_t begin, std::size_t end) {
-        std::size_t local = 0, local_awake = 0;
+      if (decided()) break;
+      parallel_for_chunks(looked, threads, stride == 1 ? 256 : 32, [&](std::size_t begin, std::size_t end) {
+        std::size_t local = 0, local_awake = 0, published = 0;
         for (std::size_t b = begin * stride; b < std::min(end * stride, bl.size()); b += stride) {
+          if (b % (16 * stride) == 0) {  // every 16 blocks: publish the woken, stop if decided
+            woken_so_far.fetch_add(local - published, std::memory_order_relaxed);
+            published = local;
+            if (decided()) break;
+          }
           // Translated so that the block's first vertex stays put (distances do not change),
           // every vertex has moved by at most `moved`, so every point of its features too, and
           // no distance has dropped by more than twice that. Rounding: the differences are
@@ -502,6 +518,7 @@ bool ExactDetector::wake_orphan_blocks(PositionsView x, Scalar pad, int threads)
           local += awake & (bl.bound[b] > pad);
           local_awake += awake ? 1u : 0u;
         }
+        woken_so_far.fetch_add(local - published, std::memory_order_relaxed);
         const std::lock_guard lock(mutex);
         count.woken += local;
         count.awake += local_awake;
