@@ -435,26 +435,33 @@ TEST(ExactDetectors, OrphanBlocksWakeWhenTheirFirstVertexIsNaN) {
 }
 
 // A face with a NaN corner keeps the contacts of its finite side: two triangles apart, the first
-// with its first corner NaN, whose far edge crosses 0.5h above two sides of the second; and the same with
-// every corner of the first NaN (no contact). Its box (for sap and hash) once started at the
-// NaN corner and stayed NaN, meeting nothing (sap) or refused as too large for the cells
+// with its first corner NaN, whose far edge crosses 0.5h above two sides of the second; and the
+// same with every corner of the first NaN (no contact). Its box (for sap and hash) once started
+// at the NaN corner and stayed NaN, meeting nothing (sap) or refused as too large for the cells
 // (hash).
 TEST(ExactDetectors, FaceWithANaNCornerKeepsItsFiniteSide) {
-  const Scalar h = 0.01, nan = std::nan("");
-  const Positions x{Vec3(nan, nan, nan), Vec3(1, 0, 0.5 * h), Vec3(0, 1, 0.5 * h),
-                    Vec3(0.2, 0.2, 0),   Vec3(0.9, 0.8, 0),   Vec3(0.1, 0.5, 0)};
-  Positions rest = x;  // a mesh is created from finite positions
-  rest[0] = Vec3(0, 0, 0.5 * h);
-  const TriMesh mesh = TriMesh::create(rest, {{0, 1, 2}, {3, 4, 5}});
-  const ContactSet want = run("naive", mesh, {}, x, h, ContactKinds::parse("vf,ee"));
-  ASSERT_EQ(want.ee.size(), 2u);  // a1-a2 crosses two sides of the second triangle
-  EXPECT_EQ(want.ee[0].a, (Edge{1, 2}));
-  EXPECT_EQ(want.ee[1].a, (Edge{1, 2}));
-  expect_sequence_exact(mesh, {x}, h, all_specs(), ContactKinds::parse("vf,ee,tt"), {1, 2});
-  Positions all_nan = x;
-  for (std::size_t i = 0; i < 3; ++i) all_nan[i] = Vec3(nan, nan, nan);
-  EXPECT_EQ(run("naive", mesh, {}, all_nan, h, ContactKinds::parse("vf,ee,tt")).size(), 0u);
-  expect_sequence_exact(mesh, {all_nan}, h, all_specs(), ContactKinds::parse("vf,ee,tt"), {1, 2});
+  // At unit scale, and far from it (hash's cells come from the mean edge length: a NaN one made
+  // them size 1, too small for this scale).
+  for (const Scalar scale : {1.0, 1e7}) {
+    SCOPED_TRACE("scale " + std::to_string(scale));
+    const Scalar h = 0.01 * scale, nan = std::nan("");
+    Positions x{Vec3(nan, nan, nan), Vec3(1, 0, 0.005), Vec3(0, 1, 0.005),
+                Vec3(0.2, 0.2, 0),   Vec3(0.9, 0.8, 0), Vec3(0.1, 0.5, 0)};
+    for (Vec3& p : x) p *= scale;
+    Positions rest = x;  // a mesh is created from finite positions
+    rest[0] = Vec3(0, 0, 0.005 * scale);
+    const TriMesh mesh = TriMesh::create(rest, {{0, 1, 2}, {3, 4, 5}});
+    const ContactSet want = run("naive", mesh, {}, x, h, ContactKinds::parse("vf,ee"));
+    ASSERT_EQ(want.ee.size(), 2u);  // a1-a2 crosses two sides of the second triangle
+    EXPECT_EQ(want.ee[0].a, (Edge{1, 2}));
+    EXPECT_EQ(want.ee[1].a, (Edge{1, 2}));
+    expect_sequence_exact(mesh, {x}, h, all_specs(), ContactKinds::parse("vf,ee,tt"), {1, 2});
+    if (HasFatalFailure()) return;
+    Positions all_nan = x;
+    for (std::size_t i = 0; i < 3; ++i) all_nan[i] = Vec3(nan, nan, nan);
+    EXPECT_EQ(run("naive", mesh, {}, all_nan, h, ContactKinds::parse("vf,ee,tt")).size(), 0u);
+    expect_sequence_exact(mesh, {all_nan}, h, all_specs(), ContactKinds::parse("vf,ee,tt"), {1, 2});
+  }
 }
 
 // Temporal coherence of the k-DOP traversal (`coherence=on`, the default): units whose
