@@ -181,6 +181,19 @@ TEST(Mesh, BoundsAndEdgeLengths) {
   const EdgeLengthStats s = edge_length_stats(m.topology(), m.positions());
   EXPECT_DOUBLE_EQ(s.min, 1.0);
   EXPECT_DOUBLE_EQ(s.max, std::sqrt(2.0));
+  // Edges of non-finite length are left out (hash's cell size is this mean).
+  Positions x = m.positions();
+  x[0] = Vec3(std::nan(""), 0, 0);
+  const EdgeLengthStats f = edge_length_stats(m.topology(), x);
+  EXPECT_DOUBLE_EQ(f.min, 1.0);
+  EXPECT_DOUBLE_EQ(f.max, std::sqrt(2.0));
+  EXPECT_TRUE(std::isfinite(f.mean));
+  EXPECT_GT(f.mean, 1.0);
+  for (Vec3& p : x) p = Vec3(std::nan(""), 0, 0);
+  const EdgeLengthStats none = edge_length_stats(m.topology(), x);
+  EXPECT_EQ(none.min, 0.0);
+  EXPECT_EQ(none.mean, 0.0);
+  EXPECT_EQ(none.max, 0.0);
 }
 
 }  // namespace

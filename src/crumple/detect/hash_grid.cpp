@@ -69,18 +69,9 @@ void HashDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
   const auto t0 = std::chrono::steady_clock::now();
   face_boxes(in, false, boxes_);
   if (cell_size_ == 0) {
-    // The mean length of the finite edges: one NaN or infinite vertex made the mean NaN or
-    // infinite, and the cells (then of size 1, or infinite) unrelated to the mesh's scale.
-    Scalar sum = 0;
-    std::size_t finite = 0;
-    for (const Edge& e : topo.edges()) {
-      const Scalar len = (in.positions[static_cast<std::size_t>(e[1])] - in.positions[static_cast<std::size_t>(e[0])]).norm();
-      if (std::isfinite(len)) {
-        sum += len;
-        ++finite;
-      }
-    }
-    const Scalar mean = finite > 0 ? sum / static_cast<Scalar>(finite) : 0;
+    // Of the finite edges: one NaN vertex made the mean NaN, and the cells size 1 whatever the
+    // mesh's scale.
+    const Scalar mean = edge_length_stats(topo, in.positions).mean;
     cell_size_ = params_.cell > 0 ? params_.cell * mean : std::max(mean, 4 * in.radius);
     if (!(cell_size_ > 0)) cell_size_ = 1;
   }

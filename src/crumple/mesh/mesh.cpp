@@ -201,16 +201,19 @@ Bounds compute_bounds(PositionsView positions) {
 
 EdgeLengthStats edge_length_stats(const Topology& topology, PositionsView positions) {
   EdgeLengthStats out;
-  if (topology.num_edges() == 0) return out;
-  out.min = std::numeric_limits<Scalar>::infinity();
   Scalar sum = 0;
+  std::size_t finite = 0;
+  out.min = std::numeric_limits<Scalar>::infinity();
   for (const Edge& e : topology.edges()) {
     const Scalar len = (positions[static_cast<std::size_t>(e[1])] - positions[static_cast<std::size_t>(e[0])]).norm();
+    if (!std::isfinite(len)) continue;
     out.min = std::min(out.min, len);
     out.max = std::max(out.max, len);
     sum += len;
+    ++finite;
   }
-  out.mean = sum / topology.num_edges();
+  if (finite == 0) return {};
+  out.mean = sum / static_cast<Scalar>(finite);
   return out;
 }
 

@@ -152,7 +152,8 @@ struct EdgeLengthStats {
   Scalar mean = 0;
   Scalar max = 0;
 };
-/// Min, mean and max edge length (all zero for a mesh without edges).
+/// Min, mean and max length of the edges of finite length (a NaN or infinite vertex would make
+/// the mean NaN or infinite, unrelated to the mesh's scale); all zero when there is none.
 EdgeLengthStats edge_length_stats(const Topology& topology, PositionsView positions);
 
 /// Number of faces whose area is at most `1e-14 * (longest side)^2` (degenerate slivers).
