@@ -553,6 +553,44 @@ TEST(ExactDetectors, KdopCoherenceReusesOnlyWhatCannotHaveMoved) {
   EXPECT_GT(across, 0u) << "the stacks meet on reuse frames";
 }
 
+// A frame with a non-finite coordinate is traversed, never served from the recorded units, and
+// the next finite frame records afresh: the displacement boxes that decide a reuse skip NaN (as
+// `Box::grow` does), so they could not be trusted to cover it. A stack of four lattices 0.6h
+// apart, carried down rigidly by 0.01h a frame (every unit reusable), with one vertex NaN on
+// frame 4; exact on every frame, and the coherence mode per frame is record, reuse x3, off
+// (NaN), record, reuse.
+TEST(ExactDetectors, KdopCoherenceTraversesAFrameWithANaN) {
+  const Scalar h = 0.02;
+  const TriMesh piece = shapes::lattice(6, 6);
+  const auto nv = static_cast<Index>(piece.positions().size());
+  std::vector<Face> faces;
+  for (Index layer = 0; layer < 4; ++layer) {
+    for (Face f : piece.topology().faces()) faces.push_back({f[0] + layer * nv, f[1] + layer * nv, f[2] + layer * nv});
+  }
+  const auto frame = [&](int k) {
+    Positions x;
+    for (int layer = 0; layer < 4; ++layer) {
+      for (const Vec3& p : piece.positions()) x.push_back(p + Vec3(0, 0, layer * 0.6 * h - 0.01 * h * k));
+    }
+    if (k == 4) x[7] = Vec3(std::nan(""), 0, 0);
+    return x;
+  };
+  const TriMesh mesh = TriMesh::create(frame(0), faces);
+  std::vector<Positions> frames;
+  for (int k = 0; k <= 6; ++k) frames.push_back(frame(k));
+  EXPECT_GT(expect_sequence_exact(mesh, frames, h, {"kdop", "kdop:arity=2,leaf=8"}, ContactKinds::parse("vf,ee"), {1, 2}),
+            100u);
+  auto d = make("kdop:leaf=8", h, ContactKinds::parse("vf,ee"), 1);
+  d->set_topology(mesh.topology_ptr());
+  std::vector<double> modes;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    ContactSet got;
+    d->update(i == 0 ? PositionsView{} : PositionsView(frames[i - 1]), frames[i], got);
+    modes.push_back(d->stats().get("coherence"));
+  }
+  EXPECT_EQ(modes, (std::vector<double>{1, 2, 2, 2, 0, 1, 2}));
+}
+
 TEST(ExactDetectors, KdopRebuildsWhenQualityDegrades) {
   const TriMesh lattice = shapes::lattice(24, 24);
   const auto frames = blend(lattice.positions(), testing::crumple_lattice(lattice, 0.3, 5), 4);
