@@ -168,6 +168,12 @@ std::size_t orphan_vertex_face_contacts(const Topology& topo, const ContactSet& 
   return n;
 }
 
+/// Appends the faces of `topo` to `faces`, their vertex ids shifted by `offset` (one more copy
+/// of a piece in a mesh made of several).
+void append_faces(std::vector<Face>& faces, const Topology& topo, Index offset) {
+  for (Face f : topo.faces()) faces.push_back({f[0] + offset, f[1] + offset, f[2] + offset});
+}
+
 std::vector<Positions> blend(PositionsView a, PositionsView b, int steps) {
   std::vector<Positions> out;
   for (int s = 0; s <= steps; ++s) {
@@ -297,7 +303,7 @@ TEST(ExactDetectors, OrphanWakeSampleWakesEveryBlock) {
   std::vector<Face> faces(fine.topology().faces().begin(), fine.topology().faces().end());
   const Index base = static_cast<Index>(fine.positions().size());
   const Index fine_faces = fine.topology().num_faces(), fine_edges = fine.topology().num_edges();
-  for (Face f : coarse.topology().faces()) faces.push_back({f[0] + base, f[1] + base, f[2] + base});
+  append_faces(faces, coarse.topology(), base);
   const TriMesh mesh = TriMesh::create(frame(0), faces);
   const double fold = std::numbers::pi * 179.5 / 180;
   const std::vector<Positions> frames{frame(0), frame(0), frame(fold)};
@@ -389,7 +395,7 @@ TEST(ExactDetectors, OrphanBoundsHoldAtEveryKindOfRejection) {
       return x;
     };
     std::vector<Face> faces{{0, 1, 2}, {0, 3, 4}};
-    for (Face f : far.topology().faces()) faces.push_back({f[0] + 5, f[1] + 5, f[2] + 5});
+    append_faces(faces, far.topology(), 5);
     const TriMesh mesh = TriMesh::create(at(0), faces);
     const std::vector<Positions> closing{at(4 * h), at(0.5 * h)};
     const std::size_t n = expect_sequence_exact(mesh, closing, h, default_specs(), ContactKinds::parse("vf,ee"), {1, 2});
@@ -424,7 +430,7 @@ TEST(ExactDetectors, OrphanBlocksWakeWhenTheirFirstVertexIsNaN) {
     return x;
   };
   std::vector<Face> faces{{0, 1, 2}, {0, 3, 4}};
-  for (Face f : far.topology().faces()) faces.push_back({f[0] + 5, f[1] + 5, f[2] + 5});
+  append_faces(faces, far.topology(), 5);
   const TriMesh mesh = TriMesh::create(at(4 * h, 0), faces);
   const std::vector<Positions> frames{at(4 * h, 0), at(0.5 * h, std::nan(""))};
   const ContactSet want = run("naive", mesh, {}, frames[1], h, ContactKinds::parse("vf,ee"));
@@ -506,12 +512,7 @@ TEST(ExactDetectors, KdopCoherenceReusesOnlyWhatCannotHaveMoved) {
   };
   std::vector<Face> faces;
   const auto nv = static_cast<Index>(piece.positions().size());
-  for (std::size_t l = 0; l < origin.size(); ++l) {
-    for (Face f : piece.topology().faces()) {
-      const Index o = static_cast<Index>(l) * nv;
-      faces.push_back({f[0] + o, f[1] + o, f[2] + o});
-    }
-  }
+  for (std::size_t l = 0; l < origin.size(); ++l) append_faces(faces, piece.topology(), static_cast<Index>(l) * nv);
   const TriMesh mesh = TriMesh::create(frame(0), faces);
   std::vector<Positions> frames;
   for (int k = 0; k <= 12; ++k) frames.push_back(frame(k));
@@ -564,9 +565,7 @@ TEST(ExactDetectors, KdopCoherenceTraversesAFrameWithANaN) {
   const TriMesh piece = shapes::lattice(6, 6);
   const auto nv = static_cast<Index>(piece.positions().size());
   std::vector<Face> faces;
-  for (Index layer = 0; layer < 4; ++layer) {
-    for (Face f : piece.topology().faces()) faces.push_back({f[0] + layer * nv, f[1] + layer * nv, f[2] + layer * nv});
-  }
+  for (Index layer = 0; layer < 4; ++layer) append_faces(faces, piece.topology(), layer * nv);
   const auto frame = [&](int k) {
     Positions x;
     for (int layer = 0; layer < 4; ++layer) {
