@@ -23,10 +23,15 @@
 // millions of contacts). Each line: scene, frame file, relative thickness (of the first
 // frame's diagonal), VF and EE counts, and the FNV-1a 64 hash of the `write_contacts` text
 // (pairs and 17-digit distances: equal hashes mean identical pairs and bit-identical
-// distances). Regenerate whenever the distance kernels change.
+// distances). Regenerate whenever the distance kernels change. Each frame's lines are appended
+// atomically; the timing tables are written atomically at the end. `--help` lists the options,
+// which are all checked before any scene is loaded.
+#include <crumple/core/atomic_file.hpp>
 #include <crumple/core/json.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/io/mesh_io.hpp>
+
+#include <CLI/CLI.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -43,6 +48,7 @@
 #include <vector>
 
 #include <time.h>
+#include <unistd.h>
 
 namespace {
 
@@ -102,11 +108,14 @@ ContactSet run_once(const std::string& spec, const TriMesh& mesh, PositionsView 
 
 int reference(const std::string& data, const std::string& out_path, int threads,
               const std::vector<std::string>& only, bool with_large) {
-  std::ofstream out(out_path, std::ios::app);
-  if (!out) {
-    std::cerr << "cannot write " << out_path << "\n";
-    return 1;
-  }
+  // Each frame's lines are appended atomically (the file rewritten whole, then renamed over the
+  // old one): an interrupted run leaves the lines of the frames it finished, never half a line.
+  const auto append = [&out_path](const std::string& lines) {
+    std::string text;
+    if (std::ifstream in(out_path); in) text.assign(std::istreambuf_iterator<char>(in), {});
+    if (!text.empty() && text.back() != '\n') text += '\n';
+    write_file_atomically(out_path, [&](std::ostream& o) { o << text << lines; });
+  };
   for (const Scene& s : kScenes) {
     if (!only.empty() && std::find(only.begin(), only.end(), s.name) == only.end()) continue;
     const TriMesh m0 = io::read_mesh(data + "/" + s.frame0);
@@ -120,9 +129,8 @@ int reference(const std::string& data, const std::string& out_path, int threads,
         char hash[32];
         std::snprintf(hash, sizeof hash, "%016llx",
                       static_cast<unsigned long long>(fnv1a(contacts_text(small))));
-        out << s.name << " " << base_name(file) << " 0.001 " << small.vf.size() << " "
-            << small.ee.size() << " " << hash << "\n";
-        out.flush();
+        append(std::string(s.name) + " " + base_name(file) + " 0.001 " + std::to_string(small.vf.size()) + " " +
+               std::to_string(small.ee.size()) + " " + hash + "\n");
         std::cerr << s.name << " " << base_name(file) << " done\n";
         continue;
       }
@@ -140,15 +148,16 @@ int reference(const std::string& data, const std::string& out_path, int threads,
       if (ambiguous) small = run_once("naive", m0, {}, m.positions(), h, threads);
       const double s_taken =
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      std::string lines;
       for (const auto& [rel, set] : {std::pair<const char*, const ContactSet*>{"0.001", &small},
                                      std::pair<const char*, const ContactSet*>{"0.01", &big}}) {
         char hash[32];
         std::snprintf(hash, sizeof hash, "%016llx",
                       static_cast<unsigned long long>(fnv1a(contacts_text(*set))));
-        out << s.name << " " << base_name(file) << " " << rel << " " << set->vf.size() << " "
-            << set->ee.size() << " " << hash << "\n";
+        lines += std::string(s.name) + " " + base_name(file) + " " + rel + " " + std::to_string(set->vf.size()) +
+                 " " + std::to_string(set->ee.size()) + " " + hash + "\n";
       }
-      out.flush();
+      append(lines);
       std::cerr << s.name << " " << base_name(file) << ": " << s_taken << " s\n";
     }
   }
@@ -165,8 +174,16 @@ struct Row {
 int bench(const std::string& data, const std::vector<std::string>& methods, const std::vector<int>& thread_counts, int repeat, bool tt,
           const std::string& json_path, const std::string& md_path, const std::vector<std::string>& only) {
   std::vector<Row> rows;
+  // Progress on stderr: a line per scene, and on a terminal the repetition being run.
+  const bool terminal = ::isatty(2) != 0;
+  const auto wanted = [&only](const Scene& s) {
+    return only.empty() || std::find(only.begin(), only.end(), s.name) != only.end();
+  };
+  const auto scene_count = static_cast<std::size_t>(std::count_if(std::begin(kScenes), std::end(kScenes), wanted));
+  std::size_t scene_number = 0;
   for (const Scene& s : kScenes) {
-    if (!only.empty() && std::find(only.begin(), only.end(), s.name) == only.end()) continue;
+    if (!wanted(s)) continue;
+    std::fprintf(stderr, "[%zu/%zu] %s\n", ++scene_number, scene_count, s.name);
     const TriMesh m0 = io::read_mesh(data + "/" + s.frame0);
     const Positions x1 = io::read_mesh(data + "/" + s.frame1).positions();
     const Positions& x0 = m0.positions();
@@ -196,6 +213,7 @@ int bench(const std::string& data, const std::vector<std::string>& methods, cons
         }
       }
       for (int r = 0; r < repeat; ++r) {
+        if (terminal) std::fprintf(stderr, "\r  %s: repetition %d/%d", qname.c_str(), r + 1, repeat);
         for (Combo& c : combos) {
           Detector& d = *c.detector;
           // From scratch each repetition (tree, orphan bounds): the timed frame then always
@@ -223,6 +241,7 @@ int bench(const std::string& data, const std::vector<std::string>& methods, cons
           c.runs.emplace_back(row.ms, row);
         }
       }
+      if (terminal) std::fprintf(stderr, "\r\033[K");
       for (Combo& c : combos) {
         std::sort(c.runs.begin(), c.runs.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
         const Row& med = c.runs[c.runs.size() / 2].second;
@@ -233,8 +252,7 @@ int bench(const std::string& data, const std::vector<std::string>& methods, cons
       }
     }
   }
-  if (!json_path.empty()) {
-    std::ofstream out(json_path);
+  if (!json_path.empty()) write_file_atomically(json_path, [&](std::ostream& out) {
     out << "[\n";
     for (std::size_t i = 0; i < rows.size(); ++i) {
       const Row& r = rows[i];
@@ -258,9 +276,8 @@ int bench(const std::string& data, const std::vector<std::string>& methods, cons
           << (i + 1 < rows.size() ? ",\n" : "\n");
     }
     out << "]\n";
-  }
-  if (!md_path.empty()) {
-    std::ofstream out(md_path);
+  });
+  if (!md_path.empty()) write_file_atomically(md_path, [&](std::ostream& out) {
     out << "| scene | query | method | threads | total ms | CPU ms | refit ms | traversal ms | narrow ms | sort ms | candidates | VF | EE | TT |\n";
     out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for (const Row& r : rows) {
@@ -270,7 +287,7 @@ int bench(const std::string& data, const std::vector<std::string>& methods, cons
                     r.traversal_ms, r.narrow_ms, r.sort_ms, r.candidates, r.vf, r.ee, r.tt);
       out << line;
     }
-  }
+  });
   return 0;
 }
 
@@ -297,49 +314,84 @@ int main(int argc, char** argv) {
   int repeat = 5, threads = 0;
   bool tt = false, small_only = false;
   std::vector<int> thread_counts{1, 2};
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::cerr << a << " needs a value\n";
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--data") data = next();
-    else if (a == "--reference") ref = next();
-    else if (a == "--json") json = next();
-    else if (a == "--md") md = next();
-    else if (a == "--methods") methods = next();
-    else if (a == "--scenes") scenes = next();
-    else if (a == "--repeat") repeat = std::max(1, std::stoi(next()));
-    else if (a == "--threads") threads = std::stoi(next());
-    else if (a == "--tt") tt = true;
-    else if (a == "--small-only") small_only = true;
-    else if (a == "--thread-counts") {
-      thread_counts.clear();
-      for (const std::string& t : split(next())) thread_counts.push_back(std::stoi(t));
+
+  std::string scene_names;
+  for (const Scene& s : kScenes) scene_names += (scene_names.empty() ? "" : ", ") + std::string(s.name);
+  CLI::App app{
+      "Times the exact detectors on the real scenes: for each scene, the second frame with motion from the\n"
+      "first, h = 1e-3 x the first frame's bounding-box diagonal, every method and thread count; prints\n"
+      "the median run's phases and writes the table as JSON and markdown (docs/benchmarks/exact.md).\n"
+      "With --reference, instead writes the cached naive contact sets the tests compare against.",
+      "exact_bench"};
+  // Checked before any work, so that a typo does not cost a whole run.
+  const auto each = [](std::string what, auto check) {
+    return CLI::Validator(
+        [check, what](std::string& list) -> std::string {
+          if (split(list).empty()) return what + " list is empty";
+          for (const std::string& item : split(list)) {
+            if (std::string error = check(item); !error.empty()) return error;
+          }
+          return {};
+        },
+        "LIST");
+  };
+  const auto method_ok = [](const std::string& m) -> std::string {
+    try {
+      make_detector(MethodSpec::parse(m), {});  // the method's own keys are checked here
+    } catch (const std::exception& e) {
+      return e.what();
     }
-    else {
-      std::cerr << "usage: exact_bench [--data DIR] [--methods 'kdop;hash;sap'] [--scenes 'a;b'] "
-                   "[--repeat N] [--thread-counts '1;2'] [--tt] [--json FILE] [--md FILE]\n"
-                   "       exact_bench --reference FILE [--threads N] [--scenes 'a;b'] [--small-only]\n";
-      return 2;
+    return {};
+  };
+  const auto scene_ok = [scene_names](const std::string& name) -> std::string {
+    for (const Scene& s : kScenes) {
+      if (name == s.name) return {};
     }
-  }
-  for (const std::string& name : split(scenes)) {
-    if (std::none_of(std::begin(kScenes), std::end(kScenes), [&](const Scene& s) { return name == s.name; })) {
-      std::cerr << "error: unknown scene '" << name << "'; scenes:";
-      for (const Scene& s : kScenes) std::cerr << " " << s.name;
-      std::cerr << "\n";
-      return 2;
-    }
+    return "unknown scene '" + name + "' (scenes: " + scene_names + ")";
+  };
+  // An output's folder must exist: found out now rather than after the run.
+  const CLI::Validator writable(
+      [](std::string& path) -> std::string {
+        const std::filesystem::path parent = std::filesystem::absolute(path).parent_path();
+        if (!std::filesystem::is_directory(parent)) return "folder " + parent.string() + " does not exist";
+        if (std::filesystem::is_directory(path)) return path + " is a folder";
+        return {};
+      },
+      "FILE");
+  app.add_option("--data", data, "Folder of the real meshes")->check(CLI::ExistingDirectory)->capture_default_str();
+  auto* methods_opt = app.add_option("--methods", methods, "Detector specs separated by ';' (e.g. 'kdop;kdop:k=14')")
+                          ->check(each("method", method_ok))
+                          ->capture_default_str();
+  app.add_option("--scenes", scenes, "Scenes separated by ';' (default: all: " + scene_names + ")")
+      ->check(each("scene", scene_ok));
+  auto* repeat_opt = app.add_option("--repeat", repeat, "Timed runs per method and thread count (median reported)")
+                         ->check(CLI::Range(1, 1000))
+                         ->capture_default_str();
+  auto* counts_opt = app.add_option("--thread-counts", thread_counts, "Thread counts separated by ';' (0 = all cores)")
+                         ->delimiter(';')
+                         ->check(CLI::Range(0, 1024))
+                         ->capture_default_str();
+  auto* tt_opt = app.add_flag("--tt", tt, "Also time the intersection-only query (non-adjacent intersecting faces)");
+  auto* json_opt = app.add_option("--json", json, "Write the table as JSON to FILE (atomically)")->check(writable);
+  auto* md_opt = app.add_option("--md", md, "Write the table as markdown to FILE (atomically)")->check(writable);
+  auto* ref_opt = app.add_option("--reference", ref,
+                                 "Instead of timing: append each frame's naive reference line(s) to FILE (atomically)")
+                      ->check(writable);
+  app.add_option("--threads", threads, "Threads of the reference runs (0 = all cores)")
+      ->check(CLI::Range(0, 1024))
+      ->needs(ref_opt);
+  app.add_flag("--small-only", small_only, "Reference at h = 1e-3 x diagonal only (not also 1e-2)")->needs(ref_opt);
+  for (auto* timing : {methods_opt, repeat_opt, counts_opt, tt_opt, json_opt, md_opt}) ref_opt->excludes(timing);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
   }
   try {
     if (!ref.empty()) return reference(data, ref, threads, split(scenes), !small_only);
     return bench(data, split(methods), thread_counts, repeat, tt, json, md, split(scenes));
   } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
+    std::cerr << "exact_bench: error: " << e.what() << "\n";
     return 1;
   }
 }

@@ -1,5 +1,6 @@
 #pragma once
-// Runs the `crumple` binary (path in the CRUMPLE_CLI macro) as a user would, for the CLI tests.
+// Runs the `crumple` binary (path in the CRUMPLE_CLI macro), or another program, as a user would,
+// for the CLI tests.
 
 #include <array>
 #include <cstdio>
@@ -15,9 +16,9 @@ struct CliResult {
   std::string out;  ///< stdout and stderr together
 };
 
-/// Runs `crumple ARGS` through the shell and collects its output.
-inline CliResult run_cli(const std::string& args) {
-  const std::string command = std::string(CRUMPLE_CLI) + " " + args + " 2>&1";
+/// Runs `PROGRAM ARGS` through the shell and collects its output.
+inline CliResult run_program(const std::string& program, const std::string& args) {
+  const std::string command = program + " " + args + " 2>&1";
   FILE* pipe = ::popen(command.c_str(), "r");
   if (!pipe) return {-1, ""};
   std::string out;
@@ -26,6 +27,9 @@ inline CliResult run_cli(const std::string& args) {
   const int raw = ::pclose(pipe);
   return {WIFEXITED(raw) ? WEXITSTATUS(raw) : -1, out};
 }
+
+/// Runs `crumple ARGS` through the shell and collects its output.
+inline CliResult run_cli(const std::string& args) { return run_program(CRUMPLE_CLI, args); }
 
 /// A fresh, empty folder under the temporary directory, unique to this process.
 inline std::filesystem::path cli_temp_dir(const std::string& name) {
