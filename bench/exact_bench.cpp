@@ -352,9 +352,13 @@ int main(int argc, char** argv) {
   // An output's folder must exist: found out now rather than after the run.
   const CLI::Validator writable(
       [](std::string& path) -> std::string {
-        const std::filesystem::path parent = std::filesystem::absolute(path).parent_path();
-        if (!std::filesystem::is_directory(parent)) return "folder " + parent.string() + " does not exist";
-        if (std::filesystem::is_directory(path)) return path + " is a folder";
+        if (path.empty()) return "the file name is empty";
+        std::error_code error;
+        const std::filesystem::path parent = std::filesystem::absolute(path, error).parent_path();
+        if (error || !std::filesystem::is_directory(parent, error)) {
+          return "folder " + parent.string() + " does not exist";
+        }
+        if (std::filesystem::is_directory(path, error)) return path + " is a folder";
         return {};
       },
       "FILE");

@@ -55,6 +55,7 @@ TEST(ExactBench, BadCommandLinesFailBeforeAnyWork) {
       {"--methods 'hash:cell=-1'", "cell must be a number >= 0"},
       {"--json " + (dir / "missing" / "x.json").string(), "does not exist"},
       {"--md " + dir.string(), "is a folder"},
+      {"--json ''", "the file name is empty"},
       {"--data " + (dir / "missing").string(), "--data"},
       {"--small-only", "requires --reference"},
       {"--reference " + (dir / "r.txt").string() + " --small-only --scenes cloth-funnel --json " +
