@@ -1,5 +1,6 @@
 // Runs `exact_bench` (bench/exact_bench.cpp, built with the benchmarks) as a user would: its
-// command line is checked before any work, and its tables are written whole or not at all.
+// command line is checked before any work, and its tables replace the old files, leaving nothing
+// else behind.
 #ifdef CRUMPLE_EXACT_BENCH
 
 #include <support/meshes.hpp>
