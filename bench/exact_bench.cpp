@@ -106,6 +106,19 @@ ContactSet run_once(const std::string& spec, const TriMesh& mesh, PositionsView 
   return out;
 }
 
+/// One line of the reference file: scene, frame file, relative thickness, counts and hash.
+std::string reference_line(const char* scene, const std::string& file, const char* rel, const ContactSet& set) {
+  char hash[32];
+  std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(fnv1a(contacts_text(set))));
+  return std::string(scene) + " " + base_name(file) + " " + rel + " " + std::to_string(set.vf.size()) + " " +
+         std::to_string(set.ee.size()) + " " + hash + "\n";
+}
+
+/// Scene s is to be run: `only` (the --scenes list) is empty or names it.
+bool wanted(const std::vector<std::string>& only, const Scene& s) {
+  return only.empty() || std::find(only.begin(), only.end(), s.name) != only.end();
+}
+
 int reference(const std::string& data, const std::string& out_path, int threads,
               const std::vector<std::string>& only, bool with_large) {
   // Each frame's lines are appended atomically (the file rewritten whole, then renamed over the
@@ -117,7 +130,7 @@ int reference(const std::string& data, const std::string& out_path, int threads,
     write_file_atomically(out_path, [&](std::ostream& o) { o << text << lines; });
   };
   for (const Scene& s : kScenes) {
-    if (!only.empty() && std::find(only.begin(), only.end(), s.name) == only.end()) continue;
+    if (!wanted(only, s)) continue;
     const TriMesh m0 = io::read_mesh(data + "/" + s.frame0);
     const Scalar diag = compute_bounds(m0.positions()).diagonal();
     for (const char* file : {s.frame0, s.frame1}) {
@@ -125,12 +138,7 @@ int reference(const std::string& data, const std::string& out_path, int threads,
       const auto start = std::chrono::steady_clock::now();
       const Scalar h = 1e-3 * diag;
       if (!with_large) {  // the smaller thickness only, directly
-        const ContactSet small = run_once("naive", m0, {}, m.positions(), h, threads);
-        char hash[32];
-        std::snprintf(hash, sizeof hash, "%016llx",
-                      static_cast<unsigned long long>(fnv1a(contacts_text(small))));
-        append(std::string(s.name) + " " + base_name(file) + " 0.001 " + std::to_string(small.vf.size()) + " " +
-               std::to_string(small.ee.size()) + " " + hash + "\n");
+        append(reference_line(s.name, file, "0.001", run_once("naive", m0, {}, m.positions(), h, threads)));
         std::cerr << s.name << " " << base_name(file) << " done\n";
         continue;
       }
@@ -148,16 +156,7 @@ int reference(const std::string& data, const std::string& out_path, int threads,
       if (ambiguous) small = run_once("naive", m0, {}, m.positions(), h, threads);
       const double s_taken =
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      std::string lines;
-      for (const auto& [rel, set] : {std::pair<const char*, const ContactSet*>{"0.001", &small},
-                                     std::pair<const char*, const ContactSet*>{"0.01", &big}}) {
-        char hash[32];
-        std::snprintf(hash, sizeof hash, "%016llx",
-                      static_cast<unsigned long long>(fnv1a(contacts_text(*set))));
-        lines += std::string(s.name) + " " + base_name(file) + " " + rel + " " + std::to_string(set->vf.size()) +
-                 " " + std::to_string(set->ee.size()) + " " + hash + "\n";
-      }
-      append(lines);
+      append(reference_line(s.name, file, "0.001", small) + reference_line(s.name, file, "0.01", big));
       std::cerr << s.name << " " << base_name(file) << ": " << s_taken << " s\n";
     }
   }
@@ -176,13 +175,11 @@ int bench(const std::string& data, const std::vector<std::string>& methods, cons
   std::vector<Row> rows;
   // Progress on stderr: a line per scene, and on a terminal the repetition being run.
   const bool terminal = ::isatty(2) != 0;
-  const auto wanted = [&only](const Scene& s) {
-    return only.empty() || std::find(only.begin(), only.end(), s.name) != only.end();
-  };
-  const auto scene_count = static_cast<std::size_t>(std::count_if(std::begin(kScenes), std::end(kScenes), wanted));
+  const auto scene_count = static_cast<std::size_t>(
+      std::count_if(std::begin(kScenes), std::end(kScenes), [&only](const Scene& s) { return wanted(only, s); }));
   std::size_t scene_number = 0;
   for (const Scene& s : kScenes) {
-    if (!wanted(s)) continue;
+    if (!wanted(only, s)) continue;
     std::fprintf(stderr, "[%zu/%zu] %s\n", ++scene_number, scene_count, s.name);
     const TriMesh m0 = io::read_mesh(data + "/" + s.frame0);
     const Positions x1 = io::read_mesh(data + "/" + s.frame1).positions();
@@ -327,8 +324,9 @@ int main(int argc, char** argv) {
   const auto each = [](std::string what, auto check) {
     return CLI::Validator(
         [check, what](std::string& list) -> std::string {
-          if (split(list).empty()) return what + " list is empty";
-          for (const std::string& item : split(list)) {
+          const std::vector<std::string> items = split(list);
+          if (items.empty()) return what + " list is empty";
+          for (const std::string& item : items) {
             if (std::string error = check(item); !error.empty()) return error;
           }
           return {};
