@@ -2,6 +2,7 @@
 #include <crumple/detect/broad_phase.hpp>
 #include <crumple/detect/gather.hpp>
 #include <crumple/detect/narrow_phase.hpp>
+#include <crumple/geometry/separation.hpp>
 #include <crumple/geometry/triangle_intersection.hpp>
 
 #include <algorithm>
@@ -173,6 +174,31 @@ void sort_by_major(std::vector<T>& items, std::size_t majors, const Major& major
   }
   items.swap(out);
 }
+
+#if CRUMPLE_SEPARATION_LANES
+/// Keeps, in order, the codes of list[0, n) that the plane (kLine false) or line (kLine true)
+/// test of their points(code) (`geometry::SeparationPoints`) leaves within pad, four at a time
+/// (`geometry::beyond_x4`); returns their number. Compiled for AVX2: only where the CPU has it.
+template <bool kLine, class Points>
+__attribute__((target("avx2"))) std::size_t sift_separated_x4(std::uint16_t* list, std::size_t n, Scalar pad,
+                                                              const Points& points) {
+  std::size_t kept = 0;
+  for (std::size_t s = 0; s < n; s += 4) {
+    std::array<std::uint16_t, 4> code;
+    std::array<geometry::SeparationPoints, 4> at;
+    for (std::size_t l = 0; l < 4; ++l) {
+      code[l] = list[std::min(s + l, n - 1)];  // past the end, the last code again (not kept)
+      at[l] = points(code[l]);
+    }
+    const unsigned beyond = geometry::beyond_x4<kLine>(at, pad);
+    for (std::size_t l = 0; l < std::min<std::size_t>(4, n - s); ++l) {
+      list[kept] = code[l];
+      kept += (beyond >> l & 1u) ^ 1u;
+    }
+  }
+  return kept;
+}
+#endif
 
 /// Contacts found by one chunk of work, kept until the frame's set is gathered.
 struct LocalContacts {
@@ -632,43 +658,6 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
     ee_tests += local.ee_tests;
     tt_tests += local.tt_tests;
   };
-  // The distance of a point to a plane, or between two lines, is |wn| / |n| for n the plane's
-  // (the lines') normal and w a vector joining them; |wn| <= |w| |e1| |e2| <= `size`, the
-  // product of the L1 norms of w and of the two vectors whose cross product n is.
-  struct Separation {
-    Scalar wn;
-    Vec3 n;
-    Scalar size;
-  };
-  const auto l1 = [](const Vec3& v) { return std::abs(v.x()) + std::abs(v.y()) + std::abs(v.z()); };
-  // |wn| / |n| > pad with a margin for the rounding of wn (1e-13 size, a hundred times its
-  // bound), compared squared: no square root, the comparison's own rounding being far inside
-  // pad's relative margin over h. NaN: false. Branch-free: it sifts lists of sub-pairs of
-  // which an unpredictable part is rejected (see `sift`).
-  const auto beyond = [pad](const Separation& s) {
-    const Scalar clear = std::abs(s.wn) - 1e-13 * s.size;
-    return ((clear > 0) & (clear * clear > pad * pad * s.n.squaredNorm())) != 0;
-  };
-  // A lower bound of |wn| / |n| with the same margin (degenerate n: -inf).
-  const auto separation_bound = [](const Separation& s) {
-    const Scalar nn = s.n.squaredNorm();
-    return nn > 0 ? (std::abs(s.wn) - 1e-13 * s.size) / std::sqrt(nn) * (1 - 1e-12)
-                  : -std::numeric_limits<Scalar>::infinity();
-  };
-  // Vertex p against the plane of face t: dist(p, triangle) >= dist(p, plane) = |(p - a) . n| /
-  // |n| (degenerate n: never rejected).
-  const auto plane = [&l1](const Vec3& p, const PackedFace& t) {
-    const Vec3& a = t.p[0];
-    const Vec3 e1 = t.p[1] - a, e2 = t.p[2] - a, w = p - a;
-    const Vec3 n = e1.cross(e2);
-    return Separation{w.dot(n), n, l1(w) * l1(e1) * l1(e2)};
-  };
-  // dist(segments) >= dist(lines) = |w . (d0 x d1)| / |d0 x d1| (parallel edges: never rejected).
-  const auto line = [&l1](const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
-    const Vec3 d0 = p1 - p0, d1 = q1 - q0, w = q0 - p0;
-    const Vec3 n = d0.cross(d1);
-    return Separation{w.dot(n), n, l1(w) * l1(d0) * l1(d1)};
-  };
   // Vertex v at p against face g, past the cheap rejections: the shared kernel, queued four at
   // a time (the contacts reach local.set.vf at the latest in `merge`), unless the squared
   // distance is wanted.
@@ -746,11 +735,30 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
     }
     return kept;
   };
+  // Sifts list[0, n) by the plane (kLine false) or line (kLine true) test of points(code)
+  // (`geometry::SeparationPoints`): four codes at a time in AVX2 lanes where the CPU has them
+  // (the same verdicts; cloth-ball's narrow phase 9-10% faster, one thread).
+  const bool lanes = geometry::has_avx2();
+  const auto sift_separated = [&]<bool kLine>(std::bool_constant<kLine>, std::uint16_t* list, std::size_t n,
+                                              const auto& points) {
+#if CRUMPLE_SEPARATION_LANES
+    if (lanes) return sift_separated_x4<kLine>(list, n, pad, points);
+#endif
+    return sift(list, n, [&](std::uint16_t code) {
+      const geometry::SeparationPoints q = points(code);
+      return !geometry::beyond(kLine ? geometry::line_separation(*q[0], *q[1], *q[2], *q[3])
+                                     : geometry::plane_separation(*q[0], *q[1], *q[2], *q[3]),
+                               pad);
+    });
+  };
   // The cheap rejections of a list of vertex-face sub-pairs, in order, leaving those the kernel
   // must test: point(code) gives the vertex's position and face(code) the face.
   const auto sift_vertex_face = [&](std::uint16_t* list, std::size_t n, const auto& point, const auto& face) {
     n = sift(list, n, [&](std::uint16_t code) { return in_box(point(code), face(code)); });
-    return sift(list, n, [&](std::uint16_t code) { return !beyond(plane(point(code), face(code))); });
+    return sift_separated(std::false_type{}, list, n, [&](std::uint16_t code) {
+      const PackedFace& t = face(code);
+      return geometry::SeparationPoints{&point(code), &t.p[0], &t.p[1], &t.p[2]};
+    });
   };
   // Sub-pairs are taken in blocks: the block's sub-pairs are listed, then the rejections sift
   // the list, and the exact kernels run over what is left.
@@ -821,9 +829,9 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
           return code & 4u ? std::pair<const PackedFace*, const PackedFace*>{b, a}
                            : std::pair<const PackedFace*, const PackedFace*>{a, b};
         };
-        nvf = sift(vf_subs.data(), nvf, [&](std::uint16_t code) {
+        nvf = sift_separated(std::false_type{}, vf_subs.data(), nvf, [&](std::uint16_t code) {
           const auto [from, t] = sides(code);
-          return !beyond(plane(from->p[code & 3u], *t));
+          return geometry::SeparationPoints{&from->p[code & 3u], &t->p[0], &t->p[1], &t->p[2]};
         });
         for (std::size_t s = 0; s < nvf; ++s) {
           const auto [from, t] = sides(vf_subs[s]);
@@ -837,10 +845,10 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
           const std::size_t i2 = code >> 2 & 3u, j = code & 3u;
           return std::array<std::size_t, 4>{i2, kNext[i2], j, kNext[j]};
         };
-        nee = sift(ee_subs.data(), nee, [&](std::uint16_t code) {
+        nee = sift_separated(std::true_type{}, ee_subs.data(), nee, [&](std::uint16_t code) {
           const auto& [a, b] = block[code >> 4];
           const auto k = ends(code);
-          return !beyond(line(a->p[k[0]], a->p[k[1]], b->p[k[2]], b->p[k[3]]));
+          return geometry::SeparationPoints{&a->p[k[0]], &a->p[k[1]], &b->p[k[2]], &b->p[k[3]]};
         });
         for (std::size_t s = 0; s < nee; ++s) {
           const auto& [a, b] = block[ee_subs[s] >> 4];
@@ -978,14 +986,21 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
               kept += lanes3((lo <= p) & (p <= hi)) == 7u ? 1u : 0u;
             }
           }
-          n = sift(list.data(), kept, [&](std::uint16_t code) { return !beyond(plane(point(i + code), face(i + code))); });
+          n = sift_separated(std::false_type{}, list.data(), kept, [&](std::uint16_t code) {
+            const PackedFace& t = face(i + code);
+            return geometry::SeparationPoints{&point(i + code), &t.p[0], &t.p[1], &t.p[2]};
+          });
           for (std::size_t s = 0; s < n; ++s) vf_test(i + list[s], local);
         },
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
           return refresh_block(
               i, n, local,
               [&](std::uint16_t k) { return vertex_box_gap(point(i + k), face(i + k)); },
-              [&](std::uint16_t k) { return separation_bound(plane(point(i + k), face(i + k))); }, vf_test);
+              [&](std::uint16_t k) {
+                const PackedFace& t = face(i + k);
+                return geometry::separation_bound(geometry::plane_separation(point(i + k), t.p[0], t.p[1], t.p[2]));
+              },
+              vf_test);
         });
     // 3. Isolated vertices against every face.
     parallel_for_chunks(isolated_.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
@@ -1040,10 +1055,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
               kept += lanes3((alo <= max4(b0, b1) + coarse_half) & (min4(b0, b1) - coarse_half <= ahi)) == 7u ? 1u : 0u;
             }
           }
-          n = sift(list.data(), kept, [&](std::uint16_t code) {
-            const auto p = ends(i + code);
-            return !beyond(line(*p[0], *p[1], *p[2], *p[3]));
-          });
+          n = sift_separated(std::true_type{}, list.data(), kept, [&](std::uint16_t code) { return ends(i + code); });
           for (std::size_t s = 0; s < n; ++s) ee_test(i + list[s], local);
         },
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
@@ -1055,7 +1067,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
               },
               [&](std::uint16_t k) {
                 const auto p = ends(i + k);
-                return separation_bound(line(*p[0], *p[1], *p[2], *p[3]));
+                return geometry::separation_bound(geometry::line_separation(*p[0], *p[1], *p[2], *p[3]));
               },
               ee_test);
         });
