@@ -738,7 +738,9 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // Sifts list[0, n) by the plane (kLine false) or line (kLine true) test of points(code)
   // (`geometry::SeparationPoints`): four codes at a time in AVX2 lanes where the CPU has them
   // (the same verdicts; cloth-ball's narrow phase 9-10% faster, one thread).
+#if CRUMPLE_SEPARATION_LANES
   const bool lanes = geometry::has_avx2();
+#endif
   const auto sift_separated = [&]<bool kLine>(std::bool_constant<kLine>, std::uint16_t* list, std::size_t n,
                                               const auto& points) {
 #if CRUMPLE_SEPARATION_LANES
