@@ -84,6 +84,32 @@ TEST(Gather, SortedPathMatchesASort) {
   for (int threads : {1, 2}) expect_gathered(make_parts(rng, 1 << 20, 5000, 9), 1 << 20, threads);
 }
 
+TEST(Gather, GroupsOfEverySizeAndSecondCriteriaOverTheirWholeRange) {
+  // Groups of 1 to 140 records under one first criterion (counted four at a time, with every
+  // remainder, and sorted past 128), in scrambled order, second criteria up to 2^31 - 1; more
+  // records than keys / 8, so that they are counted.
+  std::mt19937 rng(5104);
+  std::vector<Record> all;
+  const Index keys = 150;
+  std::uniform_int_distribution<Index> any(0, 0x7FFFFFFF);
+  std::size_t drawn = 0;
+  for (Index f = 0; f < keys - 10; ++f) {
+    // Group f: f + 1 criteria (0 and 2^31 - 1 among them), some then left out.
+    std::set<Index> seconds{0, 0x7FFFFFFF};
+    while (static_cast<Index>(seconds.size()) < f + 1) {
+      seconds.insert(f % 2 == 0 ? any(rng) : 0x7FFFFFFF - any(rng) % 300);
+    }
+    for (Index s : seconds) {
+      if (drawn++ % 7 != 3 || f < 2) all.push_back({f, s, static_cast<double>(all.size())});
+    }
+  }
+  ASSERT_GT(all.size(), 8000u);
+  std::shuffle(all.begin(), all.end(), rng);
+  std::vector<std::vector<Record>> lists(5);
+  for (const Record& r : all) lists[rng() % lists.size()].push_back(r);
+  for (int threads : {1, 2}) expect_gathered(lists, keys, threads);
+}
+
 TEST(Gather, EmptyAndSingle) {
   expect_gathered({}, 10, 2);
   expect_gathered({{}, {}}, 10, 2);
