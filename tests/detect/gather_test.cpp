@@ -85,16 +85,16 @@ TEST(Gather, SortedPathMatchesASort) {
 }
 
 TEST(Gather, GroupsOfEverySizeAndSecondCriteriaOverTheirWholeRange) {
-  // Groups of 1 to 140 records under one first criterion (counted four at a time, with every
-  // remainder, and sorted past 128), in scrambled order, second criteria up to 2^31 - 1; more
-  // records than keys / 8, so that they are counted.
+  // Groups of up to 140 records under one first criterion (ranked four at a time, with every
+  // remainder of four, and sorted past 128), in scrambled order, second criteria up to
+  // 2^31 - 1; more records than keys / 8, so that they are counted.
   std::mt19937 rng(5104);
   std::vector<Record> all;
   const Index keys = 150;
   std::uniform_int_distribution<Index> any(0, 0x7FFFFFFF);
   std::size_t drawn = 0;
   for (Index f = 0; f < keys - 10; ++f) {
-    // Group f: f + 1 criteria (0 and 2^31 - 1 among them), some then left out.
+    // Group f: max(f + 1, 2) criteria (0 and 2^31 - 1 among them), a seventh then left out.
     std::set<Index> seconds{0, 0x7FFFFFFF};
     while (static_cast<Index>(seconds.size()) < f + 1) {
       seconds.insert(f % 2 == 0 ? any(rng) : 0x7FFFFFFF - any(rng) % 300);
