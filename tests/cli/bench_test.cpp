@@ -151,9 +151,8 @@ Csv read_csv(const std::filesystem::path& path) {
 
 // One run of `crumple bench --quick` (tens of seconds under sanitizers), checked part by part.
 struct QuickRun {
-  std::filesystem::path dir = testing::cli_temp_dir("bench");
+  testing::CliTempDir dir{"bench"};
   testing::CliResult result = run_cli("bench --quick --out " + dir.string());
-  ~QuickRun() { std::filesystem::remove_all(dir); }
 };
 
 void expect_every_output(const QuickRun& run) {
@@ -267,7 +266,6 @@ TEST(CliBenchArgs, UnwritableOutputFolderIsAClearError) {
   const auto r = run_cli("bench --quick --sections budget -q --out " + (blocker / "sub").string());
   EXPECT_EQ(r.status, 1) << r.out;
   EXPECT_NE(r.out.find("crumple: error:"), std::string::npos) << r.out;
-  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -25,7 +25,7 @@ using Result = testing::CliResult;
 
 Result run(const std::string& args) { return testing::run_cli(args); }
 
-std::filesystem::path temp_dir(const std::string& name) { return testing::cli_temp_dir(name); }
+testing::CliTempDir temp_dir(const std::string& name) { return testing::cli_temp_dir(name); }
 
 std::string funnel(int frame) {
   return testing::data_path("sample-scalable-ccd/cloth-funnel/frames/" + std::to_string(frame) + ".ply").string();

@@ -54,7 +54,6 @@ TEST(CliCompare, FramesFromFilesAndNaiveAgainstItself) {
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("f4.obj"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("missed 0  false 0  recall 1.0000  min recall 1.0000"), std::string::npos) << r.out;
-  std::filesystem::remove_all(dir);
 }
 
 TEST(CliCompare, BadArgumentsAreOneLineErrors) {
