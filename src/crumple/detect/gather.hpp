@@ -47,14 +47,15 @@ struct KeyedList {
 /// The records are not moved until their place is known: the keys are counted per first
 /// criterion and the records' addresses and second criteria scattered to their first
 /// criterion's places (each thread counting then scattering its own slice of the keys), then
-/// `threads` threads that each own a range of first criteria holding about the same number of
-/// records copy each record to its place, once, reading them ahead. Among a criterion's items
-/// (up to 200 for one edge on cloth-ball, half of its edge-edge contacts in groups of more than
-/// 16), an item's place is the number of them with smaller second criteria, counted four items
-/// at a time in vector lanes over the group's 32-bit criteria, which lie side by side (measured
-/// on cloth-ball's edge-edge contacts, one thread, against one item at a time over 16-byte
-/// (key, address) items and a sort of groups over 16: the copy 11.5-12.6 → 10.3-11.2 ms; a
-/// copy that ignored the order took 7-8 ms); groups over 128 are sorted.
+/// `threads` threads, claiming ranges of first criteria that hold about the same number of
+/// records (four ranges per thread), copy each record to its place, once, reading them ahead.
+/// Among a criterion's items (up to 200 for one edge on cloth-ball, half of its edge-edge
+/// contacts in groups of more than 16), an item's place is the number of them with smaller
+/// second criteria, counted four items at a time in vector lanes over the group's 32-bit
+/// criteria, which lie side by side (measured on cloth-ball's edge-edge contacts, one thread,
+/// against one item at a time over 16-byte (key, address) items and a sort of groups over 16:
+/// the copy 11.5-12.6 → 10.3-11.2 ms; a copy that ignored the order took 7-8 ms); groups over
+/// 128 are sorted.
 ///
 /// The gather is bound by memory traffic (cloth-ball's 550 k contacts are 38 MB): the keys come
 /// with the records, so that the records are read once here, by the copy (reading them for
@@ -113,10 +114,10 @@ void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts,
   }
   // Each slice of the items is counted, then scattered, by one thread; slice s's items of first
   // criterion k go to [cursor, ...) of row s, after those of the slices before.
-  const auto ranges = static_cast<std::size_t>(resolve_threads(threads));
+  const auto workers = static_cast<std::size_t>(resolve_threads(threads));
   // (A few tens of thousands of items: one slice, counted and scattered without starting
   // threads, which costs more than it saves there.)
-  const std::size_t slices = total < (std::size_t{1} << 16) ? 1 : std::min<std::size_t>(ranges, 4);
+  const std::size_t slices = total < (std::size_t{1} << 16) ? 1 : std::min<std::size_t>(workers, 4);
   const auto nk = static_cast<std::size_t>(keys);
   const auto slice = [&](std::size_t s) { return std::pair{total * s / slices, total * (s + 1) / slices}; };
   next.resize(slices * nk);
@@ -149,7 +150,12 @@ void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts,
       });
     }
   });
-  std::vector<std::size_t> bound{0};  // ranges of first criteria holding about total / ranges records each
+  // Ranges of first criteria holding about total / ranges records each, four per thread: the
+  // threads claim them as they go, so that one whose records come slower (from the other core's
+  // cache) does fewer (with one range per thread, one of two threads waited a quarter of the
+  // copy's time on armadillo, a tenth on cloth-ball).
+  const std::size_t ranges = workers == 1 ? 1 : 4 * workers;
+  std::vector<std::size_t> bound{0};
   for (std::size_t r = 1; r < ranges; ++r) {
     const auto it = std::lower_bound(start.begin(), start.end(), total * r / ranges);
     bound.push_back(std::max(bound.back(), static_cast<std::size_t>(it - start.begin())));
