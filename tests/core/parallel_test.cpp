@@ -70,6 +70,17 @@ TEST(ParallelForChunks, CoversEveryIndexOnceInChunksOfAtLeastTheGrain) {
   }
 }
 
+TEST(BalancedGrain, SixteenChunksPerThreadWithinTheBounds) {
+  EXPECT_EQ(balanced_grain(23203, 2, 256, 2048), 23203u / 32);  // the funnel's candidates
+  EXPECT_EQ(balanced_grain(573319, 2, 256, 2048), 2048u);        // cloth-ball's: the largest grain
+  EXPECT_EQ(balanced_grain(1000, 2, 256, 2048), 256u);           // few items: the smallest
+  EXPECT_EQ(balanced_grain(0, 4, 1, 8), 1u);
+  EXPECT_EQ(balanced_grain(23203, 1, 256, 4096), 23203u / 16);
+  EXPECT_EQ(balanced_grain(64000, 4, 1, 100000), 1000u);
+  // 0 threads: every hardware thread.
+  EXPECT_EQ(balanced_grain(1u << 20, 0, 1, 1u << 20), (std::size_t{1} << 20) / (16 * static_cast<std::size_t>(resolve_threads(0))));
+}
+
 TEST(ParallelForChunks, TwoThreadsRunChunksAtOnce) {
   // The first chunk to start waits until a chunk runs on another thread: the loop ends only if
   // two threads work on it at once (a 10 s limit instead of a hang otherwise).

@@ -226,6 +226,11 @@ int resolve_threads(int threads) {
 #endif
 }
 
+std::size_t balanced_grain(std::size_t n, int threads, std::size_t smallest, std::size_t largest) {
+  CRUMPLE_ASSERT(0 < smallest && smallest <= largest);
+  return std::clamp<std::size_t>(n / (16 * static_cast<std::size_t>(resolve_threads(threads))), smallest, largest);
+}
+
 void parallel_for_chunks(std::size_t n, int threads, std::size_t grain, const Body& body) {
   // Read on every call, so that a bad CRUMPLE_PARALLEL is reported by the first loop of any
   // size, serial ones included.

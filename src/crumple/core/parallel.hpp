@@ -30,6 +30,11 @@ int resolve_threads(int threads);
 void parallel_for_chunks(std::size_t n, int threads, std::size_t grain,
                          const std::function<void(std::size_t begin, std::size_t end)>& body);
 
+/// A grain for a loop of n items on `threads` threads that gives each thread at least 16 chunks,
+/// within [smallest, largest]: a loop's last chunk is one thread's alone, so a chunk that is a
+/// large part of a short loop leaves the other threads waiting at its end.
+std::size_t balanced_grain(std::size_t n, int threads, std::size_t smallest, std::size_t largest);
+
 /// Which threads `parallel_for_chunks` runs on.
 enum class ParallelBackend {
   team,  ///< crumple's team: workers spin for `kTeamSpin` after each loop, then sleep

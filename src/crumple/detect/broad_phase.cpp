@@ -601,7 +601,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   const auto narrow_start = std::chrono::steady_clock::now();
 
   const bool proximity = kinds.vf || kinds.ee;
-  parallel_for_chunks(nf, threads, 4096, [&](std::size_t begin, std::size_t end) {
+  parallel_for_chunks(nf, threads, balanced_grain(nf, threads, 512, 4096), [&](std::size_t begin, std::size_t end) {
     for (std::size_t f = begin; f < end; ++f) {
       PackedFace& pf = packed_[f];
       for (std::size_t k = 0; k < 3; ++k) pf.p[k] = narrow::at(x, pf.v[k]);
@@ -781,14 +781,12 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // plane and line tests sift the list. Code: the candidate's place in the block << 4 | the
   // table's code.
   static constexpr std::array<std::size_t, 3> kNext{1, 2, 0};
-  // Chunks of 2,048 candidates, or fewer so that each thread has at least 16: a loop's last
-  // chunk is one thread's alone, and on the funnel a 2,048-candidate chunk was a tenth of the
-  // loop (one thread then waited 0.2 ms of the loop's 1.8 on two; 0.03 with 512-candidate
-  // chunks). Not fewer on the large scenes, where a chunk is a small part of the loop anyway and
-  // each chunk's contacts are one more part for the gather (cloth-ball with 512 was no faster).
-  const std::size_t grain =
-      std::clamp<std::size_t>(total / (16 * static_cast<std::size_t>(resolve_threads(threads))), 256, 2048);
-  parallel_for_chunks(total, threads, grain, [&](std::size_t begin, std::size_t end) {
+  // Chunks of 2,048 candidates, or fewer so that each thread has at least 16 (`balanced_grain`):
+  // on the funnel a 2,048-candidate chunk was a tenth of the loop (one thread then waited 0.2
+  // ms of the loop's 1.8 on two; 0.03 with 512-candidate chunks). Not fewer on the large
+  // scenes, where a chunk is a small part of the loop anyway and each chunk's contacts are one
+  // more part for the gather (cloth-ball with 512 was no faster).
+  parallel_for_chunks(total, threads, balanced_grain(total, threads, 256, 2048), [&](std::size_t begin, std::size_t end) {
     LocalContacts local{spare_sets_.take()};
     std::array<std::array<const PackedFace*, 2>, kBlock> block;
     // Room for a full table row written past the last candidate's codes.
