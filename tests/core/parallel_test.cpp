@@ -78,7 +78,8 @@ TEST(BalancedGrain, SixteenChunksPerThreadWithinTheBounds) {
   EXPECT_EQ(balanced_grain(23203, 1, 256, 4096), 23203u / 16);
   EXPECT_EQ(balanced_grain(64000, 4, 1, 100000), 1000u);
   // 0 threads: every hardware thread.
-  EXPECT_EQ(balanced_grain(1u << 20, 0, 1, 1u << 20), (std::size_t{1} << 20) / (16 * static_cast<std::size_t>(resolve_threads(0))));
+  const auto all = static_cast<std::size_t>(resolve_threads(0));
+  EXPECT_EQ(balanced_grain(std::size_t{1} << 20, 0, 1, std::size_t{1} << 20), (std::size_t{1} << 20) / (16 * all));
 }
 
 TEST(ParallelForChunks, TwoThreadsRunChunksAtOnce) {

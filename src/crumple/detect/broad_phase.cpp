@@ -786,7 +786,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // ms of the loop's 1.8 on two; 0.03 with 512-candidate chunks). Not fewer on the large
   // scenes, where a chunk is a small part of the loop anyway and each chunk's contacts are one
   // more part for the gather (cloth-ball with 512 was no faster).
-  parallel_for_chunks(total, threads, balanced_grain(total, threads, 256, 2048), [&](std::size_t begin, std::size_t end) {
+  const std::size_t grain = balanced_grain(total, threads, 256, 2048);
+  parallel_for_chunks(total, threads, grain, [&](std::size_t begin, std::size_t end) {
     LocalContacts local{spare_sets_.take()};
     std::array<std::array<const PackedFace*, 2>, kBlock> block;
     // Room for a full table row written past the last candidate's codes.
