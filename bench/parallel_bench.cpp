@@ -22,6 +22,7 @@ void run_loops(benchmark::State& state, crumple::ParallelBackend backend) {
     state.SkipWithError("this build has no such backend");
     return;
   }
+  const crumple::ParallelBackend before = crumple::parallel_backend();  // CRUMPLE_PARALLEL may have chosen it
   crumple::set_parallel_backend(backend);
   const auto n = static_cast<std::size_t>(state.range(0));
   const auto threads = static_cast<int>(state.range(1));
@@ -33,7 +34,7 @@ void run_loops(benchmark::State& state, crumple::ParallelBackend backend) {
       benchmark::DoNotOptimize(sum);
     });
   }
-  crumple::set_parallel_backend(crumple::ParallelBackend::team);
+  crumple::set_parallel_backend(before);
 }
 
 void BM_team_loop(benchmark::State& state) { run_loops(state, crumple::ParallelBackend::team); }

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <support/run_cli.hpp>
+#include <support/temp_dir.hpp>
 
 #include <cctype>
 #include <filesystem>
@@ -151,8 +152,8 @@ Csv read_csv(const std::filesystem::path& path) {
 
 // One run of `crumple bench --quick` (tens of seconds under sanitizers), checked part by part.
 struct QuickRun {
-  testing::CliTempDir dir{"bench"};
-  testing::CliResult result = run_cli("bench --quick --out " + dir.string());
+  testing::TempDir dir;
+  testing::CliResult result = run_cli("bench --quick --out " + dir.path().string());
 };
 
 void expect_every_output(const QuickRun& run) {
@@ -163,7 +164,7 @@ void expect_every_output(const QuickRun& run) {
     EXPECT_TRUE(std::filesystem::is_regular_file(run.dir / name)) << name;
   }
   // Atomic writes leave no temporary file behind.
-  for (const auto& entry : std::filesystem::directory_iterator(run.dir)) {
+  for (const auto& entry : std::filesystem::directory_iterator(run.dir.path())) {
     EXPECT_EQ(entry.path().filename().string().find(".tmp"), std::string::npos) << entry.path();
   }
 }
@@ -260,7 +261,7 @@ TEST(CliBenchArgs, BadOptionsAreRejected) {
 }
 
 TEST(CliBenchArgs, UnwritableOutputFolderIsAClearError) {
-  const auto dir = testing::cli_temp_dir("bench-ro");
+  const testing::TempDir dir;
   const auto blocker = dir / "file";
   std::ofstream(blocker) << "x";
   const auto r = run_cli("bench --quick --sections budget -q --out " + (blocker / "sub").string());

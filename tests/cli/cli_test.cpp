@@ -4,6 +4,7 @@
 #include <support/meshes.hpp>
 #include <support/oracle.hpp>
 #include <support/run_cli.hpp>
+#include <support/temp_dir.hpp>
 
 #include <gtest/gtest.h>
 
@@ -24,8 +25,6 @@ namespace {
 using Result = testing::CliResult;
 
 Result run(const std::string& args) { return testing::run_cli(args); }
-
-testing::CliTempDir temp_dir(const std::string& name) { return testing::cli_temp_dir(name); }
 
 std::string funnel(int frame) {
   return testing::data_path("sample-scalable-ccd/cloth-funnel/frames/" + std::to_string(frame) + ".ply").string();
@@ -50,7 +49,7 @@ TEST(Cli, DetectOnBuiltInSceneFindsContacts) {
 }
 
 TEST(Cli, BadInputGivesOneLineErrorAndNonZeroExit) {
-  const auto dir = temp_dir("bad");
+  const testing::TempDir dir;
   std::ofstream(dir / "broken.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n";
   Result r = run("detect " + (dir / "broken.obj").string());
   EXPECT_NE(r.status, 0);
@@ -114,7 +113,7 @@ TEST(Cli, InfoPrintsCountsAndReport) {
 }
 
 TEST(Cli, JsonHasOneObjectPerFrameWithStats) {
-  const auto dir = temp_dir("json");
+  const testing::TempDir dir;
   const TriMesh m = shapes::folded_cloth({.n = 10});
   io::write_obj(dir / "a.obj", m.positions(), m.topology().faces());
   io::write_obj(dir / "b.obj", testing::jitter(m.positions(), 0.002, 5), m.topology().faces());
@@ -138,7 +137,7 @@ TEST(Cli, JsonHasOneObjectPerFrameWithStats) {
 }
 
 TEST(Cli, FramesWithDifferentConnectivityAreRejected) {
-  const auto dir = temp_dir("conn");
+  const testing::TempDir dir;
   const TriMesh a = shapes::lattice(3, 3), b = shapes::lattice(4, 2);
   io::write_obj(dir / "a.obj", a.positions(), a.topology().faces());
   io::write_obj(dir / "b.obj", b.positions(), b.topology().faces());
@@ -150,7 +149,7 @@ TEST(Cli, FramesWithDifferentConnectivityAreRejected) {
 /// The acceptance check: naive on funnel frame 227 at thickness 1e-3 of the diagonal,
 /// contacts written to a file, checked against the independent oracle of tests/support.
 TEST(Cli, FunnelContactsMatchIndependentOracle) {
-  const auto dir = temp_dir("funnel");
+  const testing::TempDir dir;
   const auto out = dir / "out.tsv";
   const Result r = run("detect " + funnel(227) + " --thickness-rel 1e-3 --contacts " + out.string());
   ASSERT_EQ(r.status, 0) << r.out;

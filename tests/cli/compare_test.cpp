@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <support/run_cli.hpp>
+#include <support/temp_dir.hpp>
 
 #include <filesystem>
 #include <string>
@@ -42,7 +43,7 @@ TEST(CliCompare, JsonHasOneObjectPerFrameAndASummary) {
 }
 
 TEST(CliCompare, FramesFromFilesAndNaiveAgainstItself) {
-  const auto dir = testing::cli_temp_dir("compare");
+  const testing::TempDir dir;
   const FoldingSequence seq({.n = 8, .frames = 5, .seed = 1});
   std::string files;
   for (std::size_t i = 0; i < seq.size(); ++i) {

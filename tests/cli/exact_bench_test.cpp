@@ -5,6 +5,7 @@
 
 #include <support/meshes.hpp>
 #include <support/run_cli.hpp>
+#include <support/temp_dir.hpp>
 
 #include <gtest/gtest.h>
 
@@ -40,7 +41,7 @@ TEST(ExactBench, HelpDescribesEveryOption) {
 // Each bad command line fails with a message naming the option (and what is wrong), before
 // any scene is loaded ("[1/..." is the first scene's progress line).
 TEST(ExactBench, BadCommandLinesFailBeforeAnyWork) {
-  const auto dir = testing::cli_temp_dir("exact-bench-bad");
+  const testing::TempDir dir;
   struct Case {
     std::string args, says;
   };
@@ -55,7 +56,7 @@ TEST(ExactBench, BadCommandLinesFailBeforeAnyWork) {
       {"--methods 'kdop;kdop:k=7'", "key 'k' expects one of 6 14 18 26"},
       {"--methods 'hash:cell=-1'", "cell must be a number >= 0"},
       {"--json " + (dir / "missing" / "x.json").string(), "does not exist"},
-      {"--md " + dir.string(), "is a folder"},
+      {"--md " + dir.path().string(), "is a folder"},
       {"--json ''", "the file name is empty"},
       {"--data " + (dir / "missing").string(), "--data"},
       {"--small-only", "requires --reference"},
@@ -80,14 +81,14 @@ TEST(ExactBench, BadCommandLinesFailBeforeAnyWork) {
     EXPECT_NE(r.out.find(c.says), std::string::npos) << c.args << "\n" << r.out;
     EXPECT_EQ(r.out.find("[1/"), std::string::npos) << c.args << " started running\n" << r.out;
   }
-  EXPECT_TRUE(std::filesystem::is_empty(dir)) << "a failed command line wrote a file";
+  EXPECT_TRUE(std::filesystem::is_empty(dir.path())) << "a failed command line wrote a file";
 }
 
 // One short run: the JSON and markdown tables replace what was there, hold the detector's
 // contact counts (the naive reference's for the funnel's second frame: 5,034 VF and 13,683
 // EE, tests/data/reference/real_meshes.txt) and leave no temporary file behind.
 TEST(ExactBench, WritesBothTablesWhole) {
-  const auto dir = testing::cli_temp_dir("exact-bench-out");
+  const testing::TempDir dir;
   std::ofstream(dir / "t.json") << "stale";
   const testing::CliResult r = bench(data_option() + " --scenes cloth-funnel --methods 'kdop;sap' --repeat 1 " +
                                      "--thread-counts '1;2' --json " + (dir / "t.json").string() + " --md " +
@@ -116,7 +117,7 @@ TEST(ExactBench, WritesBothTablesWhole) {
     }
   }
   std::vector<std::string> files;
-  for (const auto& entry : std::filesystem::directory_iterator(dir)) files.push_back(entry.path().filename().string());
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path())) files.push_back(entry.path().filename().string());
   std::sort(files.begin(), files.end());
   EXPECT_EQ(files, (std::vector<std::string>{"t.json", "t.md"}));
 }

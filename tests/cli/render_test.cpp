@@ -2,6 +2,7 @@
 #include <crumple/io/mesh_io.hpp>
 #include <crumple/mesh/shapes.hpp>
 #include <support/run_cli.hpp>
+#include <support/temp_dir.hpp>
 
 #include <gtest/gtest.h>
 
@@ -14,7 +15,6 @@
 namespace crumple {
 namespace {
 
-using testing::cli_temp_dir;
 using testing::run_cli;
 
 struct Decoded {
@@ -38,7 +38,7 @@ Decoded decode(const std::filesystem::path& path) {
 }
 
 TEST(Render, HangingClothInCollisionHasRedEdges) {
-  const auto dir = cli_temp_dir("render-scene");
+  const testing::TempDir dir;
   const auto png = dir / "cloth.png";
   // Frame 160 of the default hanging cloth: more than half of the edges are in collision.
   const auto r = run_cli("render hanging-cloth --frame 160 --size 320x240 --out " + png.string());
@@ -62,7 +62,7 @@ TEST(Render, HangingClothInCollisionHasRedEdges) {
 }
 
 TEST(Render, MeshFileFolderAndVideo) {
-  const auto dir = cli_temp_dir("render-files");
+  const testing::TempDir dir;
   const TriMesh folded = shapes::folded_cloth();
   io::write_obj(dir / "folded.obj", folded.positions(), folded.topology().faces());
   const auto png = dir / "folded.png";
@@ -93,7 +93,7 @@ TEST(Render, MeshFileFolderAndVideo) {
 }
 
 TEST(Render, BadInputsGiveAClearError) {
-  const auto dir = cli_temp_dir("render-errors");
+  const testing::TempDir dir;
   const std::string out = " --out " + (dir / "x.png").string();
   const std::vector<std::pair<std::string, std::string>> cases{
       {"render hanging-cloth --size 0x10" + out, "--size"},
@@ -107,7 +107,7 @@ TEST(Render, BadInputsGiveAClearError) {
       {"render hanging-cloth --out " + (dir / "x.jpg").string(), ".png"},
       {"render hanging-cloth --aa 9" + out, "--aa"},
       {"render hanging-cloth --frame -1" + out, "--frame"},
-      {"render " + dir.string() + out, "no .obj"},
+      {"render " + dir.path().string() + out, "no .obj"},
   };
   for (const auto& [args, needle] : cases) {
     const auto r = run_cli(args);

@@ -3,6 +3,7 @@
 #include <crumple/io/x3d.hpp>
 #include <crumple/mesh/shapes.hpp>
 #include <support/run_cli.hpp>
+#include <support/temp_dir.hpp>
 
 #include <gtest/gtest.h>
 
@@ -22,7 +23,6 @@
 namespace crumple {
 namespace {
 
-using testing::cli_temp_dir;
 using testing::run_cli;
 
 std::vector<std::string> read_lines(const std::filesystem::path& path) {
@@ -35,8 +35,8 @@ std::vector<std::string> read_lines(const std::filesystem::path& path) {
 std::size_t count_fields(const std::string& line) { return static_cast<std::size_t>(std::count(line.begin(), line.end(), ',')) + 1; }
 
 TEST(Simulate, WritesFramesStatsAndState) {
-  const auto dir = cli_temp_dir("sim-out");
-  const auto r = run_cli("simulate hanging-cloth:nx=4,ny=4 --frames 5 -o " + dir.string());
+  const testing::TempDir dir;
+  const auto r = run_cli("simulate hanging-cloth:nx=4,ny=4 --frames 5 -o " + dir.path().string());
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("collision share"), std::string::npos) << r.out;
   for (int f = 0; f <= 5; ++f) {
@@ -59,7 +59,7 @@ TEST(Simulate, WritesFramesStatsAndState) {
 
 /// Simulating N + M frames equals simulating N, then resuming from the saved state for M.
 void expect_resume_bit_for_bit(const std::string& scene, int n, int m, const std::string& extra) {
-  const auto dir = cli_temp_dir("sim-resume");
+  const testing::TempDir dir;
   const auto whole = dir / "whole", first = dir / "first", second = dir / "second";
   auto r = run_cli("simulate " + scene + " --frames " + std::to_string(n + m) + " -q " + extra + " -o " + whole.string());
   ASSERT_EQ(r.status, 0) << r.out;
@@ -96,7 +96,7 @@ TEST(Simulate, ResumesTheStochasticDetectorsStateBitForBit) {
                             "--response on --method stochastic:variant=vertex,active=15");
   // Response off: positions never depend on contacts; the contact counts of every resumed
   // frame (stats.csv columns vf, ee) must still be the uninterrupted run's.
-  const auto dir = cli_temp_dir("sim-resume-sto");
+  const testing::TempDir dir;
   const std::string opts = " -q --method stochastic:variant=direct,active=10,propagation=none";
   auto r = run_cli("simulate hanging-cloth:nx=6,ny=6 --frames 60" + opts + " -o " + (dir / "whole").string());
   ASSERT_EQ(r.status, 0) << r.out;
@@ -121,14 +121,14 @@ TEST(Simulate, ResumesTheStochasticDetectorsStateBitForBit) {
 }
 
 TEST(Simulate, InterruptLeavesCompleteFiles) {
-  const auto dir = cli_temp_dir("sim-int");
+  const testing::TempDir dir;
   const pid_t pid = ::fork();
   ASSERT_GE(pid, 0);
   if (pid == 0) {
     const int null = ::open("/dev/null", O_WRONLY);
     ::dup2(null, 1);
     ::dup2(null, 2);
-    const std::string out = dir.string();
+    const std::string out = dir.path().string();
     ::execl(CRUMPLE_CLI, CRUMPLE_CLI, "simulate", "hanging-cloth:nx=6,ny=6", "--frames", "1000000", "--every",
             "7", "-o", out.c_str(), static_cast<char*>(nullptr));
     ::_exit(127);
@@ -155,7 +155,7 @@ TEST(Simulate, InterruptLeavesCompleteFiles) {
 }
 
 TEST(Simulate, MeshFileWithPinsAndFormats) {
-  const auto dir = cli_temp_dir("sim-file");
+  const testing::TempDir dir;
   const TriMesh mesh = shapes::lattice(3, 3);
   io::write_obj(dir / "cloth.obj", mesh.positions(), mesh.topology().faces());
   auto r = run_cli("simulate " + (dir / "cloth.obj").string() + " -p 'pins=0;3' -p stiffness=200 --frames 4 " +

@@ -6,6 +6,8 @@
 #include <crumple/core/types.hpp>
 #include <crumple/io/mesh_io.hpp>
 
+#include <support/temp_dir.hpp>
+
 #include <gtest/gtest.h>
 
 #include <bit>
@@ -18,48 +20,12 @@
 #include <optional>
 #include <random>
 #include <string>
-#include <unistd.h>
 
 namespace crumple::io::test {
 
 namespace fs = std::filesystem;
 
-/// A fresh folder under the system temporary folder, removed with its content at the end.
-class TempDir {
- public:
-  TempDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    std::string name = "crumple-io-";
-    name += std::to_string(::getpid());
-    name += '-';
-    if (info) {
-      name += info->test_suite_name();
-      name += '-';
-      name += info->name();
-    }
-    static int counter = 0;
-    name += '-';
-    name += std::to_string(counter++);
-    for (char& c : name) {
-      if (c == '/') c = '_';
-    }
-    path_ = fs::temp_directory_path() / name;
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-
-  fs::path operator/(const std::string& name) const { return path_ / name; }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
+using crumple::testing::TempDir;
 
 inline void write_bytes(const fs::path& path, const std::string& bytes) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);

@@ -4,10 +4,8 @@
 
 #include <array>
 #include <cstdio>
-#include <filesystem>
 #include <string>
 #include <sys/wait.h>
-#include <unistd.h>
 
 namespace crumple::testing {
 
@@ -30,27 +28,5 @@ inline CliResult run_program(const std::string& program, const std::string& args
 
 /// Runs `crumple ARGS` through the shell and collects its output.
 inline CliResult run_cli(const std::string& args) { return run_program(CRUMPLE_CLI, args); }
-
-/// A fresh, empty folder under the temporary directory, unique to this process, removed with
-/// everything in it when the object goes out of scope (a test that fails half-way leaves nothing
-/// behind either). It is a path, so `dir / "name"` and `dir.string()` read as on any path; it
-/// cannot be copied, so one folder has one owner.
-class CliTempDir : public std::filesystem::path {
- public:
-  explicit CliTempDir(const std::string& name)
-      : std::filesystem::path(std::filesystem::temp_directory_path() /
-                              ("crumple-cli-" + name + "-" + std::to_string(::getpid()))) {
-    std::filesystem::remove_all(*this);
-    std::filesystem::create_directories(*this);
-  }
-  ~CliTempDir() {
-    std::error_code ignored;
-    std::filesystem::remove_all(*this, ignored);
-  }
-  CliTempDir(const CliTempDir&) = delete;
-  CliTempDir& operator=(const CliTempDir&) = delete;
-};
-
-inline CliTempDir cli_temp_dir(const std::string& name) { return CliTempDir(name); }
 
 }  // namespace crumple::testing
