@@ -509,12 +509,8 @@ class KdopTree final : public KdopDetector::Tree {
     }
   }
 
-  /// Orders a leaf's slots [begin, end) so that each lane group of kGroup faces is a compact
-  /// piece of the leaf (recursive halving at multiples of kGroup, across the longest centroid
-  /// extent): a k-DOP that overlaps part of the leaf then meets few of its groups.
-  void group_leaf(const std::vector<Vec3>& centroid, Index begin, Index end) {
-    const Index groups = (end - begin + kGroup - 1) / kGroup;
-    if (groups <= 1) return;
+  /// The axis of the largest extent of the centroids of the faces in slots [begin, end).
+  int longest_axis(const std::vector<Vec3>& centroid, Index begin, Index end) const {
     Vec3 lo = Vec3::Constant(std::numeric_limits<Scalar>::infinity());
     Vec3 hi = -lo;
     for (Index i = begin; i < end; ++i) {
@@ -524,6 +520,16 @@ class KdopTree final : public KdopDetector::Tree {
     }
     int axis = 0;
     (hi - lo).maxCoeff(&axis);
+    return axis;
+  }
+
+  /// Orders a leaf's slots [begin, end) so that each lane group of kGroup faces is a compact
+  /// piece of the leaf (recursive halving at multiples of kGroup, across the longest centroid
+  /// extent): a k-DOP that overlaps part of the leaf then meets few of its groups.
+  void group_leaf(const std::vector<Vec3>& centroid, Index begin, Index end) {
+    const Index groups = (end - begin + kGroup - 1) / kGroup;
+    if (groups <= 1) return;
+    const int axis = longest_axis(centroid, begin, end);
     const Index mid = begin + kGroup * (groups / 2);
     std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end, [&](Index a, Index b) {
       const Scalar ca = centroid[static_cast<std::size_t>(a)][axis];
@@ -543,15 +549,7 @@ class KdopTree final : public KdopDetector::Tree {
       cuts.push_back(end);
       return;
     }
-    Vec3 lo = Vec3::Constant(std::numeric_limits<Scalar>::infinity());
-    Vec3 hi = -lo;
-    for (Index i = begin; i < end; ++i) {
-      const Vec3& c = centroid[static_cast<std::size_t>(order_[static_cast<std::size_t>(i)])];
-      lo = lo.cwiseMin(c);
-      hi = hi.cwiseMax(c);
-    }
-    int axis = 0;
-    (hi - lo).maxCoeff(&axis);
+    const int axis = longest_axis(centroid, begin, end);
     // Ordered by their patch's centroid (then patch), so that a patch's faces are equal.
     const auto patch = [&](Index f) { return patch_[static_cast<std::size_t>(f)]; };
     const auto less = [&](Index a, Index b) {
