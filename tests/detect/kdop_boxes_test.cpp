@@ -1,4 +1,4 @@
-// The kdop detector's node boxes (what the viewer draws for a level of the hierarchy).
+// The kdop detector's node boxes (what the viewer draws for a level of the hierarchy) and leaves.
 #include <crumple/detect/broad_phase.hpp>
 #include <crumple/detect/kdop_tree.hpp>
 #include <crumple/io/mesh_io.hpp>
