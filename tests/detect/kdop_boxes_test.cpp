@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <numeric>
@@ -58,7 +59,8 @@ void expect_patch_leaves(const KdopDetector& d, const Topology& topo, int leaf) 
 // Every leaf is one connected patch (faces linked by shared vertices), whatever the leaf size
 // and arity, on meshes whose sheets pass near each other: leaves of plain median cuts mixed
 // pieces of several there (armadillo's 326: 546 of 640 leaves), which move apart. Also after a
-// rebuild from other positions (rebuild=1: on every frame whose tree loosened at all).
+// rebuild from other positions (rebuild=1: on every frame whose tree loosened at all), which
+// keeps the patches of the first build, so the same leaves.
 TEST(KdopBoxes, LeavesAreConnectedPatches) {
   std::vector<std::pair<std::string, TriMesh>> meshes = testing::small_meshes();
   meshes.emplace_back("folded24", shapes::folded_cloth({.n = 24, .gap = 0.02, .wave = 0.01, .thickness = 0.04}));
@@ -82,9 +84,18 @@ TEST(KdopBoxes, LeavesAreConnectedPatches) {
         d.update(mesh.positions(), out);
         expect_patch_leaves(d, mesh.topology(), leaf);
         if (name == "armadillo") {
+          // The rebuild keeps the patches grown at the first build: the same leaves.
+          const auto sorted_leaves = [&d] {
+            std::vector<std::vector<Index>> leaves = d.leaf_faces();
+            for (std::vector<Index>& faces : leaves) std::sort(faces.begin(), faces.end());
+            std::sort(leaves.begin(), leaves.end());
+            return leaves;
+          };
+          const std::vector<std::vector<Index>> before = sorted_leaves();
           d.update(mesh.positions(), armadillo_next, out);
           EXPECT_EQ(d.stats().get("rebuilds"), 1);
           expect_patch_leaves(d, mesh.topology(), leaf);
+          EXPECT_EQ(sorted_leaves(), before);
         }
       }
     }

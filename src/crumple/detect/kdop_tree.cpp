@@ -274,7 +274,11 @@ class KdopTree final : public KdopDetector::Tree {
       }
       component_faces_.assign(root.size(), 0);
     }
-    grow_patches(topo, centroid);
+    // The patches are grown at the first build only: they are connected pieces of the surface
+    // whatever the positions, and growing them takes a third of a build (cloth-ball 23 of 76 ms,
+    // n-body 25 of 107, one thread), which a rebuild need not pay again.
+    if (patch_.size() != static_cast<std::size_t>(nf)) grow_patches(topo, centroid);
+    patch_centroids(centroid);
     nodes_.assign(1, Node{});
     levels_.clear();
     struct Item {
@@ -317,8 +321,7 @@ class KdopTree final : public KdopDetector::Tree {
         nodes_.push_back(Node{});
       }
     }
-    // The component and patch scratch serves the cuts only.
-    patch_ = {};
+    // The component and patch-centroid scratch serves the cuts only (the patches are kept).
     patch_centroid_ = {};
     component_ = {};
     component_centroid_ = {};
@@ -400,7 +403,8 @@ class KdopTree final : public KdopDetector::Tree {
   /// patch it touches that has room. A leaf of one patch stays compact however its surface
   /// moves; a leaf of the median cuts held pieces of surfaces that only passed near each other
   /// (546 of armadillo's 640 leaves), and those pieces move apart (the refitted tree's leaves
-  /// grew by 54% in the benchmark's step, those of one piece by 3%).
+  /// grew by 54% in the benchmark's step, those of one piece by 3%). Sets `patch_` and
+  /// `patches_`; `patch_centroids` then gives the cuts their keys.
   void grow_patches(const Topology& topo, const std::vector<Vec3>& centroid) {
     const std::size_t nf = centroid.size();
     Vec3 lo = Vec3::Constant(std::numeric_limits<Scalar>::infinity());
@@ -495,17 +499,23 @@ class KdopTree final : public KdopDetector::Tree {
       size[static_cast<std::size_t>(best)] += n;
       size[p] = 0;
     }
-    // Of the finite centroids (a NaN one would make every comparison of the cuts false).
-    patch_centroid_.assign(patches, Vec3::Zero());
-    for (std::size_t p = 0; p < patches; ++p) {
-      std::size_t finite = 0;
-      for (const Index f : members[p]) {
-        const Vec3& c = centroid[static_cast<std::size_t>(f)];
-        if (!c.allFinite()) continue;
-        patch_centroid_[p] += c;
-        ++finite;
-      }
-      if (finite > 0) patch_centroid_[p] /= static_cast<Scalar>(finite);
+    patches_ = patches;
+  }
+
+  /// Each patch's mean face centroid at this build's positions, of the finite centroids (a NaN
+  /// one would make every comparison of the cuts false).
+  void patch_centroids(const std::vector<Vec3>& centroid) {
+    patch_centroid_.assign(patches_, Vec3::Zero());
+    std::vector<Index> finite(patches_, 0);
+    for (std::size_t f = 0; f < centroid.size(); ++f) {
+      const Vec3& c = centroid[f];
+      if (!c.allFinite()) continue;
+      const auto p = static_cast<std::size_t>(patch_[f]);
+      patch_centroid_[p] += c;
+      ++finite[p];
+    }
+    for (std::size_t p = 0; p < patches_; ++p) {
+      if (finite[p] > 0) patch_centroid_[p] /= static_cast<Scalar>(finite[p]);
     }
   }
 
@@ -1373,9 +1383,11 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<Index> leaf_ids_;
   std::vector<std::size_t> leaf_verts_;  ///< per node: a leaf's vertices are verts_[n, n + 1)
   std::vector<Index> verts_;
+  // The leaves to be, grown at the first build and kept (`grow_patches`).
+  std::vector<Index> patch_;  ///< per face, its patch
+  std::size_t patches_ = 0;   ///< patch ids are below this
   // Scratch of `build` and `split`, released after the cuts.
   std::vector<Index> component_;          ///< per face, its connected component
-  std::vector<Index> patch_;              ///< per face, its patch (`grow_patches`)
   std::vector<Vec3> patch_centroid_;      ///< per patch, mean face centroid
   std::vector<Vec3> component_centroid_;  ///< per component id, mean face centroid
   std::vector<Index> component_faces_;    ///< per component id (all 0 between uses)

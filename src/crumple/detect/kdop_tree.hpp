@@ -6,16 +6,16 @@
 ///
 ///  - Build (first frame, and again when the quality metric degrades): first the faces are
 ///    cut into connected patches of at most `leaf` faces (grown from seeds in Morton order, the
-///    nearest faces first; small ones joined to a neighbour), the leaves to be, which stay
-///    compact however the surface moves. Then top-down, the faces sorted by their patch's
-///    centroid along the largest extent and cut into `arity` near-equal parts at patch
-///    boundaries, down to nodes of one patch, the leaves (their faces ordered so that each lane
-///    group of eight is a compact piece); where a node holds several connected components,
-///    each of at most 512 faces, the cut goes between components (ordered by their centroids,
-///    along the axis where this moves the fewest faces across the median cut, at most a
-///    quarter) when that leaves each side at least a quarter of the faces, so that small bodies
-///    that move apart are not mixed in a node. Nodes are stored breadth-first, so every depth
-///    is one index range.
+///    nearest faces first; small ones joined to a neighbour; at the first build only, a rebuild
+///    keeps them), the leaves to be, which stay compact however the surface moves. Then
+///    top-down, the faces sorted by their patch's centroid along the largest extent and cut
+///    into `arity` near-equal parts at patch boundaries, down to nodes of one patch, the leaves
+///    (their faces ordered so that each lane group of eight is a compact piece); where a node
+///    holds several connected components, each of at most 512 faces, the cut goes between
+///    components (ordered by their centroids, along the axis where this moves the fewest faces
+///    across the median cut, at most a quarter) when that leaves each side at least a quarter
+///    of the faces, so that small bodies that move apart are not mixed in a node. Nodes are
+///    stored breadth-first, so every depth is one index range.
 ///  - Refit (every frame), bottom-up and level by level in parallel: a face's k-DOP holds its
 ///    corners at the current positions and, with `sweep=on` and previous positions given, at
 ///    the previous ones (the projection of a linearly moving point is linear in time, so this
