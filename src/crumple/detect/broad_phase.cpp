@@ -706,10 +706,9 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
                              const Vec3& q1, Index w0, Index w1, Index e1, LocalContacts& local,
                              Scalar* sqr_distance = nullptr) {
     ++local.ee_tests;
-    const auto pair = narrow::EdgePair::ordered(e0, u0, u1, p0, p1, e1, w0, w1, q0, q1);
     if (sqr_distance == nullptr) {
-      local.ee_batch.push(pair, h2, local.set.ee);
-    } else if (auto c = pair.test(h2, sqr_distance)) {
+      local.ee_batch.push(e0, u0, u1, p0, p1, e1, w0, w1, q0, q1, h2, local.set.ee);
+    } else if (auto c = narrow::EdgePair::ordered(e0, u0, u1, p0, p1, e1, w0, w1, q0, q1).test(h2, sqr_distance)) {
       local.set.ee.push_back(*c);
     }
   };

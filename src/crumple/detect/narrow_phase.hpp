@@ -103,12 +103,29 @@ struct EdgePair {
   const Vec3 *p0, *p1, *q0, *q1;
   static EdgePair ordered(Index e, Index u0, Index u1, const Vec3& x0, const Vec3& x1, Index f, Index w0, Index w1,
                           const Vec3& y0, const Vec3& y1) {
+    EdgePair pair;
+    pair.set(e, u0, u1, x0, x1, f, w0, w1, y0, y1);
+    return pair;
+  }
+  /// Makes this pair `ordered(e, u0, ...)`, field by field (`EdgeEdgeBatch::push` fills its
+  /// queue's slot so: a pair built first and then copied was read back with 16-byte loads from
+  /// its 4-byte stores, a failed store forwarding on every push).
+  void set(Index e, Index u0, Index u1, const Vec3& x0, const Vec3& x1, Index f, Index w0, Index w1, const Vec3& y0,
+           const Vec3& y1) {
     const Edge a{std::min(u0, u1), std::max(u0, u1)}, b{std::min(w0, w1), std::max(w0, w1)};
     const Vec3* a0 = u0 < u1 ? &x0 : &x1;
     const Vec3* a1 = u0 < u1 ? &x1 : &x0;
     const Vec3* b0 = w0 < w1 ? &y0 : &y1;
     const Vec3* b1 = w0 < w1 ? &y1 : &y0;
-    return e < f ? EdgePair{e, f, a, b, a0, a1, b0, b1} : EdgePair{f, e, b, a, b0, b1, a0, a1};
+    const bool first = e < f;
+    e0 = first ? e : f;
+    e1 = first ? f : e;
+    ea = first ? a : b;
+    eb = first ? b : a;
+    p0 = first ? a0 : b0;
+    p1 = first ? a1 : b1;
+    q0 = first ? b0 : a0;
+    q1 = first ? b1 : a1;
   }
   /// edge_edge on this pair.
   std::optional<EdgeEdgeContact> test(Scalar sqr_thickness, Scalar* sqr_distance = nullptr) const {
@@ -122,13 +139,17 @@ struct EdgePair {
 /// Without AVX2 (`geometry::has_avx2()`), `push` tests each pair at once with `edge_edge`.
 class EdgeEdgeBatch {
  public:
-  void push(const EdgePair& pair, Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
+  /// Queues edge e of vertices (u0, u1) at (x0, x1) and edge f of vertices (w0, w1) at (y0, y1),
+  /// in any order, as `EdgePair::ordered(e, u0, u1, x0, x1, f, w0, w1, y0, y1)` makes them.
+  void push(Index e, Index u0, Index u1, const Vec3& x0, const Vec3& x1, Index f, Index w0, Index w1,
+            const Vec3& y0, const Vec3& y1, Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
     if (!lanes_) {
-      if (auto c = pair.test(sqr_thickness)) out.push_back(*c);
+      if (auto c = EdgePair::ordered(e, u0, u1, x0, x1, f, w0, w1, y0, y1).test(sqr_thickness)) out.push_back(*c);
       return;
     }
-    batch_.set(n_, *pair.p0, *pair.p1, *pair.q0, *pair.q1);
-    pairs_[n_++] = pair;
+    EdgePair& pair = pairs_[n_];
+    pair.set(e, u0, u1, x0, x1, f, w0, w1, y0, y1);
+    batch_.set(n_++, *pair.p0, *pair.p1, *pair.q0, *pair.q1);
     if (n_ == geometry::SegmentBatch::kLanes) flush(sqr_thickness, out);
   }
   void flush(Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
