@@ -526,15 +526,24 @@ bool ExactDetector::wake_orphan_blocks(PositionsView x, Scalar pad, int threads)
           const Index* v = bl.verts.data() + bl.begin[b];
           const Index* v_end = bl.verts.data() + bl.begin[b + 1];
           const Vec3 c = x[static_cast<std::size_t>(*v)], c_ref = orphan_ref_[static_cast<std::size_t>(*v)];
-          // A NaN coordinate, now or then, keeps the block awake: NaN-sticky maximum (one by
-          // `<` skips a NaN, and with the first vertex NaN every difference is NaN: the block
-          // counted unmoved while its finite vertices may have closed in).
+          // The loop stops at the first vertex that moved by more than half the block's margin
+          // over pad, `reach`: the block is awake (on a frame where everything moves, the first
+          // few vertices decide), and at once for a block that holds a pair within pad, awake
+          // whatever the motion. A NaN coordinate, now or then, stops it too, awake (a maximum
+          // by `<` would skip a NaN, and with the first vertex NaN every difference is NaN: the
+          // block counted unmoved while its finite vertices may have closed in).
+          const Scalar reach = (bl.bound[b] - pad) / 2;
+          const Scalar reach2 = reach > 0 ? reach * reach : -1;
           Scalar moved2 = 0, extent2 = 0;
           for (; v != v_end; ++v) {
             const Vec3 now = x[static_cast<std::size_t>(*v)] - c;
             const Vec3 then = orphan_ref_[static_cast<std::size_t>(*v)] - c_ref;
             const Scalar d2 = (now - then).squaredNorm();
-            moved2 = d2 > moved2 || d2 != d2 ? d2 : moved2;
+            if (!(d2 <= reach2)) {  // NaN too
+              moved2 = std::numeric_limits<Scalar>::infinity();
+              break;
+            }
+            moved2 = std::max(moved2, d2);
             extent2 = std::max({extent2, now.squaredNorm(), then.squaredNorm()});
           }
           const Scalar moved = std::sqrt(moved2) * (1 + 1e-12) + 1e-12 * std::sqrt(extent2);
