@@ -107,9 +107,9 @@ __attribute__((always_inline)) inline std::uint64_t zero_lanes(const I8& v) {
 /// library is built with -ffp-contract=off (src/CMakeLists.txt), so that the v4 clone, whose
 /// target has FMA, rounds as the others do.
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-#define CRUMPLE_AVX2_CLONES __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
+#define CRUMPLE_SIMD_CLONES __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #else
-#define CRUMPLE_AVX2_CLONES
+#define CRUMPLE_SIMD_CLONES
 #endif
 
 /// d as a float, by a non-decreasing map (round to nearest inside the float range, infinity
@@ -829,7 +829,7 @@ class KdopTree final : public KdopDetector::Tree {
   }
 
   /// Refits nodes [first, last) of one level, whose children (if any) are refitted.
-  CRUMPLE_AVX2_CLONES void refit_nodes(std::size_t first, std::size_t last, const FrameInput& in, bool swept,
+  CRUMPLE_SIMD_CLONES void refit_nodes(std::size_t first, std::size_t last, const FrameInput& in, bool swept,
                                        Scalar radius, bool moves) {
     std::array<FloatDop, 64> faces;  // a leaf's face k-DOPs, for its lanes
     for (std::size_t n = first; n < last; ++n) {
@@ -1049,7 +1049,7 @@ class KdopTree final : public KdopDetector::Tree {
 
   /// Leaves a and b (node ids); only a's faces that overlap b's k-DOP are tested against b's
   /// faces (adjacent leaves overlap along their shared boundary only).
-  CRUMPLE_AVX2_CLONES void emit_leaf_pair(Index ia, Index ib, std::vector<FacePair>& out) const {
+  CRUMPLE_SIMD_CLONES void emit_leaf_pair(Index ia, Index ib, std::vector<FacePair>& out) const {
     const Node& a = nodes_[static_cast<std::size_t>(ia)];
     const Node& b = nodes_[static_cast<std::size_t>(ib)];
     std::uint64_t near = overlapping_node(a, ib);
@@ -1097,7 +1097,7 @@ class KdopTree final : public KdopDetector::Tree {
   /// Self-test of node n. With kUnits, the first small node or pair of small nodes reached is a
   /// coherence unit (`unit`); inside a unit, and when coherence is off, kUnits is false.
   template <bool kUnits>
-  CRUMPLE_AVX2_CLONES void self(Index n, Walk& w) const {
+  CRUMPLE_SIMD_CLONES void self(Index n, Walk& w) const {
     if constexpr (kUnits) {
       if (small_[static_cast<std::size_t>(n)]) return unit(n, n, w);
     }
@@ -1131,7 +1131,7 @@ class KdopTree final : public KdopDetector::Tree {
 
   /// Nodes a and b, whose k-DOPs may overlap.
   template <bool kUnits>
-  CRUMPLE_AVX2_CLONES void pair(Index a, Index b, Walk& w) const {
+  CRUMPLE_SIMD_CLONES void pair(Index a, Index b, Walk& w) const {
     if constexpr (kUnits) {
       if (small_[static_cast<std::size_t>(a)] && small_[static_cast<std::size_t>(b)]) return unit(a, b, w);
     }
@@ -1154,7 +1154,7 @@ class KdopTree final : public KdopDetector::Tree {
   /// displacements of the unit's vertices since the refresh frame differ by at most the slack,
   /// the refresh frame's candidates of the unit are emitted (none when it had none); otherwise,
   /// and on other frames, it is traversed, and recorded on a refresh frame.
-  CRUMPLE_AVX2_CLONES void unit(Index a, Index b, Walk& w) const {
+  CRUMPLE_SIMD_CLONES void unit(Index a, Index b, Walk& w) const {
     const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(std::min(a, b))) << 32) |
                               static_cast<std::uint32_t>(std::max(a, b));
     if (mode_ == Mode::reuse &&
