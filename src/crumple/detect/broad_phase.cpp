@@ -100,20 +100,31 @@ __attribute__((always_inline)) inline F4 lane(const F4& v) {
   return __builtin_shufflevector(v, v, L, L, L, L);
 }
 
+/// A face's corners rounded to float (`coarse_coordinate`), axis by axis: coordinate d of
+/// corner k in lane k of axes[d], and of corner 0 again in lane 3; from the corners' (x, y, z,
+/// 0) lanes.
+using CoarseAxes = std::array<F4, 3>;
+__attribute__((always_inline)) inline CoarseAxes coarse_axes(const F4& c0, const F4& c1, const F4& c2) {
+  const F4 xy = __builtin_shufflevector(c0, c1, 0, 4, 1, 5);  // x0 x1 y0 y1
+  const F4 zz = __builtin_shufflevector(c0, c1, 2, 6, 2, 6);  // z0 z1 z0 z1
+  return {__builtin_shufflevector(xy, c2, 0, 1, 4, 0), __builtin_shufflevector(xy, c2, 2, 3, 5, 2),
+          __builtin_shufflevector(zz, c2, 0, 1, 6, 0)};
+}
+
 /// The box rejections of a candidate face pair's sub-pairs, in float lanes on the faces'
-/// `coarse` corners. `vf`: bit k, corner k of the first face lies in the second face's box
-/// padded by `pad` (bit 3 + k: corner k of the second in the first's box); `ee`: bit 3i + j,
-/// the boxes of side i of the first face and side j of the second, each padded by `half`,
-/// meet. The pads must cover the float rounding (`coarse_pad`), so that these boxes hold the
-/// exact ones: a bit that is 0 is a sub-pair beyond the padded thickness. NaN: 0.
+/// corners rounded to float (`coarse_axes`). `vf`: bit k, corner k of the first face lies in
+/// the second face's box padded by `pad` (bit 3 + k: corner k of the second in the first's
+/// box); `ee`: bit 3i + j, the boxes of side i of the first face and side j of the second, each
+/// padded by `half`, meet. The pads must cover the float rounding (`coarse_pad`), so that these
+/// boxes hold the exact ones: a bit that is 0 is a sub-pair beyond the padded thickness. NaN: 0.
 struct CoarseMasks {
   unsigned vf = 0, ee = 0;
 };
-template <class Face>
-__attribute__((always_inline)) inline CoarseMasks coarse_masks(const Face& a, const Face& b, float half, float pad) {
+__attribute__((always_inline)) inline CoarseMasks coarse_masks(const CoarseAxes& a, const CoarseAxes& b, float half,
+                                                               float pad) {
   I4 in_a = {-1, -1, -1, -1}, in_b = in_a, meet0 = in_a, meet1 = in_a, meet2 = in_a;
   for (std::size_t d = 0; d < 3; ++d) {
-    const F4 ca = load4(a.coarse[d]), cb = load4(b.coarse[d]);
+    const F4 ca = a[d], cb = b[d];
     // Side k joins corners k and k + 1.
     const F4 na = __builtin_shufflevector(ca, ca, 1, 2, 0, 3), nb = __builtin_shufflevector(cb, cb, 1, 2, 0, 3);
     const F4 alo = min4(ca, na) - half, ahi = max4(ca, na) + half;
@@ -610,17 +621,19 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   const auto narrow_start = std::chrono::steady_clock::now();
 
   const bool proximity = kinds.vf || kinds.ee;
-  parallel_for_chunks(nf, threads, balanced_grain(nf, threads, 512, 4096), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t f = begin; f < end; ++f) {
-      PackedFace& pf = packed_[f];
-      for (std::size_t k = 0; k < 3; ++k) pf.p[k] = narrow::at(x, pf.v[k]);
-      if (!proximity) continue;  // the float corners serve the proximity tests only
-      for (std::size_t a = 0; a < 3; ++a) {
-        for (std::size_t k = 0; k < 3; ++k) pf.coarse[a][k] = coarse_coordinate(pf.p[k][a]);
-        pf.coarse[a][3] = pf.coarse[a][0];
+  // The corners rounded to float, for the box rejections in float lanes.
+  if (proximity) {
+    coarse_x_.resize(x.size());
+    parallel_for_chunks(x.size(), threads, 8192, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t v = begin; v < end; ++v) {
+        for (std::size_t a = 0; a < 3; ++a) coarse_x_[v][a] = coarse_coordinate(x[v][a]);
+        coarse_x_[v][3] = 0;
       }
-    }
-  });
+    });
+  }
+  const auto coarse_point = [&](Index v) { return load4(coarse_x_[static_cast<std::size_t>(v)]); };
+  // Corner k of face t, at x.
+  const auto corner = [&](const PackedFace& t, std::size_t k) -> const Vec3& { return narrow::at(x, t.v[k]); };
   // The box rejections of the candidates (`coarse_masks`) and of the orphans, in float lanes,
   // unless the coordinates or the pad are too large for floats (or NaN): then infinite pads,
   // no box rejects, and the plane and line tests and the kernels decide alone.
@@ -670,23 +683,24 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // Vertex v at p against face g, past the cheap rejections: the shared kernel, queued four at
   // a time (the contacts reach local.set.vf at the latest in `merge`), unless the squared
   // distance is wanted.
-  const auto vf_kernel = [&](const Vec3& p, Index v, const PackedFace& t, Index g, LocalContacts& local,
-                             Scalar* sqr_distance = nullptr) {
+  const auto vf_kernel = [&](const Vec3& p, Index v, const Vec3& a, const Vec3& b, const Vec3& c, Index g,
+                             LocalContacts& local, Scalar* sqr_distance = nullptr) {
     ++local.vf_tests;
     if (sqr_distance == nullptr) {
-      local.vf_batch.push(v, p, g, t.p[0], t.p[1], t.p[2], h2, local.set.vf);
-    } else if (auto c = narrow::vertex_face(v, p, g, t.p[0], t.p[1], t.p[2], h2, sqr_distance)) {
-      local.set.vf.push_back(*c);
+      local.vf_batch.push(v, p, g, a, b, c, h2, local.set.vf);
+    } else if (auto contact = narrow::vertex_face(v, p, g, a, b, c, h2, sqr_distance)) {
+      local.set.vf.push_back(*contact);
     }
   };
   // The box of face t padded by pad holds p (branch-free; NaN: it does not), in two steps that
   // the orphans' sift takes apart to bound a face once for several points.
   using Bounds = std::array<Vec3, 2>;  // lo, hi
-  const auto padded_face_box = [pad](const PackedFace& t) {
+  const auto padded_face_box = [&](const PackedFace& t) {
+    const Vec3 &a = corner(t, 0), &b = corner(t, 1), &c = corner(t, 2);
     Bounds box;
     for (int i = 0; i < 3; ++i) {
-      box[0][i] = std::min({t.p[0][i], t.p[1][i], t.p[2][i]}) - pad;
-      box[1][i] = std::max({t.p[0][i], t.p[1][i], t.p[2][i]}) + pad;
+      box[0][i] = std::min({a[i], b[i], c[i]}) - pad;
+      box[1][i] = std::max({a[i], b[i], c[i]}) + pad;
     }
     return box;
   };
@@ -698,11 +712,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   const auto in_box = [&](const Vec3& p, const PackedFace& t) { return inside(p, padded_face_box(t)); };
   // The gap between p and the box of face t (negative inside; in_box: not beyond pad), as a
   // lower bound of their distance (rounded down by 1e-12 of itself).
-  const auto vertex_box_gap = [](const Vec3& p, const PackedFace& t) {
+  const auto vertex_box_gap = [&](const Vec3& p, const PackedFace& t) {
+    const Vec3 &c0 = corner(t, 0), &c1 = corner(t, 1), &c2 = corner(t, 2);
     Scalar gap = -std::numeric_limits<Scalar>::infinity();
     for (int a = 0; a < 3; ++a) {
-      gap = std::max({gap, std::min({t.p[0][a], t.p[1][a], t.p[2][a]}) - p[a],
-                      p[a] - std::max({t.p[0][a], t.p[1][a], t.p[2][a]})});
+      gap = std::max({gap, std::min({c0[a], c1[a], c2[a]}) - p[a], p[a] - std::max({c0[a], c1[a], c2[a]})});
     }
     return gap * (1 - 1e-12);
   };
@@ -767,7 +781,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
     n = sift(list, n, [&](std::uint16_t code) { return in_box(point(code), face(code)); });
     return sift_separated(std::false_type{}, list, n, [&](std::uint16_t code) {
       const PackedFace& t = face(code);
-      return geometry::SeparationPoints{&point(code), &t.p[0], &t.p[1], &t.p[2]};
+      return geometry::SeparationPoints{&point(code), &corner(t, 0), &corner(t, 1), &corner(t, 2)};
     });
   };
   // Sub-pairs are taken in blocks: the block's sub-pairs are listed, then the rejections sift
@@ -797,7 +811,12 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   const std::size_t grain = balanced_grain(total, threads, 256, 2048);
   parallel_for_chunks(total, threads, grain, [&](std::size_t begin, std::size_t end) {
     LocalContacts local{spare_sets_.take()};
-    std::array<std::array<const PackedFace*, 2>, kBlock> block;
+    // A block's candidates: the two faces, and where their corners are in x (looked up once).
+    struct Candidate {
+      std::array<const PackedFace*, 2> face;
+      std::array<std::array<const Vec3*, 3>, 2> at;
+    };
+    std::array<Candidate, kBlock> block;
     // Room for a full table row written past the last candidate's codes.
     std::array<std::uint16_t, kBlock * 6 + 8> vf_subs;
     std::array<std::uint16_t, kBlock * 9 + 16> ee_subs;
@@ -811,19 +830,18 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
         if (const std::size_t ahead = i + kBlock - offsets[c]; ahead < chunks[c].size()) {
           // The records of the next block's candidates, read while this block is processed.
           for (const Index f : chunks[c][ahead]) {
-            const auto* r = reinterpret_cast<const char*>(&packed_[static_cast<std::size_t>(f)]);
-            static_assert(sizeof(PackedFace) <= 192);
-            __builtin_prefetch(r);
-            __builtin_prefetch(r + 64);
-            __builtin_prefetch(r + sizeof(PackedFace) - 1);
+            __builtin_prefetch(&packed_[static_cast<std::size_t>(f)]);
           }
         }
         const PackedFace& a = packed_[static_cast<std::size_t>(pair[0])];
         const PackedFace& b = packed_[static_cast<std::size_t>(pair[1])];
-        block[n] = {&a, &b};
+        block[n] = {{&a, &b}, {{{&corner(a, 0), &corner(a, 1), &corner(a, 2)}, {&corner(b, 0), &corner(b, 1), &corner(b, 2)}}}};
         const auto base = static_cast<std::uint16_t>(n << 4);
         // The owned sub-pairs whose boxes meet.
-        const CoarseMasks box = proximity ? coarse_masks(a, b, coarse_half, coarse_full) : CoarseMasks{};
+        const auto axes = [&](const PackedFace& t) {
+          return coarse_axes(coarse_point(t.v[0]), coarse_point(t.v[1]), coarse_point(t.v[2]));
+        };
+        const CoarseMasks box = proximity ? coarse_masks(axes(a), axes(b), coarse_half, coarse_full) : CoarseMasks{};
         if (kinds.vf) {
           const unsigned vkey = (a.vertex_mask | static_cast<unsigned>(b.vertex_mask) << 3) & box.vf;
           for (std::size_t k = 0; k < 8; ++k) vf_subs[nvf + k] = static_cast<std::uint16_t>(base | kVertexFace.codes[vkey][k]);
@@ -839,20 +857,21 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
         }
       }
       if (kinds.vf) {
-        // Corner (code & 3) of one face of the pair, against the other face.
-        const auto sides = [&](std::uint16_t code) {
-          const auto& [a, b] = block[code >> 4];
-          return code & 4u ? std::pair<const PackedFace*, const PackedFace*>{b, a}
-                           : std::pair<const PackedFace*, const PackedFace*>{a, b};
-        };
+        // Corner (code & 3) of one face of the pair (the first, or with bit 2 the second), against
+        // the other face.
         nvf = sift_separated(std::false_type{}, vf_subs.data(), nvf, [&](std::uint16_t code) {
-          const auto [from, t] = sides(code);
-          return geometry::SeparationPoints{&from->p[code & 3u], &t->p[0], &t->p[1], &t->p[2]};
+          const Candidate& m = block[code >> 4];
+          const std::size_t from = code >> 2 & 1u;
+          const auto& t = m.at[from ^ 1u];
+          return geometry::SeparationPoints{m.at[from][code & 3u], t[0], t[1], t[2]};
         });
         for (std::size_t s = 0; s < nvf; ++s) {
-          const auto [from, t] = sides(vf_subs[s]);
-          const std::size_t k = vf_subs[s] & 3u;
-          vf_kernel(from->p[k], from->v[k], *t, static_cast<Index>(t - packed_.data()), local);
+          const Candidate& m = block[vf_subs[s] >> 4];
+          const std::size_t from = vf_subs[s] >> 2 & 1u, k = vf_subs[s] & 3u;
+          const PackedFace* t = m.face[from ^ 1u];
+          const auto& at = m.at[from ^ 1u];
+          vf_kernel(*m.at[from][k], m.face[from]->v[k], *at[0], *at[1], *at[2], static_cast<Index>(t - packed_.data()),
+                    local);
         }
       }
       if (kinds.ee) {
@@ -862,30 +881,33 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
           return std::array<std::size_t, 4>{i2, kNext[i2], j, kNext[j]};
         };
         nee = sift_separated(std::true_type{}, ee_subs.data(), nee, [&](std::uint16_t code) {
-          const auto& [a, b] = block[code >> 4];
+          const auto& at = block[code >> 4].at;
           const auto k = ends(code);
-          return geometry::SeparationPoints{&a->p[k[0]], &a->p[k[1]], &b->p[k[2]], &b->p[k[3]]};
+          return geometry::SeparationPoints{at[0][k[0]], at[0][k[1]], at[1][k[2]], at[1][k[3]]};
         });
         for (std::size_t s = 0; s < nee; ++s) {
-          const auto& [a, b] = block[ee_subs[s] >> 4];
+          const Candidate& m = block[ee_subs[s] >> 4];
+          const PackedFace &a = *m.face[0], &b = *m.face[1];
           const auto k = ends(ee_subs[s]);
-          ee_kernel(a->p[k[0]], a->p[k[1]], a->v[k[0]], a->v[k[1]], a->e[k[0]], b->p[k[2]], b->p[k[3]], b->v[k[2]],
-                    b->v[k[3]], b->e[k[2]], local);
+          ee_kernel(*m.at[0][k[0]], *m.at[0][k[1]], a.v[k[0]], a.v[k[1]], a.e[k[0]], *m.at[1][k[2]], *m.at[1][k[3]],
+                    b.v[k[2]], b.v[k[3]], b.e[k[2]], local);
         }
       }
       if (kinds.tt) {
         for (std::size_t m = 0; m < n; ++m) {
-          const PackedFace& a = *block[m][0];
-          const PackedFace& b = *block[m][1];
+          const PackedFace& a = *block[m].face[0];
+          const PackedFace& b = *block[m].face[1];
           const auto f = static_cast<Index>(&a - packed_.data()), g = static_cast<Index>(&b - packed_.data());
           // No box test first: every broad phase's candidates have boxes that overlap once padded
           // (measured: a test of the boxes padded by pad kept all 432,600 of cloth-ball's, and
           // all of the funnel's for kdop, hash and sap alike).
           ++local.tt_tests;
+          const std::array<Vec3, 3> pa{corner(a, 0), corner(a, 1), corner(a, 2)};
+          const std::array<Vec3, 3> pb{corner(b, 0), corner(b, 1), corner(b, 2)};
           if (f < g) {
-            local.tt_batch.push(f, a.p, g, b.p, local.set.tt);
+            local.tt_batch.push(f, pa, g, pb, local.set.tt);
           } else {
-            local.tt_batch.push(g, b.p, f, a.p, local.set.tt);
+            local.tt_batch.push(g, pb, f, pa, local.set.tt);
           }
         }
       }
@@ -902,17 +924,6 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   const auto orphans_start = std::chrono::steady_clock::now();
   const bool refresh = proximity && wake_orphan_blocks(x, pad, threads);
   stats_.set("orphan_wake_ms", ms_since(orphans_start));
-  // Off a refresh, the awake blocks' box tests run in float lanes on the positions rounded once.
-  if (proximity && !refresh) {
-    coarse_x_.resize(x.size());
-    parallel_for_chunks(x.size(), threads, 8192, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t v = begin; v < end; ++v) {
-        for (std::size_t a = 0; a < 3; ++a) coarse_x_[v][a] = coarse_coordinate(x[v][a]);
-        coarse_x_[v][3] = 0;
-      }
-    });
-  }
-  const auto coarse_point = [&](Index v) { return load4(coarse_x_[static_cast<std::size_t>(v)]); };
   const Scalar kernel_margin = pad - h;
   constexpr Scalar kInf = std::numeric_limits<Scalar>::infinity();
   // NaN-sticky minimum: a NaN bound keeps its block awake.
@@ -982,7 +993,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
     };
     const auto vf_test = [&](std::size_t k, LocalContacts& local, Scalar* sqr_distance = nullptr) {
       const auto [v, g] = orphan_vf_[k];
-      vf_kernel(point(k), v, face(k), g, local, sqr_distance);
+      const PackedFace& t = face(k);
+      vf_kernel(point(k), v, corner(t, 0), corner(t, 1), corner(t, 2), g, local, sqr_distance);
     };
     orphan_pass(
         vf_blocks_, orphan_vf_.size(),
@@ -1004,7 +1016,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
           }
           n = sift_separated(std::false_type{}, list.data(), kept, [&](std::uint16_t code) {
             const PackedFace& t = face(i + code);
-            return geometry::SeparationPoints{&point(i + code), &t.p[0], &t.p[1], &t.p[2]};
+            return geometry::SeparationPoints{&point(i + code), &corner(t, 0), &corner(t, 1), &corner(t, 2)};
           });
           for (std::size_t s = 0; s < n; ++s) vf_test(i + list[s], local);
         },
@@ -1014,7 +1026,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
               [&](std::uint16_t k) { return vertex_box_gap(point(i + k), face(i + k)); },
               [&](std::uint16_t k) {
                 const PackedFace& t = face(i + k);
-                return geometry::separation_bound(geometry::plane_separation(point(i + k), t.p[0], t.p[1], t.p[2]));
+                return geometry::separation_bound(
+                    geometry::plane_separation(point(i + k), corner(t, 0), corner(t, 1), corner(t, 2)));
               },
               vf_test);
         });
@@ -1033,7 +1046,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
               [&](std::uint16_t k) -> const PackedFace& { return packed_[g0 + k]; });
           for (std::size_t s = 0; s < n; ++s) {
             const std::size_t g = g0 + list[s];
-            vf_kernel(p, v, packed_[g], static_cast<Index>(g), local);
+            const PackedFace& t = packed_[g];
+            vf_kernel(p, v, corner(t, 0), corner(t, 1), corner(t, 2), static_cast<Index>(g), local);
           }
         }
       }
