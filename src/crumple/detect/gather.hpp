@@ -8,6 +8,7 @@
 #include <crumple/core/types.hpp>
 
 #include <algorithm>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <utility>
@@ -28,6 +29,7 @@ struct GatherScratch {
   std::vector<const void*> records;
   std::vector<std::int32_t> seconds;
   std::vector<std::size_t> start;  ///< per first criterion: its first place
+  std::vector<std::uint64_t> held;  ///< bit k: first criterion k has items
   /// Per slice of the items and first criterion: how many items, then the next free place.
   std::vector<std::size_t> cursor;
 };
@@ -74,6 +76,7 @@ void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts,
   auto& records = scratch.records;
   auto& seconds = scratch.seconds;
   auto& start = scratch.start;
+  auto& held = scratch.held;
   auto& next = scratch.cursor;
   std::vector<std::size_t> offset(parts.size() + 1, 0);
   for (std::size_t i = 0; i < parts.size(); ++i) {
@@ -130,10 +133,12 @@ void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts,
     }
   });
   start.resize(nk + 1);
+  held.assign((nk + 63) / 64, 0);
   std::size_t place = 0;
   for (std::size_t k = 0; k < nk; ++k) {
     start[k] = place;
     for (std::size_t s = 0; s < slices; ++s) place += std::exchange(next[s * nk + k], place);
+    held[k / 64] |= static_cast<std::uint64_t>(place != start[k]) << (k % 64);
   }
   start[nk] = place;
   records.resize(total);
@@ -162,10 +167,24 @@ void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts,
   }
   bound.push_back(nk);
   constexpr std::size_t kRanked = 128;  // more items under one first criterion: sorted, then copied
+  // The first first criterion from k on that has items (nk if none): the copy below visits those
+  // only, by the bits of `held`. Most may have none: 4.8 k of armadillo's 36.4 k edges are the
+  // first edge of one of its 19.9 k edge-edge contacts, and a loop over every criterion,
+  // branching on its count, took the frame's gather from 0.54 to 0.59 ms (one thread).
+  const auto next_held = [&](std::size_t k) {
+    if (k >= nk) return nk;
+    std::size_t w = k / 64;
+    std::uint64_t bits = held[w] & (~std::uint64_t{0} << (k % 64));
+    while (bits == 0) {
+      if (++w == held.size()) return nk;
+      bits = held[w];
+    }
+    return w * 64 + static_cast<std::size_t>(std::countr_zero(bits));
+  };
   parallel_for_chunks(ranges, threads, 1, [&](std::size_t begin, std::size_t end) {
     std::vector<std::uint64_t> order;  // a large group's (second criterion, item), sorted
     for (std::size_t r = begin; r < end; ++r) {
-      for (std::size_t k = bound[r]; k < std::max(bound[r], bound[r + 1]); ++k) {
+      for (std::size_t k = next_held(bound[r]); k < std::max(bound[r], bound[r + 1]); k = next_held(k + 1)) {
         const std::size_t first = start[k];
         const std::size_t n = start[k + 1] - first;
         // The records are scattered: fetch ahead.
