@@ -1050,12 +1050,23 @@ class KdopTree final : public KdopDetector::Tree {
   /// Leaves a and b (node ids); only a's faces that overlap b's k-DOP are tested against b's
   /// faces (adjacent leaves overlap along their shared boundary only).
   CRUMPLE_SIMD_CLONES void emit_leaf_pair(Index ia, Index ib, std::vector<FacePair>& out) const {
-    const Node& a = nodes_[static_cast<std::size_t>(ia)];
-    const Node& b = nodes_[static_cast<std::size_t>(ib)];
-    std::uint64_t near = overlapping_node(a, ib);
+    std::uint64_t near = overlapping_node(nodes_[static_cast<std::size_t>(ia)], ib);
     if (near == 0) return;
     // b's faces that overlap a's k-DOP: only their lane groups are tested against a's faces.
-    const std::uint64_t near_b = overlapping_node(b, ia);
+    std::uint64_t near_b = overlapping_node(nodes_[static_cast<std::size_t>(ib)], ia);
+    // The side whose near faces make fewer group tests against the other's near groups queries.
+    const auto groups = [](std::uint64_t m) {
+      m |= m >> 4;
+      m |= m >> 2;
+      m |= m >> 1;
+      return std::popcount(m & 0x0101010101010101u);
+    };
+    if (std::popcount(near_b) * groups(near) < std::popcount(near) * groups(near_b)) {
+      std::swap(ia, ib);
+      std::swap(near, near_b);
+    }
+    const Node& a = nodes_[static_cast<std::size_t>(ia)];
+    const Node& b = nodes_[static_cast<std::size_t>(ib)];
     for (; near != 0; near &= near - 1) {
       const Index i = a.first + std::countr_zero(near);
       for (std::uint64_t m = overlapping_members(b, member(a, i - a.first), near_b & ~idle_with(ib, i)); m != 0;
