@@ -837,8 +837,17 @@ class KdopTree final : public KdopDetector::Tree {
       Dop d;
       Box mv = Box::empty();
       if (node.leaf) {
-        d = refit_leaf(node, in, swept, radius, faces.data());
-        fill_lanes(node, faces.data());
+        if constexpr (K == 18) {
+          if (!swept) {
+            d = refit_leaf18(node, in.positions, radius);
+          } else {
+            d = refit_leaf(node, in, swept, radius, faces.data());
+            fill_lanes(node, faces.data());
+          }
+        } else {
+          d = refit_leaf(node, in, swept, radius, faces.data());
+          fill_lanes(node, faces.data());
+        }
         if (moves) {
           for (std::size_t k = leaf_verts_[n]; k < leaf_verts_[n + 1]; ++k) {
             const auto v = static_cast<std::size_t>(verts_[k]);
@@ -871,9 +880,6 @@ class KdopTree final : public KdopDetector::Tree {
   /// current positions into `now_dops_` when swept).
   __attribute__((always_inline)) Dop refit_leaf(const Node& node, const FrameInput& in, bool swept, Scalar radius,
                                                 FloatDop* faces) {
-    if constexpr (K == 18) {
-      if (!swept) return refit_leaf18(node, in.positions, radius, faces);
-    }
     Dop d;
     // Each face's k-DOP straight from its corners (and their previous positions when
     // swept), inflated: the same slabs as merging per-vertex k-DOPs, since rounding
@@ -896,13 +902,14 @@ class KdopTree final : public KdopDetector::Tree {
     return d;
   }
 
-  /// `refit_leaf` for the default k = 18 without sweep, two slabs per SSE2 operation: the same
+  /// `refit_leaf` then `fill_lanes` for the default k = 18 without sweep, the faces' float
+  /// k-DOPs written straight into the leaf's lanes (through a copy they were a third of the
+  /// refit's time), two slabs per SSE2 operation: the same
   /// slabs as the generic path, bit for bit (the projections by the same operations as
   /// `Kdop::along`, x - y as x + (-y), which IEEE defines it to be; minima and maxima that skip
   /// a NaN corner like `extend`; then `inflate`, `merge`, `to_float`). The generic path's scalar
   /// slabs were most of the refit's time (armadillo, one thread: 1.4 ms for k = 18, 0.4 for k = 6).
-  __attribute__((always_inline)) Dop refit_leaf18(const Node& node, std::span<const Vec3> x, Scalar radius,
-                                                  FloatDop* faces) const
+  __attribute__((always_inline)) Dop refit_leaf18(const Node& node, std::span<const Vec3> x, Scalar radius)
     requires(K == 18)
   {
     using D2 = double __attribute__((vector_size(16)));
@@ -940,7 +947,9 @@ class KdopTree final : public KdopDetector::Tree {
           hi[k] = hi[k] < q[k] ? q[k] : hi[k];
         }
       }
-      FloatDop& f = faces[s - node.first];
+      const auto member = static_cast<std::size_t>(s - node.first);
+      Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes) + member / kGroup];
+      const std::size_t l = member % kGroup;
       std::array<D2, kPairs> flo, fhi;
       for (std::size_t k = 0; k < kPairs; ++k) {
         lo[k] -= radius;
@@ -951,8 +960,18 @@ class KdopTree final : public KdopDetector::Tree {
         fhi[k] = rounded(hi[k]);
       }
       for (int j = 0; j < kAxes; ++j) {
-        f.lo[static_cast<std::size_t>(j)] = static_cast<float>(lane(flo, j));
-        f.hi[static_cast<std::size_t>(j)] = static_cast<float>(lane(fhi, j));
+        lanes.lo[static_cast<std::size_t>(j)][l] = static_cast<float>(lane(flo, j));
+        lanes.hi[static_cast<std::size_t>(j)][l] = static_cast<float>(lane(fhi, j));
+      }
+    }
+    // The last group's lanes past the faces: empty.
+    if (const Index used = node.count % kGroup; used != 0) {
+      Lanes& last = lanes_[static_cast<std::size_t>(node.lanes + node.count / kGroup)];
+      for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
+        for (auto l = static_cast<std::size_t>(used); l < static_cast<std::size_t>(kGroup); ++l) {
+          last.lo[j][l] = std::numeric_limits<float>::infinity();
+          last.hi[j][l] = -std::numeric_limits<float>::infinity();
+        }
       }
     }
     typename Dop::Slabs mins, maxs;
