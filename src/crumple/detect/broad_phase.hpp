@@ -281,9 +281,12 @@ class ExactDetector : public Detector {
   /// candidate pair touches two lines. The corners' positions are read from the frame's
   /// positions and their float roundings from `coarse_x_`. (The records held copies of both,
   /// written every frame: 120 bytes a face, 2.9 MB on armadillo, whose positions and float
-  /// corners are 0.5 MB. Reading them in place made armadillo's narrow phase 6-10% faster on
-  /// one thread, and rod-twist's, whose 0.6 M contacts read more corners from larger arrays,
-  /// 2-3% slower.)
+  /// corners are 0.5 MB. Reading them in place changed the narrow phase, one thread, kdop:
+  /// armadillo 4.3-4.6 -> 4.0-4.1 ms, n-body 10.5 -> 8.8-9.1, funnel 3.5-3.6 -> 3.4, and the
+  /// scenes with many candidates a face, whose corners then come from arrays past the L2
+  /// cache: cloth-ball 68.0-68.3 -> 69.7-72.0, rod-twist 67.5-68.5 -> 69.7-71.2; `hash`, whose
+  /// candidates come by cells, cloth-ball 106 -> 127-134. Copying the corners only on frames
+  /// with more than two candidates a face did not win those back: kdop cloth-ball 71.4-74.6.)
   struct alignas(32) PackedFace {
     Face v;                        ///< corner ids
     std::array<Index, 3> e;        ///< side ids (side k joins corners k and k+1)
