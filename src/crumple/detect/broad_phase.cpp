@@ -634,6 +634,14 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   const auto coarse_point = [&](Index v) { return load4(coarse_x_[static_cast<std::size_t>(v)]); };
   // Corner k of face t, at x.
   const auto corner = [&](const PackedFace& t, std::size_t k) -> const Vec3& { return narrow::at(x, t.v[k]); };
+  if (kinds.tt) {
+    face_corners_.resize(nf);
+    parallel_for_chunks(nf, threads, balanced_grain(nf, threads, 512, 4096), [&](std::size_t begin, std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f) {
+        for (std::size_t k = 0; k < 3; ++k) face_corners_[f][k] = corner(packed_[f], k);
+      }
+    });
+  }
   // The box rejections of the candidates (`coarse_masks`) and of the orphans, in float lanes,
   // unless the coordinates or the pad are too large for floats (or NaN): then infinite pads,
   // no box rejects, and the plane and line tests and the kernels decide alone.
@@ -831,6 +839,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
           // The records of the next block's candidates, read while this block is processed.
           for (const Index f : chunks[c][ahead]) {
             __builtin_prefetch(&packed_[static_cast<std::size_t>(f)]);
+            if (kinds.tt) {
+              const auto* r = reinterpret_cast<const char*>(&face_corners_[static_cast<std::size_t>(f)]);
+              __builtin_prefetch(r);
+              __builtin_prefetch(r + sizeof(face_corners_[0]) - 1);
+            }
           }
         }
         const PackedFace& a = packed_[static_cast<std::size_t>(pair[0])];
@@ -902,8 +915,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
           // (measured: a test of the boxes padded by pad kept all 432,600 of cloth-ball's, and
           // all of the funnel's for kdop, hash and sap alike).
           ++local.tt_tests;
-          const std::array<Vec3, 3> pa{corner(a, 0), corner(a, 1), corner(a, 2)};
-          const std::array<Vec3, 3> pb{corner(b, 0), corner(b, 1), corner(b, 2)};
+          const std::array<Vec3, 3>& pa = face_corners_[static_cast<std::size_t>(f)];
+          const std::array<Vec3, 3>& pb = face_corners_[static_cast<std::size_t>(g)];
           if (f < g) {
             local.tt_batch.push(f, pa, g, pb, local.set.tt);
           } else {
