@@ -848,7 +848,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
         }
         const PackedFace& a = packed_[static_cast<std::size_t>(pair[0])];
         const PackedFace& b = packed_[static_cast<std::size_t>(pair[1])];
-        block[n] = {{&a, &b}, {{{&corner(a, 0), &corner(a, 1), &corner(a, 2)}, {&corner(b, 0), &corner(b, 1), &corner(b, 2)}}}};
+        block[n].face = {&a, &b};
+        block[n].at = {{{&corner(a, 0), &corner(a, 1), &corner(a, 2)}, {&corner(b, 0), &corner(b, 1), &corner(b, 2)}}};
         const auto base = static_cast<std::uint16_t>(n << 4);
         // The owned sub-pairs whose boxes meet.
         const auto axes = [&](const PackedFace& t) {
