@@ -837,17 +837,7 @@ class KdopTree final : public KdopDetector::Tree {
       Dop d;
       Box mv = Box::empty();
       if (node.leaf) {
-        if constexpr (K == 18) {
-          if (!swept) {
-            d = refit_leaf18(node, in.positions, radius);
-          } else {
-            d = refit_leaf(node, in, swept, radius, faces.data());
-            fill_lanes(node, faces.data());
-          }
-        } else {
-          d = refit_leaf(node, in, swept, radius, faces.data());
-          fill_lanes(node, faces.data());
-        }
+        d = refit_leaf_lanes(node, in, swept, radius, faces.data());
         if (moves) {
           for (std::size_t k = leaf_verts_[n]; k < leaf_verts_[n + 1]; ++k) {
             const auto v = static_cast<std::size_t>(verts_[k]);
@@ -874,6 +864,18 @@ class KdopTree final : public KdopDetector::Tree {
     if (const auto ahead = static_cast<std::size_t>(s) + 4; ahead < slot_faces_.size()) {
       for (const Index v : slot_faces_[ahead]) __builtin_prefetch(&x[static_cast<std::size_t>(v)]);
     }
+  }
+
+  /// Leaf `node`'s k-DOP, and its faces' float k-DOPs into its lanes (through `faces`, scratch
+  /// for up to 64 float k-DOPs, except on `refit_leaf18`'s path).
+  __attribute__((always_inline)) Dop refit_leaf_lanes(const Node& node, const FrameInput& in, bool swept,
+                                                      Scalar radius, FloatDop* faces) {
+    if constexpr (K == 18) {
+      if (!swept) return refit_leaf18(node, in.positions, radius);
+    }
+    const Dop d = refit_leaf(node, in, swept, radius, faces);
+    fill_lanes(node, faces);
+    return d;
   }
 
   /// Leaf `node`'s k-DOP, and its faces' float k-DOPs into `faces` (and their k-DOPs at the
@@ -964,16 +966,7 @@ class KdopTree final : public KdopDetector::Tree {
         lanes.hi[static_cast<std::size_t>(j)][l] = static_cast<float>(lane(fhi, j));
       }
     }
-    // The last group's lanes past the faces: empty.
-    if (const Index used = node.count % kGroup; used != 0) {
-      Lanes& last = lanes_[static_cast<std::size_t>(node.lanes + node.count / kGroup)];
-      for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
-        for (auto l = static_cast<std::size_t>(used); l < static_cast<std::size_t>(kGroup); ++l) {
-          last.lo[j][l] = std::numeric_limits<float>::infinity();
-          last.hi[j][l] = -std::numeric_limits<float>::infinity();
-        }
-      }
-    }
+    empty_lanes_past_members(node);
     typename Dop::Slabs mins, maxs;
     for (int j = 0; j < kAxes; ++j) {
       mins[static_cast<std::size_t>(j)] = lane(node_lo, j);
@@ -994,18 +987,27 @@ class KdopTree final : public KdopDetector::Tree {
   /// Writes the float k-DOPs of the node's members (faces of a leaf, children otherwise),
   /// `members[0, count)`, into its lanes, eight per group; lanes past `count` are empty.
   void fill_lanes(const Node& node, const FloatDop* members) {
-    const F8 none_lo = std::numeric_limits<float>::infinity() - F8{};
-    const F8 none_hi = -std::numeric_limits<float>::infinity() - F8{};
-    for (Index g = 0; g < (node.count + kGroup - 1) / kGroup; ++g) {
-      Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
-      lanes.lo.fill(none_lo);
-      lanes.hi.fill(none_hi);
-      for (Index l = 0; l < std::min<Index>(kGroup, node.count - kGroup * g); ++l) {
-        const FloatDop& f = members[kGroup * g + l];
-        for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
-          lanes.lo[j][l] = f.lo[j];
-          lanes.hi[j][l] = f.hi[j];
-        }
+    for (Index i = 0; i < node.count; ++i) {
+      Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + i / kGroup)];
+      const auto l = static_cast<std::size_t>(i % kGroup);
+      const FloatDop& f = members[i];
+      for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
+        lanes.lo[j][l] = f.lo[j];
+        lanes.hi[j][l] = f.hi[j];
+      }
+    }
+    empty_lanes_past_members(node);
+  }
+
+  /// Empties (min +inf, max -inf) the lanes of the node's last group past its members.
+  void empty_lanes_past_members(const Node& node) {
+    const Index used = node.count % kGroup;
+    if (used == 0) return;
+    Lanes& last = lanes_[static_cast<std::size_t>(node.lanes + node.count / kGroup)];
+    for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
+      for (auto l = static_cast<std::size_t>(used); l < static_cast<std::size_t>(kGroup); ++l) {
+        last.lo[j][l] = std::numeric_limits<float>::infinity();
+        last.hi[j][l] = -std::numeric_limits<float>::infinity();
       }
     }
   }
