@@ -301,7 +301,8 @@ class ExactDetector : public Detector {
   /// them in place.
   std::vector<std::array<Vec3, 3>> face_corners_;
   /// Per vertex, this frame's position rounded to float (then 0), for the box tests of the
-  /// candidates and of the orphans, in float lanes.
+  /// candidates and of the orphans, in float lanes; made by `detect` on frames that ask for
+  /// proximity, in its pass for the frame's magnitude.
   std::vector<std::array<float, 4>> coarse_x_;
 };
 
