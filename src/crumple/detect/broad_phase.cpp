@@ -1143,9 +1143,33 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
     ee_parts.push_back({&p.set.ee, &p.ee_keys});
     tt_parts.push_back({&p.set.tt, &p.tt_keys});
   }
-  detail::gather_sorted(out.vf, vf_parts, topo.num_vertices(), threads, gather_);
-  detail::gather_sorted(out.ee, ee_parts, topo.num_edges(), threads, gather_);
-  detail::gather_sorted(out.tt, tt_parts, static_cast<Index>(nf), threads, gather_);
+  const auto count = [](const auto& lists) {
+    std::size_t n = 0;
+    for (const auto& list : lists) n += list.records->size();
+    return n;
+  };
+  if (resolve_threads(threads) > 1 && detail::gather_places_serially(count(vf_parts)) &&
+      detail::gather_places_serially(count(ee_parts)) && detail::gather_places_serially(count(tt_parts))) {
+    // Few contacts: each kind's places are found on one thread, so the kinds are placed side by
+    // side, the vertex-face and triangle contacts copied there too, then the edge-edge ones
+    // (most of them) by every thread. (One after the other, the second thread waited 0.24 ms of
+    // armadillo's 3.9 ms frame while the first placed them.)
+    parallel_for_chunks(2, threads, 1, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t task = begin; task < end; ++task) {
+        if (task == 0) {
+          detail::gather_place(out.ee, ee_parts, topo.num_edges(), threads, gather_);
+        } else {
+          detail::gather_sorted(out.vf, vf_parts, topo.num_vertices(), threads, gather_other_);
+          detail::gather_sorted(out.tt, tt_parts, static_cast<Index>(nf), threads, gather_other_);
+        }
+      }
+    });
+    detail::gather_copy(out.ee, threads, gather_);
+  } else {
+    detail::gather_sorted(out.vf, vf_parts, topo.num_vertices(), threads, gather_);
+    detail::gather_sorted(out.ee, ee_parts, topo.num_edges(), threads, gather_);
+    detail::gather_sorted(out.tt, tt_parts, static_cast<Index>(nf), threads, gather_);
+  }
   for (KeyedContacts& p : parts) spare_sets_.give(std::move(p));
   stats_.set("sort_ms", ms_since(gather_start));
   stats_.set("orphan_vf", static_cast<double>(orphan_vf_.size()));

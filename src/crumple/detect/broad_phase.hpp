@@ -277,6 +277,7 @@ class ExactDetector : public Detector {
   std::vector<Index> edge_rank_;                 ///< each edge's rank in (first, second vertex) order
   Spares<KeyedContacts> spare_sets_;             ///< per-chunk contacts and their keys, for reuse
   detail::GatherScratch gather_;  ///< buffers of the final gather, kept across frames
+  detail::GatherScratch gather_other_;  ///< of the vertex-face and triangle contacts' beside it
   /// What the narrow phase reads of one face's topology, in one 32-byte record, so that a
   /// candidate pair touches two lines. The corners' positions are read from the frame's
   /// positions and their float roundings from `coarse_x_`. (The records held copies of both,

@@ -32,7 +32,15 @@ struct GatherScratch {
   std::vector<std::uint64_t> held;  ///< bit k: first criterion k has items
   /// Per slice of the items and first criterion: how many items, then the next free place.
   std::vector<std::size_t> cursor;
+  // What `gather_place` leaves for `gather_copy`:
+  bool listed = false;             ///< the records are `items`, sorted (else counted)
+  std::size_t criteria = 0;        ///< first criteria, [0, criteria)
+  std::vector<std::size_t> bound;  ///< ranges of first criteria that the copy's threads claim
 };
+
+/// True when `gather_place` places `total` records on the calling thread alone, whatever the
+/// thread count: counting them in slices costs more than it saves.
+inline bool gather_places_serially(std::size_t total) { return total < (std::size_t{1} << 16); }
 
 /// One list of records to gather and their keys (keys[i]: records[i]'s place in the order, as
 /// `gather_sorted` says), listed by whoever wrote the records.
@@ -42,7 +50,10 @@ struct KeyedList {
   const std::vector<std::uint64_t>* keys;
 };
 
-/// Gathers the records of every list in `parts` into `dest` in the order of their keys. A key
+/// `gather_sorted` (below) gathers the records of every list in `parts` into `dest` in the
+/// order of their keys, in two steps that a caller may also run apart: `gather_place` finds
+/// each record's place (and sizes dest), `gather_copy` copies the records there (they must
+/// still be where they were). A key
 /// is a record's place in that order as one integer, first criterion << 32 | second, the first
 /// in [0, keys), the second in [0, 2^31) (an `Index`); no two records may have the same key.
 ///
@@ -69,8 +80,8 @@ struct KeyedList {
 /// the copy changed nothing.) Fewer records than keys / 8 are sorted by key instead of counted:
 /// counting would cost more, over every key.
 template <class T>
-void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, Index keys, int threads,
-                   GatherScratch& scratch) {
+void gather_place(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, Index keys, int threads,
+                  GatherScratch& scratch) {
   using Item = GatherScratch::Item;
   auto& items = scratch.items;
   auto& records = scratch.records;
@@ -78,6 +89,9 @@ void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts,
   auto& start = scratch.start;
   auto& held = scratch.held;
   auto& next = scratch.cursor;
+  auto& bound = scratch.bound;
+  scratch.listed = false;
+  scratch.criteria = 0;
   std::vector<std::size_t> offset(parts.size() + 1, 0);
   for (std::size_t i = 0; i < parts.size(); ++i) {
     CRUMPLE_ASSERT(parts[i].keys->size() == parts[i].records->size());
@@ -96,23 +110,13 @@ void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts,
       for (; j < stop; ++j) f(*key++, record++);
     }
   };
-  const auto copy = [&](const Item* from, std::size_t begin, std::size_t end) {
-    for (std::size_t j = begin; j < end; ++j) {
-      if (j + 48 < end) {  // the records are scattered: fetch ahead
-        const auto* ahead = static_cast<const char*>(from[j + 48].record);
-        __builtin_prefetch(ahead);
-        __builtin_prefetch(ahead + sizeof(T) - 1);
-      }
-      dest[j] = *static_cast<const T*>(from[j].record);
-    }
-  };
   const auto by_key = [](const Item& a, const Item& b) { return a.key < b.key; };
   if (total < static_cast<std::size_t>(keys) / 8) {
     items.resize(total);
     Item* to = items.data();
     each_item(0, total, [&to](std::uint64_t key, const T* record) { *to++ = {key, record}; });
     std::sort(items.begin(), items.end(), by_key);
-    parallel_for_chunks(total, threads, 4096, [&](std::size_t begin, std::size_t end) { copy(items.data(), begin, end); });
+    scratch.listed = true;
     return;
   }
   // Each slice of the items is counted, then scattered, by one thread; slice s's items of first
@@ -120,7 +124,7 @@ void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts,
   const auto workers = static_cast<std::size_t>(resolve_threads(threads));
   // (A few tens of thousands of items: one slice, counted and scattered without starting
   // threads, which costs more than it saves there.)
-  const std::size_t slices = total < (std::size_t{1} << 16) ? 1 : std::min<std::size_t>(workers, 4);
+  const std::size_t slices = gather_places_serially(total) ? 1 : std::min<std::size_t>(workers, 4);
   const auto nk = static_cast<std::size_t>(keys);
   const auto slice = [&](std::size_t s) { return std::pair{total * s / slices, total * (s + 1) / slices}; };
   next.resize(slices * nk);
@@ -160,12 +164,42 @@ void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts,
   // cache) does fewer (with one range per thread, one of two threads waited a quarter of the
   // copy's time on armadillo, a tenth on cloth-ball).
   const std::size_t ranges = workers == 1 ? 1 : 4 * workers;
-  std::vector<std::size_t> bound{0};
+  bound.assign(1, 0);
   for (std::size_t r = 1; r < ranges; ++r) {
     const auto it = std::lower_bound(start.begin(), start.end(), total * r / ranges);
     bound.push_back(std::max(bound.back(), static_cast<std::size_t>(it - start.begin())));
   }
   bound.push_back(nk);
+  scratch.criteria = nk;
+}
+
+/// Second step of `gather_sorted`: copies the records placed by `gather_place` into dest.
+template <class T>
+void gather_copy(std::vector<T>& dest, int threads, GatherScratch& scratch) {
+  using Item = GatherScratch::Item;
+  const std::size_t total = dest.size();
+  if (total == 0) return;
+  if (scratch.listed) {
+    const Item* from = scratch.items.data();
+    parallel_for_chunks(total, threads, 4096, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t j = begin; j < end; ++j) {
+        if (j + 48 < end) {  // the records are scattered: fetch ahead
+          const auto* ahead = static_cast<const char*>(from[j + 48].record);
+          __builtin_prefetch(ahead);
+          __builtin_prefetch(ahead + sizeof(T) - 1);
+        }
+        dest[j] = *static_cast<const T*>(from[j].record);
+      }
+    });
+    return;
+  }
+  const auto& records = scratch.records;
+  const auto& seconds = scratch.seconds;
+  const auto& start = scratch.start;
+  const auto& held = scratch.held;
+  const auto& bound = scratch.bound;
+  const std::size_t nk = scratch.criteria;
+  const std::size_t ranges = bound.size() - 1;
   constexpr std::size_t kRanked = 128;  // more items under one first criterion: sorted, then copied
   // The first first criterion from k on that has items (nk if none): the copy below visits those
   // only, by the bits of `held`. Most may have none: 4.8 k of armadillo's 36.4 k edges are the
@@ -227,6 +261,14 @@ void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts,
       }
     }
   });
+}
+
+/// Both steps (see `gather_place`).
+template <class T>
+void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, Index keys, int threads,
+                   GatherScratch& scratch) {
+  gather_place(dest, parts, keys, threads, scratch);
+  gather_copy(dest, threads, scratch);
 }
 
 }  // namespace crumple::detail
