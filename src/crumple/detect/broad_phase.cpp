@@ -93,6 +93,14 @@ __attribute__((always_inline)) inline unsigned lanes3(const I4& v) {
   return (v[0] != 0 ? 1u : 0u) | (v[1] != 0 ? 2u : 0u) | (v[2] != 0 ? 4u : 0u);
 #endif
 }
+/// 1 when every lane of v is true (all ones), else 0.
+__attribute__((always_inline)) inline unsigned all_lanes(const I4& v) {
+#if defined(__SSE__)
+  return (static_cast<unsigned>(__builtin_ia32_movmskps(std::bit_cast<F4>(v))) + 1) >> 4;
+#else
+  return (v[0] != 0) & (v[1] != 0) & (v[2] != 0) & (v[3] != 0) ? 1u : 0u;
+#endif
+}
 __attribute__((always_inline)) inline F4 min4(const F4& a, const F4& b) { return a < b ? a : b; }
 __attribute__((always_inline)) inline F4 max4(const F4& a, const F4& b) { return a > b ? a : b; }
 template <int L>
@@ -1035,7 +1043,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
             for (const std::size_t run_end = k + vf_blocks_.runs[r]; k < run_end; ++k) {
               const F4 p = coarse_point(orphan_vf_[i + k][0]);
               list[kept] = static_cast<std::uint16_t>(k);
-              kept += lanes3((lo <= p) & (p <= hi)) == 7u ? 1u : 0u;
+              kept += all_lanes((lo <= p) & (p <= hi));  // lane 3: 0 in [-pad, pad]
             }
           }
           n = sift_separated(std::false_type{}, list.data(), kept, [&](std::uint16_t code) {
@@ -1093,20 +1101,21 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
     orphan_pass(
         ee_blocks_, orphan_ee_.size(),
         [&](std::size_t i, std::size_t n, LocalContacts& local) {
-          // The box sift (the half-padded edge boxes meet) run by run, in float lanes: a run's
-          // first edge is bounded once.
+          // The box sift run by run, in float lanes: the first edge's box, bounded once for its
+          // run and padded by the whole pad, meets the second edge's (as the vertex-face sift's
+          // face box holds the point: the same rounding margin, `coarse_pad`).
           std::array<std::uint16_t, kBlock> list;
           const std::size_t b = i / kOrphanBlock;
           std::size_t kept = 0, k = 0;
           for (std::size_t r = ee_blocks_.run_begin[b]; r < ee_blocks_.run_begin[b + 1]; ++r) {
             const OrphanEdges& first = orphan_ee_[i + k];
             const F4 a0 = coarse_point(first.a[0]), a1 = coarse_point(first.a[1]);
-            const F4 alo = min4(a0, a1) - coarse_half, ahi = max4(a0, a1) + coarse_half;
+            const F4 alo = min4(a0, a1) - coarse_full, ahi = max4(a0, a1) + coarse_full;
             for (const std::size_t run_end = k + ee_blocks_.runs[r]; k < run_end; ++k) {
               const OrphanEdges& o = orphan_ee_[i + k];
               const F4 b0 = coarse_point(o.b[0]), b1 = coarse_point(o.b[1]);
               list[kept] = static_cast<std::uint16_t>(k);
-              kept += lanes3((alo <= max4(b0, b1) + coarse_half) & (min4(b0, b1) - coarse_half <= ahi)) == 7u ? 1u : 0u;
+              kept += all_lanes((alo <= max4(b0, b1)) & (min4(b0, b1) <= ahi));  // lane 3: 0 in [-pad, pad]
             }
           }
           n = sift_separated(std::true_type{}, list.data(), kept, [&](std::uint16_t code) { return ends(i + code); });
