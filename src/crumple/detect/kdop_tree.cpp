@@ -817,11 +817,12 @@ class KdopTree final : public KdopDetector::Tree {
     for (std::size_t l = levels_.size(); l-- > 0;) {
       const auto [lb, le] = levels_[l];
       const auto count = static_cast<std::size_t>(le - lb);
-      // Chunks of about 2048 faces on a level with leaves (chunks of 1024 leaves held the whole
-      // of a 20k-face mesh, refitted on one thread), of 64 nodes above (with 1024, armadillo's
-      // 256 nodes above its leaves took 30 us on one thread while the other waited).
+      // Chunks of about 2048 leaf faces (chunks of 1024 leaves held the whole of a 20k-face mesh,
+      // refitted on one thread), and of at most 64 nodes: a level that holds few leaves is
+      // mostly inner nodes (armadillo's 256 nodes above its leaves, with a few leaves among them,
+      // were one chunk, 30 us on one thread while the other waited).
       const auto leaf_faces = static_cast<std::size_t>(level_leaf_faces_[l]);
-      const std::size_t grain = leaf_faces > 0 ? std::max<std::size_t>(1, 2048 * count / leaf_faces) : 64;
+      const std::size_t grain = std::clamp<std::size_t>(leaf_faces > 0 ? 2048 * count / leaf_faces : 64, 1, 64);
       parallel_for_chunks(count, in.threads, grain, [&](std::size_t begin, std::size_t end) {
         refit_nodes(static_cast<std::size_t>(lb) + begin, static_cast<std::size_t>(lb) + end, in, swept, radius, moves);
       });
