@@ -1155,11 +1155,32 @@ class KdopTree final : public KdopDetector::Tree {
       return;
     }
     for (Index c = node.first; c < node.first + node.count; ++c) self<kUnits>(c, w);
+    each_child_pair(node, [&](Index c, Index d) { pair<kUnits>(c, d, w); });
+  }
+
+  /// Calls f(c, d) for each pair of children c < d of the inner node whose k-DOPs may overlap:
+  /// the pairs that `self` descends to (and that `traverse` splits into tasks).
+  template <class F>
+  __attribute__((always_inline)) void each_child_pair(const Node& node, const F& f) const {
     for (Index i = 0; i + 1 < node.count; ++i) {
       const Index c = node.first + i;
       for (std::uint64_t m = overlapping_node(node, c) >> (i + 1); m != 0; m &= m - 1) {
-        pair<kUnits>(c, c + 1 + std::countr_zero(m), w);
+        f(c, c + 1 + std::countr_zero(m));
       }
+    }
+  }
+
+  /// Nodes a and b, not both leaves: calls f for each pair that `pair(a, b)` descends to, the
+  /// larger inner node's children whose k-DOPs may overlap the other node's (and that `traverse`
+  /// splits into tasks).
+  template <class F>
+  __attribute__((always_inline)) void each_descent(Index a, Index b, const F& f) const {
+    const Node& na = nodes_[static_cast<std::size_t>(a)];
+    const Node& nb = nodes_[static_cast<std::size_t>(b)];
+    if (na.leaf || (!nb.leaf && nb.faces > na.faces)) {
+      for (std::uint64_t m = overlapping_node(nb, a); m != 0; m &= m - 1) f(a, nb.first + std::countr_zero(m));
+    } else {
+      for (std::uint64_t m = overlapping_node(na, b); m != 0; m &= m - 1) f(na.first + std::countr_zero(m), b);
     }
   }
 
@@ -1173,14 +1194,8 @@ class KdopTree final : public KdopDetector::Tree {
     const Node& nb = nodes_[static_cast<std::size_t>(b)];
     if (na.leaf && nb.leaf) {
       emit_leaf_pair(a, b, w.out);
-    } else if (na.leaf || (!nb.leaf && nb.faces > na.faces)) {
-      for (std::uint64_t m = overlapping_node(nb, a); m != 0; m &= m - 1) {
-        pair<kUnits>(a, nb.first + std::countr_zero(m), w);
-      }
     } else {
-      for (std::uint64_t m = overlapping_node(na, b); m != 0; m &= m - 1) {
-        pair<kUnits>(na.first + std::countr_zero(m), b, w);
-      }
+      each_descent(a, b, [&](Index c, Index d) { pair<kUnits>(c, d, w); });
     }
   }
 
@@ -1223,8 +1238,8 @@ class KdopTree final : public KdopDetector::Tree {
     // At least 64 tasks a thread, which the threads claim as they go. The splitting is serial,
     // and the last round before 256 a thread was 45 of the 60 us that it took on armadillo
     // (288 -> 1,087 tasks; the traversal is 1.2 ms on two threads), while the other thread
-    // waited. The node pairs are split by the float lane tests of the recursion (`self`,
-    // `pair`), which are also cheaper than the nodes' double k-DOPs one pair at a time.
+    // waited. The node pairs are split as the recursion descends (`each_child_pair`,
+    // `each_descent`), by float lane tests, cheaper than the nodes' double k-DOPs pair by pair.
     const std::size_t target = resolve_threads(threads) > 1 ? 64 * static_cast<std::size_t>(resolve_threads(threads)) : 1;
     for (int round = 0; round < 16 && tasks.size() < target; ++round) {
       std::vector<std::array<Index, 2>> next;
@@ -1242,25 +1257,12 @@ class KdopTree final : public KdopDetector::Tree {
           if (culled(a)) continue;
           expanded = true;
           for (Index c = na.first; c < na.first + na.count; ++c) next.push_back({c, c});
-          for (Index i = 0; i + 1 < na.count; ++i) {
-            const Index c = na.first + i;
-            for (std::uint64_t m = overlapping_node(na, c) >> (i + 1); m != 0; m &= m - 1) {
-              next.push_back({c, c + 1 + std::countr_zero(m)});
-            }
-          }
+          each_child_pair(na, [&](Index c, Index d) { next.push_back({c, d}); });
         } else if ((na.leaf && nb.leaf) || unit) {
           next.push_back({a, b});
         } else {
           expanded = true;
-          if (na.leaf || (!nb.leaf && nb.faces > na.faces)) {
-            for (std::uint64_t m = overlapping_node(nb, a); m != 0; m &= m - 1) {
-              next.push_back({a, nb.first + std::countr_zero(m)});
-            }
-          } else {
-            for (std::uint64_t m = overlapping_node(na, b); m != 0; m &= m - 1) {
-              next.push_back({na.first + std::countr_zero(m), b});
-            }
-          }
+          each_descent(a, b, [&](Index c, Index d) { next.push_back({c, d}); });
         }
       }
       tasks = std::move(next);
