@@ -41,7 +41,9 @@ std::vector<std::vector<Record>> make_parts(std::mt19937& rng, Index keys, std::
   return out;
 }
 
-void expect_gathered(const std::vector<std::vector<Record>>& lists, Index keys, int threads) {
+// `shared`: a scratch kept from earlier calls (else a fresh one).
+void expect_gathered(const std::vector<std::vector<Record>>& lists, Index keys, int threads,
+                     detail::GatherScratch* shared = nullptr) {
   std::vector<std::vector<std::uint64_t>> keys_of(lists.size());
   std::vector<detail::KeyedList<Record>> parts;
   std::vector<Record> want;
@@ -51,7 +53,8 @@ void expect_gathered(const std::vector<std::vector<Record>>& lists, Index keys, 
     want.insert(want.end(), lists[i].begin(), lists[i].end());
   }
   std::sort(want.begin(), want.end(), [](const Record& a, const Record& b) { return a.key() < b.key(); });
-  detail::GatherScratch scratch;
+  detail::GatherScratch fresh;
+  detail::GatherScratch& scratch = shared != nullptr ? *shared : fresh;
   std::vector<Record> got{{7, 7, 7}};  // stale content is replaced
   for (int round = 0; round < 2; ++round) {  // the scratch is reused
     detail::gather_sorted(got, parts, keys, threads, scratch);
@@ -118,6 +121,22 @@ TEST(Gather, EmptyAndSingle) {
   std::vector<Record> one;
   for (Index s = 500; s > 0; --s) one.push_back({2, s, static_cast<double>(s)});
   expect_gathered({one}, 4, 2);
+}
+
+TEST(Gather, OneScratchAcrossDifferentFrames) {
+  // The counts are put back to 0 only for the first criteria that had records: a scratch kept
+  // across calls whose records fall under other criteria, with other key counts, other slice
+  // counts, and the sorted path in between, must still place every record.
+  std::mt19937 rng(5105);
+  for (int threads : {1, 2, 3}) {
+    detail::GatherScratch scratch;
+    expect_gathered(make_parts(rng, 1000, 20000, 7), 1000, threads, &scratch);
+    expect_gathered(make_parts(rng, 1000, 9000, 3), 1000, threads, &scratch);
+    expect_gathered(make_parts(rng, 20000, 70000, 11), 20000, threads, &scratch);
+    expect_gathered(make_parts(rng, 1 << 20, 5000, 9), 1 << 20, threads, &scratch);
+    expect_gathered(make_parts(rng, 20000, 30000, 5), 20000, threads, &scratch);
+    expect_gathered(make_parts(rng, 1000, 20000, 2), 1000, threads, &scratch);
+  }
 }
 
 }  // namespace
