@@ -1110,9 +1110,15 @@ class KdopTree final : public KdopDetector::Tree {
                                                                    std::uint64_t only = ~std::uint64_t{0}) const {
     // The empty lanes past `count` overlap nothing but a NaN k-DOP: masked.
     if (node.count < 64) only &= (std::uint64_t{1} << node.count) - 1;
+    // Bit g: group g has a member in `only`; the loop visits those only (a test per group of
+    // whether it had was a third of the traversal's branch mispredictions on armadillo).
+    std::uint64_t groups = only | only >> 4;
+    groups |= groups >> 2;
+    groups |= groups >> 1;
+    groups = (groups & 0x0101010101010101u) * 0x0102040810204080u >> 56;
     std::uint64_t mask = 0;
-    for (Index g = 0; g < (node.count + kGroup - 1) / kGroup; ++g) {
-      if (((only >> (kGroup * g)) & 0xFFu) == 0) continue;
+    for (; groups != 0; groups &= groups - 1) {
+      const int g = std::countr_zero(groups);
       const Lanes& lanes = lanes_[static_cast<std::size_t>(node.lanes + g)];
       I8 apart{};
       for (std::size_t j = 0; j < static_cast<std::size_t>(kAxes); ++j) {
