@@ -1093,10 +1093,17 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
       return std::array<const Vec3*, 4>{&narrow::at(x, o.a[0]), &narrow::at(x, o.a[1]), &narrow::at(x, o.b[0]),
                                         &narrow::at(x, o.b[1])};
     };
+    // The pairs are in the kernel's order already (first edge < second, each edge as the mesh
+    // stores it): queued as they are, unless the squared distance is wanted.
     const auto ee_test = [&](std::size_t k, LocalContacts& local, Scalar* sqr_distance = nullptr) {
       const OrphanEdges& o = orphan_ee_[k];
       const auto p = ends(k);
-      ee_kernel(*p[0], *p[1], o.a[0], o.a[1], o.e[0], *p[2], *p[3], o.b[0], o.b[1], o.e[1], local, sqr_distance);
+      if (sqr_distance == nullptr) {
+        ++local.ee_tests;
+        local.ee_batch.push_in_order(o.e[0], o.a, *p[0], *p[1], o.e[1], o.b, *p[2], *p[3], h2, local.set.ee);
+      } else {
+        ee_kernel(*p[0], *p[1], o.a[0], o.a[1], o.e[0], *p[2], *p[3], o.b[0], o.b[1], o.e[1], local, sqr_distance);
+      }
     };
     orphan_pass(
         ee_blocks_, orphan_ee_.size(),

@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -110,22 +111,49 @@ struct EdgePair {
   /// Makes this pair `ordered(e, u0, ...)`, field by field (`EdgeEdgeBatch::push` fills its
   /// queue's slot so: a pair built first and then copied was read back with 16-byte loads from
   /// its 4-byte stores, a failed store forwarding on every push).
+  /// Every choice is a select by a mask, without a branch: which way round the edges come is
+  /// unpredictable, and std::min's and std::max's references, the choice of a whole Edge and
+  /// even `c ? &x0 : &x1` compiled to branches (a tenth of armadillo's frame's branch
+  /// mispredictions).
   void set(Index e, Index u0, Index u1, const Vec3& x0, const Vec3& x1, Index f, Index w0, Index w1, const Vec3& y0,
            const Vec3& y1) {
-    const Edge a{std::min(u0, u1), std::max(u0, u1)}, b{std::min(w0, w1), std::max(w0, w1)};
-    const Vec3* a0 = u0 < u1 ? &x0 : &x1;
-    const Vec3* a1 = u0 < u1 ? &x1 : &x0;
-    const Vec3* b0 = w0 < w1 ? &y0 : &y1;
-    const Vec3* b1 = w0 < w1 ? &y1 : &y0;
-    const bool first = e < f;
-    e0 = first ? e : f;
-    e1 = first ? f : e;
-    ea = first ? a : b;
-    eb = first ? b : a;
-    p0 = first ? a0 : b0;
-    p1 = first ? a1 : b1;
-    q0 = first ? b0 : a0;
-    q1 = first ? b1 : a1;
+    const auto mask = [](bool c) { return std::uintptr_t{0} - static_cast<std::uintptr_t>(c); };
+    const auto pick = [](std::uintptr_t m, const Vec3* t, const Vec3* f) {
+      return reinterpret_cast<const Vec3*>((reinterpret_cast<std::uintptr_t>(t) & m) |
+                                           (reinterpret_cast<std::uintptr_t>(f) & ~m));
+    };
+    const auto pick_index = [](std::uintptr_t m, Index t, Index f) {
+      return static_cast<Index>(static_cast<std::uint32_t>((static_cast<std::uint32_t>(t) & m) |
+                                                           (static_cast<std::uint32_t>(f) & ~m)));
+    };
+    const std::uintptr_t up = mask(u0 < u1), wp = mask(w0 < w1), first = mask(e < f);
+    const Index a_lo = pick_index(up, u0, u1), a_hi = pick_index(up, u1, u0);
+    const Index b_lo = pick_index(wp, w0, w1), b_hi = pick_index(wp, w1, w0);
+    const Vec3* a0 = pick(up, &x0, &x1);
+    const Vec3* a1 = pick(up, &x1, &x0);
+    const Vec3* b0 = pick(wp, &y0, &y1);
+    const Vec3* b1 = pick(wp, &y1, &y0);
+    e0 = pick_index(first, e, f);
+    e1 = pick_index(first, f, e);
+    ea = {pick_index(first, a_lo, b_lo), pick_index(first, a_hi, b_hi)};
+    eb = {pick_index(first, b_lo, a_lo), pick_index(first, b_hi, a_hi)};
+    p0 = pick(first, a0, b0);
+    p1 = pick(first, a1, b1);
+    q0 = pick(first, b0, a0);
+    q1 = pick(first, b1, a1);
+  }
+  /// Makes this pair from edges already as `edge_edge` takes them (e < f, each as the mesh
+  /// stores it, x0 x1 the positions of a's vertices, y0 y1 b's): nothing to choose.
+  void set_in_order(Index e, const Edge& a, const Vec3& x0, const Vec3& x1, Index f, const Edge& b, const Vec3& y0,
+                    const Vec3& y1) {
+    e0 = e;
+    e1 = f;
+    ea = a;
+    eb = b;
+    p0 = &x0;
+    p1 = &x1;
+    q0 = &y0;
+    q1 = &y1;
   }
   /// edge_edge on this pair.
   std::optional<EdgeEdgeContact> test(Scalar sqr_thickness, Scalar* sqr_distance = nullptr) const {
@@ -150,6 +178,19 @@ class EdgeEdgeBatch {
     EdgePair& pair = pairs_[n_];
     pair.set(e, u0, u1, x0, x1, f, w0, w1, y0, y1);
     batch_.set(n_++, *pair.p0, *pair.p1, *pair.q0, *pair.q1);
+    if (n_ == geometry::SegmentBatch::kLanes) flush(sqr_thickness, out);
+  }
+  /// Queues a pair already as `edge_edge` takes it (`EdgePair::set_in_order`): the orphans'
+  /// pairs, whose order `set`'s selects would only find again.
+  void push_in_order(Index e, const Edge& a, const Vec3& x0, const Vec3& x1, Index f, const Edge& b,
+                     const Vec3& y0, const Vec3& y1, Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
+    if (!lanes_) {
+      if (auto c = edge_edge(e, a, x0, x1, f, b, y0, y1, sqr_thickness)) out.push_back(*c);
+      return;
+    }
+    EdgePair& pair = pairs_[n_];
+    pair.set_in_order(e, a, x0, x1, f, b, y0, y1);
+    batch_.set(n_++, x0, x1, y0, y1);
     if (n_ == geometry::SegmentBatch::kLanes) flush(sqr_thickness, out);
   }
   void flush(Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
