@@ -1097,7 +1097,7 @@ class KdopTree final : public KdopDetector::Tree {
     Hits hits;
     for (; near != 0; near &= near - 1) {
       const Index i = a.first + std::countr_zero(near);
-      hits.add(i, overlapping_members(b, member(a, i - a.first), near_b & ~idle_with(ib, i)));
+      hits.add(i, overlapping_members(b, member(a, i - a.first), ~idle_with(ib, i), near_b));
     }
     emit_hits(hits, b.first, [&](Index i, Index j) { return candidate(i, j); }, out);
   }
@@ -1141,15 +1141,18 @@ class KdopTree final : public KdopDetector::Tree {
   }
 
   /// Bit i set: member `first + i` of the node (child or face slot) is in `only` and may overlap
-  /// the k-DOP f (float, conservative; NaN never separates, as in `Kdop::overlaps`). A lane
-  /// group with no member in `only` is not tested.
+  /// the k-DOP f (float, conservative; NaN never separates, as in `Kdop::overlaps`). Only the
+  /// lane groups with a member in `tested` (which holds `only`) are tested: a caller that
+  /// queries several faces against one node passes the members that any of them may want, so
+  /// that the groups, and the loop's count, are the same from face to face.
   __attribute__((always_inline)) std::uint64_t overlapping_members(const Node& node, const FloatDop& f,
-                                                                   std::uint64_t only = ~std::uint64_t{0}) const {
+                                                                   std::uint64_t only = ~std::uint64_t{0},
+                                                                   std::uint64_t tested = ~std::uint64_t{0}) const {
     // The empty lanes past `count` overlap nothing but a NaN k-DOP: masked.
-    if (node.count < 64) only &= (std::uint64_t{1} << node.count) - 1;
-    // Bit g: group g has a member in `only`; the loop visits those only (a test per group of
+    if (node.count < 64) tested &= (std::uint64_t{1} << node.count) - 1;
+    // Bit g: group g has a member in `tested`; the loop visits those only (a test per group of
     // whether it had was a third of the traversal's branch mispredictions on armadillo).
-    std::uint64_t groups = only | only >> 4;
+    std::uint64_t groups = tested | tested >> 4;
     groups |= groups >> 2;
     groups |= groups >> 1;
     groups = (groups & 0x0101010101010101u) * 0x0102040810204080u >> 56;
@@ -1167,7 +1170,7 @@ class KdopTree final : public KdopDetector::Tree {
       }
       mask |= zero_lanes(apart) << (kGroup * g);
     }
-    return mask & only;
+    return mask & only & tested;
   }
   /// Members of `node` that may overlap node q's k-DOP.
   __attribute__((always_inline)) std::uint64_t overlapping_node(const Node& node, Index q) const {
@@ -1191,7 +1194,7 @@ class KdopTree final : public KdopDetector::Tree {
         // (i + 1 < count <= 64).
         const std::uint64_t later = ~std::uint64_t{0} << (i + 1);
         hits.add(a, overlapping_members(node, member(node, i),
-                                        later & ~leaf_adjacent_[static_cast<std::size_t>(a)] & ~idle_with(n, a)));
+                                        ~leaf_adjacent_[static_cast<std::size_t>(a)] & ~idle_with(n, a), later));
       }
       emit_hits(hits, node.first, [&](Index a, Index b) { return !(swept_ && now_apart(a, b)); }, w.out);
       return;
