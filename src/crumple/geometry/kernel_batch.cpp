@@ -30,6 +30,12 @@ CRUMPLE_LANES V splat(Scalar x) { return V{x, x, x, x}; }
 CRUMPLE_LANES V sqrt(V x) { return reinterpret_cast<V>(_mm256_sqrt_pd(reinterpret_cast<__m256d>(x))); }
 CRUMPLE_LANES void store(std::array<Scalar, SegmentBatch::kLanes>& to, V x) { std::memcpy(to.data(), &x, sizeof(V)); }
 CRUMPLE_LANES V select(M m, V yes, V no) { return m ? yes : no; }
+// Row k of a batch's coordinates, read where it is (an array of the rows, filled first, was the
+// batch copied to the stack and read back: a sixth of the edge-edge kernel's time).
+CRUMPLE_LANES V load_row(const std::array<Scalar, SegmentBatch::kLanes>& row) {
+  return reinterpret_cast<V>(_mm256_loadu_pd(row.data()));
+}
+CRUMPLE_LANES V row(const SegmentBatch& batch, std::size_t k) { return load_row(batch.coords[k]); }
 CRUMPLE_LANES M select(M m, M yes, M no) { return (m & yes) | (~m & no); }
 
 // The scalar kernel's helpers, lane by lane (distance_impl.hpp).
@@ -51,13 +57,11 @@ CRUMPLE_LANES V clamped_root(V slope, V h0, V h1) {
 // The scalar kernel (distance_impl.hpp) on four lanes: every branch evaluated, each lane's
 // outcome selected, in the scalar kernel's order of operations.
 CRUMPLE_LANES SegmentBatchResult run(const SegmentBatch& batch) {
-  V x[12];
-  for (std::size_t k = 0; k < 12; ++k) std::memcpy(&x[k], batch.coords[k].data(), sizeof(V));
   V u[3], v[3], w[3];
   for (std::size_t i = 0; i < 3; ++i) {
-    u[i] = x[3 + i] - x[i];
-    v[i] = x[9 + i] - x[6 + i];
-    w[i] = x[i] - x[6 + i];
+    u[i] = row(batch, 3 + i) - row(batch, i);
+    v[i] = row(batch, 9 + i) - row(batch, 6 + i);
+    w[i] = row(batch, i) - row(batch, 6 + i);
   }
   const V a = dot(u, u), b = dot(u, v), c = dot(v, v), d = dot(u, w), e = dot(v, w);
   const V zero = splat(0), one = splat(1);
@@ -125,8 +129,8 @@ CRUMPLE_LANES SegmentBatchResult run(const SegmentBatch& batch) {
   const M s_one = s == one, t_one = t == one;
   V gap[3];
   for (std::size_t i = 0; i < 3; ++i) {
-    const V closest0 = select(s_one, x[3 + i], x[i] + s * u[i]);
-    const V closest1 = select(t_one, x[9 + i], x[6 + i] + t * v[i]);
+    const V closest0 = select(s_one, row(batch, 3 + i), row(batch, i) + s * u[i]);
+    const V closest1 = select(t_one, row(batch, 9 + i), row(batch, 6 + i) + t * v[i]);
     gap[i] = closest1 - closest0;
   }
   const V gap_norm = sqrt(dot(gap, gap));
@@ -143,7 +147,7 @@ struct V3 {
 template <std::size_t Points>
 CRUMPLE_LANES V3 load(const PointBatch<Points>& batch, std::size_t point) {
   V3 out;
-  for (std::size_t i = 0; i < 3; ++i) std::memcpy(&out.c[i], batch.coords[3 * point + i].data(), sizeof(V));
+  for (std::size_t i = 0; i < 3; ++i) out.c[i] = load_row(batch.coords[3 * point + i]);
   return out;
 }
 CRUMPLE_LANES V3 operator-(const V3& x, const V3& y) { return {{x.c[0] - y.c[0], x.c[1] - y.c[1], x.c[2] - y.c[2]}}; }
