@@ -110,11 +110,10 @@ struct EdgePair {
   }
   /// Makes this pair `ordered(e, u0, ...)`, field by field (`EdgeEdgeBatch::push` fills its
   /// queue's slot so: a pair built first and then copied was read back with 16-byte loads from
-  /// its 4-byte stores, a failed store forwarding on every push).
-  /// Every choice is a select by a mask, without a branch: which way round the edges come is
-  /// unpredictable, and std::min's and std::max's references, the choice of a whole Edge and
-  /// even `c ? &x0 : &x1` compiled to branches (a tenth of armadillo's frame's branch
-  /// mispredictions).
+  /// its 4-byte stores, a failed store forwarding on every push). Every choice is a select by a
+  /// mask, without a branch: which way round the edges come is unpredictable, and std::min's
+  /// and std::max's references, the choice of a whole Edge and even `c ? &x0 : &x1` compiled to
+  /// branches (a tenth of armadillo's frame's branch mispredictions).
   void set(Index e, Index u0, Index u1, const Vec3& x0, const Vec3& x1, Index f, Index w0, Index w1, const Vec3& y0,
            const Vec3& y1) {
     const auto mask = [](bool c) { return std::uintptr_t{0} - static_cast<std::uintptr_t>(c); };
