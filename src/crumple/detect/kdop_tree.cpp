@@ -1483,7 +1483,7 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<Node> nodes_;
   std::vector<Dop> dops_;
   std::vector<FloatDop> float_dops_;  ///< per node
-  std::vector<Lanes> lanes_;          ///< per node, its members (children or faces) by four
+  std::vector<Lanes> lanes_;          ///< per node, its members (children or faces) eight to a group
   std::vector<Index> order_;     ///< face of each leaf slot
   std::vector<Face> slot_faces_;  ///< corners of each slot's face (adjacency test locality)
   std::vector<std::uint8_t> slot_owns_;        ///< per slot, FrameInput::owns (proximity queries)
