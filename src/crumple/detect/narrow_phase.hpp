@@ -170,27 +170,13 @@ class EdgeEdgeBatch {
   /// in any order, as `EdgePair::ordered(e, u0, u1, x0, x1, f, w0, w1, y0, y1)` makes them.
   void push(Index e, Index u0, Index u1, const Vec3& x0, const Vec3& x1, Index f, Index w0, Index w1,
             const Vec3& y0, const Vec3& y1, Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
-    if (!lanes_) {
-      if (auto c = EdgePair::ordered(e, u0, u1, x0, x1, f, w0, w1, y0, y1).test(sqr_thickness)) out.push_back(*c);
-      return;
-    }
-    EdgePair& pair = pairs_[n_];
-    pair.set(e, u0, u1, x0, x1, f, w0, w1, y0, y1);
-    batch_.set(n_++, *pair.p0, *pair.p1, *pair.q0, *pair.q1);
-    if (n_ == geometry::SegmentBatch::kLanes) flush(sqr_thickness, out);
+    queue([&](EdgePair& pair) { pair.set(e, u0, u1, x0, x1, f, w0, w1, y0, y1); }, sqr_thickness, out);
   }
   /// Queues a pair already as `edge_edge` takes it (`EdgePair::set_in_order`): the orphans'
   /// pairs, whose order `set`'s selects would only find again.
   void push_in_order(Index e, const Edge& a, const Vec3& x0, const Vec3& x1, Index f, const Edge& b,
                      const Vec3& y0, const Vec3& y1, Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
-    if (!lanes_) {
-      if (auto c = edge_edge(e, a, x0, x1, f, b, y0, y1, sqr_thickness)) out.push_back(*c);
-      return;
-    }
-    EdgePair& pair = pairs_[n_];
-    pair.set_in_order(e, a, x0, x1, f, b, y0, y1);
-    batch_.set(n_++, x0, x1, y0, y1);
-    if (n_ == geometry::SegmentBatch::kLanes) flush(sqr_thickness, out);
+    queue([&](EdgePair& pair) { pair.set_in_order(e, a, x0, x1, f, b, y0, y1); }, sqr_thickness, out);
   }
   void flush(Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
     if (n_ == 0) return;
@@ -207,6 +193,21 @@ class EdgeEdgeBatch {
   }
 
  private:
+  /// Queues the pair that fill(pair) makes (tested at once without lanes).
+  template <class Fill>
+  void queue(const Fill& fill, Scalar sqr_thickness, std::vector<EdgeEdgeContact>& out) {
+    if (!lanes_) {
+      EdgePair pair;
+      fill(pair);
+      if (auto c = pair.test(sqr_thickness)) out.push_back(*c);
+      return;
+    }
+    EdgePair& pair = pairs_[n_];
+    fill(pair);
+    batch_.set(n_++, *pair.p0, *pair.p1, *pair.q0, *pair.q1);
+    if (n_ == geometry::SegmentBatch::kLanes) flush(sqr_thickness, out);
+  }
+
   bool lanes_ = geometry::has_avx2();
   geometry::SegmentBatch batch_;
   std::array<EdgePair, geometry::SegmentBatch::kLanes> pairs_{};
