@@ -199,6 +199,10 @@ Bounds compute_bounds(PositionsView positions) {
   return b;
 }
 
+Scalar default_thickness(PositionsView positions) {
+  return kDefaultThicknessRel * compute_bounds(positions).diagonal();
+}
+
 EdgeLengthStats edge_length_stats(const Topology& topology, PositionsView positions) {
   EdgeLengthStats out;
   Scalar sum = 0;

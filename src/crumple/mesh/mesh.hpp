@@ -146,6 +146,11 @@ struct Bounds {
 };
 Bounds compute_bounds(PositionsView positions);
 
+/// The contact thickness used when the user gives none: `kDefaultThicknessRel` times the
+/// bounding-box diagonal of `positions` (a scale-free choice: the same relative gap on any mesh).
+inline constexpr Scalar kDefaultThicknessRel = 1e-3;
+Scalar default_thickness(PositionsView positions);
+
 /// Lengths of the unique edges.
 struct EdgeLengthStats {
   Scalar min = 0;
