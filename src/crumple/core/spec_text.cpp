@@ -63,7 +63,19 @@ std::optional<bool> parse_switch(std::string_view text) {
   return std::nullopt;
 }
 
-std::string format_spec(std::string_view name, const std::vector<std::pair<std::string, std::string>>& items) {
+const std::string* find_spec_value(const SpecItems& items, std::string_view key) {
+  for (const auto& [k, v] : items) {
+    if (k == key) return &v;
+  }
+  return nullptr;
+}
+
+void throw_unknown_spec_key(std::string_view owner, std::string_view key, const std::string& valid) {
+  throw InputError(std::string(owner) + ": unknown key '" + std::string(key) + "' (valid keys: " +
+                   (valid.empty() ? std::string("none") : valid) + ")");
+}
+
+std::string format_spec(std::string_view name, const SpecItems& items) {
   std::string out(name);
   for (std::size_t i = 0; i < items.size(); ++i) {
     out.append(i == 0 ? ":" : ",").append(items[i].first).append("=").append(items[i].second);

@@ -95,15 +95,8 @@ std::string join_names() {
 }
 
 std::string join_keys(const MethodInfo& info) {
-  if (info.params.empty()) return "(none)";
+  if (info.params.empty()) return "none";
   return join_list(info.params, [](const ParamInfo& p) { return std::string(p.key); });
-}
-
-const ParamInfo* find_param(const MethodInfo& info, std::string_view key) {
-  for (const auto& p : info.params) {
-    if (p.key == key) return &p;
-  }
-  return nullptr;
 }
 
 }  // namespace
@@ -138,25 +131,14 @@ MethodSpec MethodSpec::parse(std::string_view text) {
 
 MethodSpec& MethodSpec::set(std::string key, std::string value) {
   const MethodInfo& info = method_info(method_);
-  if (!find_param(info, key)) {
-    throw InputError("method " + std::string(info.name) + ": unknown key '" + key +
-                     "' (valid keys: " + join_keys(info) + ")");
-  }
-  for (auto& [k, v] : params_) {
-    if (k == key) {
-      v = std::move(value);
-      return *this;
-    }
-  }
-  params_.emplace_back(std::move(key), std::move(value));
+  set_spec_key(params_, info.params, std::move(key), std::move(value), "method " + std::string(info.name));
   return *this;
 }
 
 std::optional<std::string> MethodSpec::get(std::string_view key) const {
-  for (const auto& [k, v] : params_) {
-    if (k == key) return v;
-  }
-  return std::nullopt;
+  const std::string* value = find_spec_value(params_, key);
+  if (!value) return std::nullopt;
+  return *value;
 }
 
 void MethodSpec::bad_value(std::string_view key, const std::string& value,

@@ -93,10 +93,6 @@ std::string join_names() {
   return join_list(kScenes, [](const SceneInfo& s) { return std::string(s.name); });
 }
 
-std::string join_keys(const SceneInfo& info) {
-  return join_list(info.params, [](const SceneParamInfo& p) { return std::string(p.key); });
-}
-
 const SceneParamInfo* find_param(const SceneInfo& info, std::string_view key) {
   for (const auto& p : info.params) {
     if (p.key == key) return &p;
@@ -312,24 +308,12 @@ SceneSpec SceneSpec::parse(std::string_view text) {
 }
 
 SceneSpec& SceneSpec::set(std::string key, std::string value) {
-  const SceneInfo& info = scene_info(name_);
-  if (!find_param(info, key)) {
-    throw InputError("scene '" + name_ + "': unknown key '" + key + "' (valid: " + join_keys(info) + ")");
-  }
-  for (auto& [k, v] : params_) {
-    if (k == key) {
-      v = std::move(value);
-      return *this;
-    }
-  }
-  params_.emplace_back(std::move(key), std::move(value));
+  set_spec_key(params_, scene_info(name_).params, std::move(key), std::move(value), "scene '" + name_ + "'");
   return *this;
 }
 
 std::string SceneSpec::get_string(std::string_view key) const {
-  for (const auto& [k, v] : params_) {
-    if (k == key) return v;
-  }
+  if (const std::string* value = find_spec_value(params_, key)) return *value;
   const SceneParamInfo* p = find_param(scene_info(name_), key);
   CRUMPLE_CHECK(p != nullptr, "scene key not in the scene's table");
   return std::string(p->default_value);
