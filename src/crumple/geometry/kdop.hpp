@@ -7,7 +7,7 @@
 /// using bounding volume hierarchies of k-DOPs", IEEE TVCG 4(1), 1998; used for cloth by
 /// Mezger, Kimmerle & Etzmuss 2003). Two k-DOPs are disjoint if one slab pair is separated.
 ///
-/// Directions (ALGORITHMS.md §2), in this order:
+/// Directions, in this order:
 ///   j = 0..2   coordinate axes x, y, z                          (all K)
 ///   then, K = 14 and 26: cube diagonals (1,1,1), (1,1,-1), (1,-1,1), (1,-1,-1) / sqrt(3)
 ///   then, K = 18 and 26: edge diagonals (1,1,0), (1,-1,0), (1,0,1), (1,0,-1), (0,1,1),

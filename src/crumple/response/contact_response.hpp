@@ -1,6 +1,6 @@
 #pragma once
 /// \file
-/// Self-collision response by velocity and position correction (SPEC.md §5, thesis Annex B),
+/// Self-collision response by velocity and position correction (thesis Annex B; docs/simulation.md),
 /// generalised to unequal masses. Stateless kernels plus a Gauss–Seidel loop over contacts.
 ///
 /// Every contact is turned into a *stencil*: up to four vertices i with signed weights c_i,

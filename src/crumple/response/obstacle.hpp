@@ -1,8 +1,8 @@
 #pragma once
 /// \file
 /// Rigid obstacles (spheres, boxes, planes) and the response of cloth vertices against them
-/// (SPEC.md §9.3). Obstacles are kinematic: they move with a prescribed linear velocity (up to
-/// a stop time) and are not pushed back by the cloth.
+/// (docs/simulation.md). Obstacles are kinematic: they move with a prescribed linear velocity
+/// (up to a stop time) and are not pushed back by the cloth.
 ///
 /// Per vertex with signed distance φ(x) to the obstacle's surface and outward unit normal n:
 /// when φ < margin, the vertex is projected out, x += (margin − φ) n; its velocity relative to
