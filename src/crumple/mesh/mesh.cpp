@@ -316,6 +316,18 @@ Bounds compute_bounds(PositionsView positions) {
   return b;
 }
 
+namespace {
+/// 2 |half|, with half = (b - a) / 2 computed exactly from halves (no overflow): bit for bit
+/// the plain |b - a| in the normal range, a scaled norm where the squares would overflow or
+/// underflow.
+Scalar length_from_half(const Vec3& half) {
+  const Scalar plain = half.norm();
+  return 2 * (std::isfinite(plain) && plain > 1e-150 ? plain : half.stableNorm());
+}
+}  // namespace
+
+Scalar Bounds::diagonal() const { return length_from_half(max * 0.5 - min * 0.5); }
+
 Scalar default_thickness(PositionsView positions) {
   return kDefaultThicknessRel * compute_bounds(positions).diagonal();
 }
@@ -326,7 +338,9 @@ EdgeLengthStats edge_length_stats(const Topology& topology, PositionsView positi
   std::size_t finite = 0;
   out.min = std::numeric_limits<Scalar>::infinity();
   for (const Edge& e : topology.edges()) {
-    const Scalar len = (positions[static_cast<std::size_t>(e[1])] - positions[static_cast<std::size_t>(e[0])]).norm();
+    // Halves first and a scaled norm: no overflow (nor underflow) unless the length does.
+    const Vec3 half = positions[static_cast<std::size_t>(e[1])] * 0.5 - positions[static_cast<std::size_t>(e[0])] * 0.5;
+    const Scalar len = length_from_half(half);
     if (!std::isfinite(len)) continue;
     out.min = std::min(out.min, len);
     out.max = std::max(out.max, len);
@@ -335,15 +349,36 @@ EdgeLengthStats edge_length_stats(const Topology& topology, PositionsView positi
   }
   if (finite == 0) return {};
   out.mean = sum / static_cast<Scalar>(finite);
+  if (!std::isfinite(out.mean)) {  // the sum overflowed: a running mean cannot
+    Scalar mean = 0;
+    std::size_t k = 0;
+    for (const Edge& e : topology.edges()) {
+      const Scalar len = length_from_half(positions[static_cast<std::size_t>(e[1])] * 0.5 -
+                                          positions[static_cast<std::size_t>(e[0])] * 0.5);
+      if (std::isfinite(len)) mean += (len - mean) / static_cast<Scalar>(++k);
+    }
+    out.mean = std::clamp(mean, out.min, out.max);
+  }
   return out;
 }
 
 std::size_t count_zero_area_faces(const Topology& topology, PositionsView positions) {
   std::size_t count = 0;
   for (const Face& t : topology.faces()) {
-    const Vec3& a = positions[static_cast<std::size_t>(t[0])];
-    const Vec3 e0 = positions[static_cast<std::size_t>(t[1])] - a;
-    const Vec3 e1 = positions[static_cast<std::size_t>(t[2])] - a;
+    // Sides scaled so that the largest coordinate is about 1: the squares below neither
+    // overflow at 1e300 nor underflow at 1e-300.
+    const Vec3 a = positions[static_cast<std::size_t>(t[0])] * 0.5;
+    Vec3 e0 = positions[static_cast<std::size_t>(t[1])] * 0.5 - a;
+    Vec3 e1 = positions[static_cast<std::size_t>(t[2])] * 0.5 - a;
+    const Scalar largest = std::max(e0.cwiseAbs().maxCoeff(), e1.cwiseAbs().maxCoeff());
+    if (!(largest > 0) || !std::isfinite(largest)) {
+      count += largest == 0;
+      continue;
+    }
+    // A power of two: exact, so the test below does not depend on the scale at all.
+    const Scalar scale = std::ldexp(1.0, -std::ilogb(largest));
+    e0 *= scale;
+    e1 *= scale;
     const Scalar longest = std::max({e0.squaredNorm(), e1.squaredNorm(), (e1 - e0).squaredNorm()});
     // |e0 x e1| = 2 area; compare squared quantities.
     if (e0.cross(e1).squaredNorm() <= 4e-28 * longest * longest) ++count;

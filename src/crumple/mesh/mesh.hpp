@@ -170,7 +170,9 @@ void check_finite(PositionsView positions);
 struct Bounds {
   Vec3 min;
   Vec3 max;
-  Scalar diagonal() const { return (max - min).norm(); }
+  /// Length of max - min without overflow or underflow on the way: infinite only when the
+  /// length itself exceeds the largest double.
+  Scalar diagonal() const;
 };
 Bounds compute_bounds(PositionsView positions);
 
@@ -187,9 +189,11 @@ struct EdgeLengthStats {
 };
 /// Min, mean and max length of the edges of finite length (a NaN or infinite vertex would make
 /// the mean NaN or infinite, unrelated to the mesh's scale); all zero when there is none.
+/// Scale-free: right for coordinates anywhere in the range of doubles (1e-300 or 1e300).
 EdgeLengthStats edge_length_stats(const Topology& topology, PositionsView positions);
 
-/// Number of faces whose area is at most `1e-14 * (longest side)^2` (degenerate slivers).
+/// Number of faces whose area is at most `1e-14 * (longest side)^2` (degenerate slivers),
+/// tested on the sides scaled to unit size, so at any scale.
 std::size_t count_zero_area_faces(const Topology& topology, PositionsView positions);
 
 }  // namespace crumple
