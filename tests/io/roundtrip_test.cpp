@@ -104,12 +104,10 @@ TEST(RoundTrip, ReadMeshValidates) {
   EXPECT_EQ(tri.num_vertices(), static_cast<Index>(mesh.positions.size()));
   EXPECT_EQ(tri.num_faces(), static_cast<Index>(mesh.faces.size()));
 
-  // A face repeating a vertex is valid for the reader but not for TriMesh::create: read_mesh
-  // turns the InputError into a ParseError naming the file and the face.
+  // A face repeating a vertex: the reader names it at its line, in the file's numbering.
   const fs::path bad = dir / "repeated.obj";
   write_bytes(bad, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 2\n");
-  EXPECT_NO_THROW(read_obj(bad));
-  expect_parse_error([&] { read_mesh(bad); }, bad, At::Nowhere(), "invalid mesh: face 1");
+  expect_parse_error([&] { read_mesh(bad); }, bad, At::Line(5), "triangle 1 2 2 repeats vertex 2");
 }
 
 TEST(Readers, MissingFileIsAParseErrorNamingIt) {

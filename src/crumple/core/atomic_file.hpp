@@ -11,9 +11,14 @@
 namespace crumple {
 
 /// Calls `write(stream)` on a temporary file in the target's folder, then renames it to `path`.
-/// Throws `ParseError` (with the file name) if the file cannot be opened or written; the
-/// temporary file is removed on any failure, including an exception thrown by `write`.
-/// `binary` opens the stream in binary mode.
+///  - Only a regular file (which keeps its permission bits) or a new path is replaced. A
+///    symbolic link is followed: the file it points to is written, the link stays. A directory,
+///    device, FIFO or socket is refused before anything is written.
+///  - Every write, the fsync and the close are checked: a full disk is an error, and the old
+///    file stays as it was.
+/// Throws `ParseError` naming `path` and the reason (the system's, where it gives one); the
+/// temporary file is removed on any failure, including an exception thrown by `write` (which
+/// is rethrown). `binary` is accepted for portability and has no effect on POSIX.
 void write_file_atomically(const std::filesystem::path& path,
                            const std::function<void(std::ostream&)>& write, bool binary = false);
 

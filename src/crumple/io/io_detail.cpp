@@ -57,6 +57,16 @@ void fail_in_file(const std::filesystem::path& path, const std::string& message)
   throw ParseError(path.string(), {}, message);
 }
 
+std::optional<std::string> repeated_vertex(const Face& t, std::int64_t base) {
+  Index twice = -1;
+  if (t[0] == t[1] || t[0] == t[2]) twice = t[0];
+  else if (t[1] == t[2]) twice = t[1];
+  if (twice < 0) return std::nullopt;
+  return "triangle " + std::to_string(t[0] + base) + " " + std::to_string(t[1] + base) + " " +
+         std::to_string(t[2] + base) + " repeats vertex " + std::to_string(twice + base) +
+         " (a face needs distinct vertices)";
+}
+
 std::string quote(std::string_view token) {
   constexpr std::size_t max_chars = 40;
   std::string out = "'";

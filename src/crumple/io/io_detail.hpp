@@ -103,6 +103,12 @@ std::string_view strip_comment(std::string_view line, char marker);
 /// 1-based line number of a byte offset in a text.
 std::int64_t line_of_offset(std::string_view text, std::size_t offset);
 
+/// What is wrong with a triangle whose ids are not all different, with ids in the file's own
+/// numbering (`base` added: 1 for OBJ, 0 otherwise), e.g. "triangle 1 1 2 repeats vertex 1
+/// (a face needs distinct vertices)"; empty when the three ids differ. Every reader reports it
+/// at the face's own line or byte, which `TriMesh::create` could not.
+std::optional<std::string> repeated_vertex(const Face& t, std::int64_t base);
+
 /// Checks the arguments of a mesh writer with `CRUMPLE_CHECK`: finite coordinates, face ids in
 /// [0, #V), and counts that fit `Index`.
 void check_mesh_for_writing(PositionsView positions, std::span<const Face> faces);

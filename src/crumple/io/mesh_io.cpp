@@ -45,6 +45,13 @@ MeshData read_mesh_data(const std::filesystem::path& path) {
 
 TriMesh read_mesh(const std::filesystem::path& path) {
   MeshData data = read_mesh_data(path);
+  // Valid in every format (a PLY with zero faces, an OBJ with no statement), but not a mesh:
+  // every format says so the same way.
+  if (data.faces.empty()) {
+    throw ParseError(path.string(), {},
+                     "no faces: a triangle mesh needs at least one (the file holds " +
+                         std::to_string(data.positions.size()) + " vertices and no face)");
+  }
   try {
     return TriMesh::create(std::move(data.positions), std::move(data.faces));
   } catch (const InputError& e) {

@@ -7,7 +7,8 @@
 /// `crumple::ParseError` naming the file, the line (text) or byte offset (binary) and what was
 /// expected; never a crash, hang or silent partial mesh. A missing or unreadable file is a
 /// `ParseError` naming the file. Readers reject non-finite coordinates and vertex ids out of
-/// range; repeated vertices in a face and the like are left to `TriMesh::create` (`read_mesh`).
+/// range, and faces that repeat a vertex, at the face's line (or byte) with ids as the file
+/// numbers them; zero-area faces and the like are left to `TriMesh::create` (`read_mesh`).
 /// Text formats accept LF and CRLF line endings.
 ///
 /// Writers write a temporary file beside the target and rename it, so an interrupted write never
@@ -73,7 +74,8 @@ MeshData read_x3d(const std::filesystem::path& path);
 /// Reads by extension (see `format_from_path`).
 MeshData read_mesh_data(const std::filesystem::path& path);
 /// Reads by extension and validates with `TriMesh::create`; a validation `InputError` is
-/// rethrown as `ParseError` naming the file and, in its message, the element.
+/// rethrown as `ParseError` naming the file and, in its message, the element. A file without
+/// any face (empty, or points only) is a `ParseError` in every format.
 TriMesh read_mesh(const std::filesystem::path& path);
 
 enum class PlyEncoding { Ascii, BinaryLittleEndian, BinaryBigEndian };

@@ -154,7 +154,9 @@ class ObjParser {
         if (data_.faces.size() >= static_cast<std::size_t>(std::numeric_limits<Index>::max())) {
           fail("too many faces (at most 2^31-1)");
         }
-        data_.faces.push_back({first, previous, id});
+        const Face t{first, previous, id};
+        if (const auto problem = detail::repeated_vertex(t, 1)) fail(*problem);
+        data_.faces.push_back(t);
       }
       previous = id;
       ++n;

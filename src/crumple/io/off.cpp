@@ -163,7 +163,11 @@ class OffParser {
           if (data_.faces.size() >= static_cast<std::size_t>(std::numeric_limits<Index>::max())) {
             fail("too many triangles (at most 2^31-1)");
           }
-          data_.faces.push_back({first, previous, vertex});
+          const Face t{first, previous, vertex};
+          if (const auto problem = detail::repeated_vertex(t, 0)) {
+            fail("face " + std::to_string(f) + ": " + *problem);
+          }
+          data_.faces.push_back(t);
         }
         previous = vertex;
       }

@@ -552,7 +552,11 @@ class BinaryBody {
         if (k == 0) {
           first = v;
         } else if (k >= 2) {
-          faces.push_back({first, previous, v});
+          const Face t{first, previous, v};
+          if (const auto problem = detail::repeated_vertex(t, 0)) {
+            fail_at_byte(path_, static_cast<std::int64_t>(count_at), "face " + std::to_string(i) + ": " + *problem);
+          }
+          faces.push_back(t);
         }
         previous = v;
       }
@@ -754,7 +758,11 @@ class AsciiBody {
             if (faces.size() >= static_cast<std::size_t>(std::numeric_limits<Index>::max())) {
               fail_at_line(path_, line_, "too many triangles (at most 2^31-1)");
             }
-            faces.push_back({first, previous, v});
+            const Face t{first, previous, v};
+            if (const auto problem = detail::repeated_vertex(t, 0)) {
+              fail_at_line(path_, line_, "face " + std::to_string(i) + ": " + *problem);
+            }
+            faces.push_back(t);
           }
           previous = v;
         }

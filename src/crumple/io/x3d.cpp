@@ -249,7 +249,11 @@ MeshData read_indexed_face_set(const X3dDocument& doc, pugi::xml_node node) {
       first = v;
     } else if (corners >= 2) {
       if (mesh.faces.size() >= max_count) doc.fail(node, "too many triangles");
-      mesh.faces.push_back({first, previous, v});
+      const Face t{first, previous, v};
+      if (const auto problem = detail::repeated_vertex(t, 0)) {
+        doc.fail(node, "<IndexedFaceSet coordIndex>: polygon " + std::to_string(polygon) + ": " + *problem);
+      }
+      mesh.faces.push_back(t);
     }
     previous = v;
     ++corners;
@@ -265,6 +269,9 @@ MeshData read_indexed_triangle_set(const X3dDocument& doc, pugi::xml_node node) 
   mesh.faces.resize(ids.size() / 3);
   for (std::size_t f = 0; f < mesh.faces.size(); ++f) {
     mesh.faces[f] = {ids[3 * f], ids[3 * f + 1], ids[3 * f + 2]};
+    if (const auto problem = detail::repeated_vertex(mesh.faces[f], 0)) {
+      doc.fail(node, "<IndexedTriangleSet index>: triangle " + std::to_string(f) + ": " + *problem);
+    }
   }
   return mesh;
 }
@@ -316,6 +323,9 @@ MassSpringData read_mass_spring_node(const X3dDocument& doc, pugi::xml_node node
     data.faces.resize(ids.size() / 3);
     for (std::size_t f = 0; f < data.faces.size(); ++f) {
       data.faces[f] = {ids[3 * f], ids[3 * f + 1], ids[3 * f + 2]};
+      if (const auto problem = detail::repeated_vertex(data.faces[f], 0)) {
+        doc.fail(face, "<Face vertex>: triangle " + std::to_string(f) + ": " + *problem);
+      }
     }
   }
   return data;

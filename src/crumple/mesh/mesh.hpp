@@ -12,8 +12,10 @@
 
 #include <crumple/core/types.hpp>
 
+#include <atomic>
 #include <cstddef>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
 #include <vector>
@@ -26,6 +28,9 @@ class Adjacency {
   Adjacency() = default;
   /// Builds from per-element lists (each list is sorted and deduplicated here).
   static Adjacency from_lists(std::vector<std::vector<Index>> lists);
+  /// Takes compressed rows as they are: row i is `data[offsets[i] .. offsets[i+1])`, each
+  /// already sorted and without repeats (not checked).
+  static Adjacency from_csr(std::vector<std::size_t> offsets, std::vector<Index> data);
 
   std::span<const Index> operator[](Index i) const {
     return {data_.data() + offsets_[static_cast<std::size_t>(i)],
@@ -35,6 +40,12 @@ class Adjacency {
   Index size() const { return static_cast<Index>(offsets_.empty() ? 0 : offsets_.size() - 1); }
   /// Total number of entries over all rows.
   std::size_t total() const { return data_.size(); }
+  /// Position of row i's first entry among all entries.
+  std::size_t row_start(Index i) const { return offsets_[static_cast<std::size_t>(i)]; }
+  /// Bytes held by the lists (capacity, not size).
+  std::size_t memory_bytes() const {
+    return offsets_.capacity() * sizeof(std::size_t) + data_.capacity() * sizeof(Index);
+  }
 
  private:
   std::vector<std::size_t> offsets_;  // size()+1 entries
@@ -53,6 +64,10 @@ struct MeshReport {
 };
 
 /// Connectivity of a triangle mesh with every derived adjacency, immutable once built.
+/// `build` takes time and memory linear in #V + #F, whatever the valences or repeated faces.
+/// The two lists whose size can grow with the square of a valence (`edge_edges`, `face_faces`:
+/// a fan of n faces around one vertex has n^2 face pairs) are built on first use (thread-safe),
+/// in time linear in their size, so that loading a mesh never pays for them.
 class Topology {
  public:
   /// Validates and builds. Throws `InputError` naming the face on an out-of-range index or
@@ -76,10 +91,12 @@ class Topology {
   const Adjacency& vertex_edges() const { return vertex_edges_; }     ///< edges incident to a vertex
   const Adjacency& vertex_faces() const { return vertex_faces_; }     ///< faces incident to a vertex
   const Adjacency& vertex_vertices() const { return vertex_vertices_; }  ///< one-ring
-  /// Edges sharing at least one vertex with the edge (itself excluded).
-  const Adjacency& edge_edges() const { return edge_edges_; }
-  /// Faces sharing at least one vertex with the face (itself excluded).
-  const Adjacency& face_faces() const { return face_faces_; }
+  /// Edges sharing at least one vertex with the edge (itself excluded). Built on first use:
+  /// sum over vertices of valence^2 entries.
+  const Adjacency& edge_edges() const;
+  /// Faces sharing at least one vertex with the face (itself excluded). Built on first use:
+  /// up to sum over vertices of (faces around it)^2 entries.
+  const Adjacency& face_faces() const;
 
   /// True when face f has v as a corner.
   bool face_has_vertex(Index f, Index v) const {
@@ -98,12 +115,23 @@ class Topology {
   /// Topological part of the report (everything except zero-area faces, which need positions).
   const MeshReport& report() const { return report_; }
 
+  /// Bytes held by the topology now: capacities of every array, the on-first-use lists only
+  /// once built.
+  std::size_t memory_bytes() const;
+
  private:
+  struct Lazy {
+    std::once_flag edge_edges_once, face_faces_once;
+    std::atomic<bool> edge_edges_built{false}, face_faces_built{false};
+    Adjacency edge_edges, face_faces;
+  };
+
   Index num_vertices_ = 0;
   std::vector<Face> faces_;
   std::vector<Edge> edges_;
   std::vector<std::array<Index, 3>> face_edges_;
-  Adjacency edge_faces_, vertex_edges_, vertex_faces_, vertex_vertices_, edge_edges_, face_faces_;
+  Adjacency edge_faces_, vertex_edges_, vertex_faces_, vertex_vertices_;
+  std::unique_ptr<Lazy> lazy_ = std::make_unique<Lazy>();
   MeshReport report_;
 };
 
@@ -142,7 +170,9 @@ void check_finite(PositionsView positions);
 struct Bounds {
   Vec3 min;
   Vec3 max;
-  Scalar diagonal() const { return (max - min).norm(); }
+  /// Length of max - min without overflow or underflow on the way: infinite only when the
+  /// length itself exceeds the largest double.
+  Scalar diagonal() const;
 };
 Bounds compute_bounds(PositionsView positions);
 
@@ -159,9 +189,11 @@ struct EdgeLengthStats {
 };
 /// Min, mean and max length of the edges of finite length (a NaN or infinite vertex would make
 /// the mean NaN or infinite, unrelated to the mesh's scale); all zero when there is none.
+/// Scale-free: right for coordinates anywhere in the range of doubles (1e-300 or 1e300).
 EdgeLengthStats edge_length_stats(const Topology& topology, PositionsView positions);
 
-/// Number of faces whose area is at most `1e-14 * (longest side)^2` (degenerate slivers).
+/// Number of faces whose area is at most `1e-14 * (longest side)^2` (degenerate slivers),
+/// tested on the sides scaled to unit size, so at any scale.
 std::size_t count_zero_area_faces(const Topology& topology, PositionsView positions);
 
 }  // namespace crumple
