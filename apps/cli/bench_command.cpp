@@ -5,6 +5,7 @@
 // frames and compared with `naive` in the same run. Writes CSV, JSON, markdown and SVG plots.
 #include "bench_suite.hpp"
 #include "commands.hpp"
+#include "outputs.hpp"
 #include "svg_plot.hpp"
 
 #include <crumple/core/atomic_file.hpp>
@@ -17,11 +18,13 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <map>
 #include <memory>
 #include <optional>
 #include <set>
+#include <sstream>
 #include <string>
 #include <variant>
 #include <vector>
@@ -160,7 +163,7 @@ std::string fps_text(double fps) {
 // ---------------------------------------------------------------------------------------------
 
 struct Args {
-  std::string out = "docs/benchmarks";
+  std::string out = "crumple-bench";
   bool quick = false;
   int repeat = 3;
   std::vector<std::string> sections;
@@ -526,7 +529,7 @@ void scaling_section(Report& report, const Progress& progress) {
     ScalingInput in;
     in.name = s.name;
     in.topology = m0.topology_ptr();
-    in.thickness = 1e-3 * compute_bounds(m0.positions()).diagonal();
+    in.thickness = default_thickness(m0.positions());
     in.frames = {m0.positions(), m1.positions()};
     in.plan = bench::frame_pair_plan(a.repeat);
     inputs.push_back(std::move(in));
@@ -752,17 +755,30 @@ void write_report(const Report& r) {
   write_text("bench.md", md);
 }
 
-/// Creates the output folder up front, so a bad `--out` fails before minutes of measurements.
-void prepare_output(const std::string& folder) {
-  std::error_code ec;
-  std::filesystem::create_directories(folder, ec);
-  if (ec || !std::filesystem::is_directory(folder)) {
-    throw InputError("cannot create the output folder '" + folder + "'" + (ec ? ": " + ec.message() : ""));
+/// Whether `folder` holds a full (not --quick) report.
+bool holds_full_report(const std::filesystem::path& folder) {
+  std::ifstream in(folder / "bench.json");
+  if (!in) return false;
+  std::stringstream text;
+  text << in.rdbuf();
+  const std::string s = text.str();
+  return s.find("\"quick\":false") != std::string::npos ||
+         s.find("\"quick\": false") != std::string::npos;
+}
+
+/// Checks the output folder up front, so a bad `--out` fails before minutes of measurements:
+/// writable, and never a full report about to be replaced by a --quick one.
+void prepare_output(const Args& args) {
+  if (args.quick && holds_full_report(args.out)) {
+    throw InputError("--out '" + args.out +
+                     "' holds a full report (bench.json): --quick never replaces one; give "
+                     "another --out");
   }
+  prepare_output_folder(args.out, "--out");
 }
 
 int run(const Args& args) {
-  prepare_output(args.out);
+  prepare_output(args);
   Report report;
   report.args = args;
   if (report.args.sections.empty()) report.args.sections.assign(kSections.begin(), kSections.end());
@@ -809,9 +825,12 @@ Run add_bench_command(CLI::App& app) {
       "lattices up to --max-lattice and the real meshes of --data), budget (the stochastic\n"
       "detector's recall against time per frame). Writes bench.md, bench.json, one CSV per table\n"
       "and SVG plots into --out. The full run takes about 10 minutes on 2 cores.");
-  app.add_option("-o,--out", args->out, "Output folder (created)")->capture_default_str();
+  app.add_option("-o,--out", args->out,
+                 "Output folder (created); the repository's report is docs/benchmarks")
+      ->capture_default_str();
   app.add_flag("--quick", args->quick,
-               "Every section on tiny inputs (seconds): checks the whole pipeline, figures meaningless");
+               "Every section on tiny inputs (seconds): checks the whole pipeline, figures "
+               "meaningless; never replaces a full report");
   app.add_option("--sections", args->sections, "Sections to run (default: all)")
       ->delimiter(',')
       ->check(CLI::IsMember(std::vector<std::string>(kSections.begin(), kSections.end())));
