@@ -6,6 +6,7 @@
 #include "bench_suite.hpp"
 #include "commands.hpp"
 #include "outputs.hpp"
+#include "progress.hpp"
 #include "svg_plot.hpp"
 
 #include <crumple/core/atomic_file.hpp>
@@ -29,7 +30,7 @@
 #include <variant>
 #include <vector>
 
-#include <unistd.h>
+
 
 #ifndef CRUMPLE_DEFAULT_DATA_DIR
 #define CRUMPLE_DEFAULT_DATA_DIR "../shared/data"
@@ -176,19 +177,19 @@ struct Args {
 
 constexpr std::array<const char*, 4> kSections = {"thesis", "second", "scaling", "budget"};
 
-/// Progress on a terminal: `[section] label` on one rewritten line.
-class Progress {
+/// The shared progress report over the sections of the run, each step named.
+class BenchProgress {
  public:
-  explicit Progress(bool on) : on_(on && ::isatty(STDERR_FILENO)) {}
+  BenchProgress(bool on, std::size_t sections) : progress_("bench", "section", sections, on) {}
   void show(const std::string& section, const std::string& label) const {
-    if (on_) std::fprintf(stderr, "\r\033[K[%s] %s", section.c_str(), label.c_str());
+    progress_.update(done_, "[" + section + "] " + label);
   }
-  void clear() const {
-    if (on_) std::fprintf(stderr, "\r\033[K");
-  }
+  void section_done() { ++done_; }
+  void clear() const { progress_.clear(); }
 
  private:
-  bool on_;
+  mutable Progress progress_;
+  std::size_t done_ = 0;
 };
 
 /// Aggregates of one method over the frames of one bin.
@@ -239,7 +240,7 @@ double mean(const std::vector<double>& v) {
 /// Times every row on a recording, interleaved by repetition (`time_methods_against_first`);
 /// naive first: its contacts are the reference.
 std::vector<Timing> time_rows(const bench::Recording& rec, const std::vector<Row>& rows, ContactKinds kinds,
-                              const Args& args, const Progress& progress, const std::string& section) {
+                              const Args& args, const BenchProgress& progress, const std::string& section) {
   const DetectorOptions options{.thickness = rec.thickness, .kinds = kinds, .threads = args.threads};
   const TimingPlan plan{.first = 0, .timed_from = 0, .last = rec.frames.size(), .repetitions = args.repeat};
   std::vector<std::string> specs;
@@ -262,7 +263,7 @@ struct Report {
 
 // --- Figures 4.2 and 4.3 ---------------------------------------------------------------------
 
-void thesis_section(Report& report, const Progress& progress) {
+void thesis_section(Report& report, const BenchProgress& progress) {
   const Args& a = report.args;
   const std::string spec = a.quick ? "hanging-cloth:nx=5,ny=5" : "hanging-cloth";
   const std::int64_t frames = a.quick ? 150 : 600;
@@ -411,7 +412,7 @@ void thesis_section(Report& report, const Progress& progress) {
 
 // --- The thesis' second test: a 100×10 strip ---------------------------------------------------
 
-void second_section(Report& report, const Progress& progress) {
+void second_section(Report& report, const BenchProgress& progress) {
   const Args& a = report.args;
   const std::string spec = a.quick ? "hanging-cloth:nx=12,ny=3,size=1.2,depth=0.3"
                                    : "hanging-cloth:nx=100,ny=10,size=2,depth=0.2";
@@ -479,7 +480,7 @@ const char* const kScalingMethods[][2] = {
 };
 constexpr Index kNaiveMaxFaces = 4000;
 
-void scaling_section(Report& report, const Progress& progress) {
+void scaling_section(Report& report, const BenchProgress& progress) {
   const Args& a = report.args;
   std::vector<ScalingInput> inputs;
   std::vector<Index> sizes = a.quick ? std::vector<Index>{6, 12} : std::vector<Index>{10, 30, 100, 300, 1000};
@@ -615,7 +616,7 @@ void scaling_section(Report& report, const Progress& progress) {
 
 // --- Time budget: recall against time per frame ----------------------------------------------
 
-void budget_section(Report& report, const Progress& progress, const bench::Recording& rec) {
+void budget_section(Report& report, const BenchProgress& progress, const bench::Recording& rec) {
   const Args& a = report.args;
   const std::vector<long long> actives =
       a.quick ? std::vector<long long>{10, 100} : std::vector<long long>{5, 10, 20, 50, 100, 200, 400, 1000, 3000};
@@ -788,11 +789,20 @@ int run(const Args& args) {
   report.machine = bench::machine_description();
   report.commit = bench::source_commit();
   report.date = bench::utc_now();
-  const Progress progress(!args.quiet);
+  BenchProgress progress(!args.quiet, report.args.sections.size());
   try {
-    if (wants("thesis")) thesis_section(report, progress);
-    if (wants("second")) second_section(report, progress);
-    if (wants("scaling")) scaling_section(report, progress);
+    if (wants("thesis")) {
+      thesis_section(report, progress);
+      progress.section_done();
+    }
+    if (wants("second")) {
+      second_section(report, progress);
+      progress.section_done();
+    }
+    if (wants("scaling")) {
+      scaling_section(report, progress);
+      progress.section_done();
+    }
     if (wants("budget")) {
       const std::string spec = args.quick ? "hanging-cloth:nx=5,ny=5" : "hanging-cloth";
       progress.show("budget", "recording " + spec);

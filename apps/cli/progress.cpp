@@ -41,7 +41,7 @@ Progress::Progress(std::string what, std::string unit, std::size_t total, bool e
 
 Progress::~Progress() { finish(); }
 
-void Progress::update(std::size_t done) {
+void Progress::update(std::size_t done, const std::string& note) {
   if (!enabled_) return;
   const auto now = Clock::now();
   const double elapsed = std::chrono::duration<double>(now - start_).count();
@@ -57,12 +57,14 @@ void Progress::update(std::size_t done) {
   if (tty_) {
     constexpr std::size_t width = 30;
     const std::size_t filled = total_ > 0 ? std::min(width, done * width / total_) : width;
-    std::fprintf(stderr, "\r\033[K[%s%s] %s %zu/%zu  %s elapsed, ETA %s",
+    std::fprintf(stderr, "\r\033[K[%s%s] %s %zu/%zu  %s elapsed, ETA %s%s%s",
                  std::string(filled, '#').c_str(), std::string(width - filled, '.').c_str(),
-                 unit_.c_str(), done, total_, duration_text(elapsed).c_str(), eta.c_str());
+                 unit_.c_str(), done, total_, duration_text(elapsed).c_str(), eta.c_str(),
+                 note.empty() ? "" : "  ", note.c_str());
   } else {
-    std::fprintf(stderr, "crumple %s: %s %zu/%zu, %s elapsed, ETA %s\n", what_.c_str(),
-                 unit_.c_str(), done, total_, duration_text(elapsed).c_str(), eta.c_str());
+    std::fprintf(stderr, "crumple %s: %s %zu/%zu, %s elapsed, ETA %s%s%s\n", what_.c_str(),
+                 unit_.c_str(), done, total_, duration_text(elapsed).c_str(), eta.c_str(),
+                 note.empty() ? "" : ", ", note.c_str());
   }
   std::fflush(stderr);
   drawn_ = true;

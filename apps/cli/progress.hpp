@@ -18,8 +18,8 @@ class Progress {
   Progress(const Progress&) = delete;
   Progress& operator=(const Progress&) = delete;
 
-  /// `done` items of `total` are finished.
-  void update(std::size_t done);
+  /// `done` items of `total` are finished; `note` says what runs now (may be empty).
+  void update(std::size_t done, const std::string& note = {});
   /// Clears the bar (terminal) so other output starts on a clean line; the next update redraws.
   void clear();
   /// Clears the bar and reports nothing more; idempotent.
