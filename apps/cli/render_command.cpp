@@ -117,6 +117,15 @@ class Painter {
       : size_(parse_size(args.size)),
         camera_(args.camera ? parse_camera(*args.camera) : CameraArg{}) {
     if (args.supersample < 1 || args.supersample > 4) throw InputError("--aa must be 1..4");
+    // The rasteriser holds colour and depth for every sample: bound them (~1.5 GB).
+    constexpr long long kMaxSamples = 1LL << 27;
+    const long long samples = static_cast<long long>(size_.width) * size_.height *
+                              args.supersample * args.supersample;
+    if (samples > kMaxSamples) {
+      throw InputError("--size " + args.size + " with --aa " + std::to_string(args.supersample) +
+                       " needs " + std::to_string(samples) + " samples, more than " +
+                       std::to_string(kMaxSamples) + ": lower --aa or --size");
+    }
     options_.wireframe = args.wireframe;
     options_.masses_springs = args.springs;
     supersample_ = args.supersample;

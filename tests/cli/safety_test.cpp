@@ -273,6 +273,9 @@ TEST(Safety, OutOfRangeSizesAreClearErrors) {
       {"compare --size 100000", "--size must be between 2 and 1000"},
       {"compare --frames 0", "--frames must be between 1 and"},
       {"simulate hanging-cloth -n 1 --threads 100000", "--threads must be between"},
+      {"simulate hanging-cloth:nx=100000,ny=100000 -n 1", "more than 4000000"},
+      {"simulate hanging-cloth:nx=100000000 -n 1", "'nx' must be between 1 and 100000"},
+      {"render hanging-cloth --size 8192x8192 --aa 4 --out x.png", "lower --aa or --size"},
   };
   const std::regex long_number("[0-9]{12,}");
   for (const auto& [args, needle] : cases) {
