@@ -12,7 +12,7 @@
 #include <fstream>
 #include <thread>
 
-namespace crumple::cli::bench {
+namespace crumple::bench {
 
 std::vector<FeedStep> feed_steps(const TimingPlan& plan) {
   std::vector<FeedStep> steps;
@@ -142,4 +142,4 @@ std::string utc_now() {
   return buf;
 }
 
-}  // namespace crumple::cli::bench
+}  // namespace crumple::bench
