@@ -143,6 +143,25 @@ TEST(Safety, OutputFolderOfAnotherRunNeedsForce) {
   EXPECT_TRUE(std::filesystem::exists(out / "notes.txt")) << "only the run's own files go";
 }
 
+// Defect 5: a --video folder holding another video's pictures would mix them into this one.
+TEST(Safety, VideoFolderOfAnotherVideoNeedsForce) {
+  const testing::TempDir dir;
+  const auto video = dir / "video";
+  const std::string base = "render hanging-cloth:nx=4,ny=4 --size 40x30 -q --video " + video.string();
+  ASSERT_EQ(run_cli(base + " --frame 3").status, 0);
+  ASSERT_TRUE(std::filesystem::exists(video / "000003.png"));
+  std::ofstream(video / "notes.txt") << "mine";
+  auto r = run_cli(base + " --frame 1");
+  EXPECT_EQ(r.status, 1) << r.out;
+  EXPECT_NE(r.out.find("holds the pictures of another video"), std::string::npos) << r.out;
+  EXPECT_TRUE(std::filesystem::exists(video / "000003.png")) << "untouched";
+  r = run_cli(base + " --frame 1 --force");
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_FALSE(std::filesystem::exists(video / "000003.png")) << "no stale picture";
+  EXPECT_TRUE(std::filesystem::exists(video / "000001.png"));
+  EXPECT_TRUE(std::filesystem::exists(video / "notes.txt")) << "only the video's own files go";
+}
+
 // Defect 5: outputs are checked before any work; file system errors are user errors (exit 1)
 // with the OS's reason, never `internal error`.
 TEST(Safety, BadOutputPathsFailFirstAsUserErrors) {
