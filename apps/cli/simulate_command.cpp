@@ -223,6 +223,126 @@ std::pair<Scalar, int> stable_split(Scalar frame_time, Scalar stable_dt) {
   return {frame_time / substeps, substeps};
 }
 
+/// The final state: X3D MassSpring + JSON side file (the settings needed to resume bit for bit).
+void save_state(const std::filesystem::path& out, const sim::Simulation& simulation,
+                const sim::Settings& settings, const std::string& spec_text, std::uint64_t seed) {
+  io::write_mass_spring(out / "state.x3d", to_mass_spring(simulation.model(), simulation.state()));
+  const std::string side_json = JsonObject()
+                                    .add("format", "crumple-sim-state")
+                                    .add("version", 1)
+                                    .add("scene", spec_text)
+                                    .add("seed", static_cast<long long>(seed))
+                                    .add("frame", static_cast<long long>(simulation.frame()))
+                                    .add("time", simulation.state().time)
+                                    .add("dt", settings.dt)
+                                    .add("substeps", settings.substeps)
+                                    .add("integrator", sim::to_string(settings.integrator))
+                                    .add("method", settings.method.to_string())
+                                    .add("thickness", settings.detector.thickness)
+                                    .add("kinds", settings.detector.kinds.to_string())
+                                    .add("response", settings.response)
+                                    .add("passes", settings.passes)
+                                    .add("detector_state", simulation.detector_state())
+                                    .str();
+  write_file_atomically(out / "state.json", [&](std::ostream& os) { os << side_json << "\n"; });
+}
+
+/// The summary table on stdout.
+void print_summary(const Summary& summary, const sim::Simulation& simulation,
+                   const std::filesystem::path& frames_dir, const std::filesystem::path& csv_path,
+                   bool append, const std::filesystem::path& out) {
+  const double n = static_cast<double>(std::max<long long>(summary.frames - 1, 1));
+  const auto yes = [](bool b) { return b ? "yes" : "no"; };
+  std::printf("\n  %-28s %lld (%lld written to %s)\n", "frames simulated", summary.frames - 1, summary.frames,
+              frames_dir.string().c_str());
+  std::printf("  %-28s %.4g s\n", "simulated time", simulation.state().time);
+  std::printf("  %-28s %.3f / %.3f / %.3f\n", "ms per frame: integrate/detect/response", summary.integrate_ms / n,
+              summary.detect_ms / n, summary.response_ms / n);
+  std::printf("  %-28s %.1f%% .. %.1f%%\n", "collision share min..max", 100 * summary.share_min,
+              100 * summary.share_max);
+  std::printf("  %-28s 0%%: %s  ~30%%: %s  ~50%%: %s  >=80%%: %s\n", "share reached", yes(summary.hit0),
+              yes(summary.hit30), yes(summary.hit50), yes(summary.hit80));
+  std::printf("  %-28s %lld of %lld\n", "frames with a pair < h/2", summary.close_frames, summary.frames);
+  std::printf("  %-28s %.3g m\n", "max obstacle penetration", summary.max_penetration);
+  std::printf("  %-28s %s%s, %s\n", "wrote", csv_path.string().c_str(), append ? " (appended)" : "",
+              (out / "state.x3d").string().c_str());
+}
+
+/// Where a run writes: the folder, and whether stats.csv is continued.
+struct RunOutput {
+  std::filesystem::path out;
+  bool append = false;
+};
+
+/// The output folder, checked and created before any work. Resuming DIR/state.x3d continues the
+/// run in DIR (stats.csv appended, when it ends at the state's frame); any other folder holding
+/// a run is refused, or cleared of that run's files with --force.
+RunOutput prepare_run_output(const SimulateArgs& args, bool resumed, std::int64_t start_frame) {
+  const std::filesystem::path input(args.input);
+  const std::filesystem::path state_dir = input.parent_path().empty() ? "." : input.parent_path();
+  RunOutput result;
+  result.out = args.out ? std::filesystem::path(*args.out)
+               : resumed ? state_dir
+                         : std::filesystem::path(kDefaultOut);
+  const std::filesystem::path& out = result.out;
+  std::error_code ec;
+  const bool continuing = resumed && input.stem() == "state" && std::filesystem::exists(out) &&
+                          std::filesystem::equivalent(out, state_dir, ec);
+  const std::filesystem::path csv_path = out / "stats.csv";
+  if (continuing) {
+    if (std::filesystem::exists(csv_path)) {
+      std::string header;
+      const std::string last = last_line(csv_path, &header);
+      if (header != kStatsHeader) {
+        throw InputError(csv_path.string() + " has other columns than this version writes: resume "
+                         "into another folder with --out");
+      }
+      if (last.rfind(std::to_string(start_frame) + ",", 0) != 0) {
+        throw InputError(csv_path.string() + " does not end at the saved state's frame " +
+                         std::to_string(start_frame) +
+                         ": resume into another folder with --out, so that no line is lost");
+      }
+      result.append = true;
+    }
+  } else if (std::filesystem::is_directory(out) && holds_a_run(out)) {
+    if (!args.force) {
+      throw InputError("--out '" + out.string() +
+                       "' holds another run (stats.csv, state or frames): give a new or empty "
+                       "folder, or --force to replace that run's files");
+    }
+    remove_run(out);
+  }
+  prepare_output_folder(out, "--out");
+  prepare_output_folder(out / "frames", "--out");
+  return result;
+}
+
+/// A time step beyond the integrator's stable range: the scene's own step is split into stable
+/// substeps (same frame length) when that costs at most 100 times the steps; a step the user
+/// chose (`user_step`) is kept, with a warning. Returns the stable step estimate.
+Scalar fit_time_step(sim::Settings& settings, const sim::Model& model, bool user_step) {
+  const Scalar stable_dt = sim::stable_time_step(model, settings.integrator);
+  if (!(settings.dt > stable_dt)) return stable_dt;
+  const std::string name(sim::to_string(settings.integrator));
+  const auto [dt, substeps] = stable_split(settings.dt * settings.substeps, stable_dt);
+  if (!user_step && substeps <= 100 * settings.substeps) {
+    std::fprintf(stderr,
+                 "crumple simulate: the scene's time step %.3g s is beyond %s's stable range "
+                 "(about %.3g s for the stiffest spring): using %d substeps of %.3g s per frame "
+                 "instead of %d (same frame length); --dt and --substeps override\n",
+                 settings.dt, name.c_str(), stable_dt, substeps, dt, settings.substeps);
+    settings.dt = dt;
+    settings.substeps = substeps;
+  } else {
+    std::fprintf(stderr,
+                 "crumple: warning: the time step %.3g s is beyond %s's stable range (about "
+                 "%.3g s for the stiffest spring): the run will likely diverge. Use --dt %.3g "
+                 "--substeps %d (same frame length) or -i implicit-euler\n",
+                 settings.dt, name.c_str(), stable_dt, dt, substeps);
+  }
+  return stable_dt;
+}
+
 int run_simulate(const SimulateArgs& args) {
   if (args.frames < 0) throw InputError("--frames must be >= 0");
   if (args.every < 1) throw InputError("--every must be >= 1");
@@ -262,71 +382,11 @@ int run_simulate(const SimulateArgs& args) {
   if (settings.substeps < 1) throw InputError("--substeps must be >= 1");
   if (settings.passes < 1) throw InputError("--passes must be >= 1");
 
-  // The output folder, checked before any work. Resuming DIR/state.x3d continues the run in DIR
-  // (stats.csv appended); any other folder holding a run is replaced only with --force.
-  const std::filesystem::path state_dir = std::filesystem::path(args.input).parent_path();
-  const std::filesystem::path out = args.out ? std::filesystem::path(*args.out)
-                                    : side ? (state_dir.empty() ? "." : state_dir)
-                                           : std::filesystem::path(kDefaultOut);
-  std::error_code ec;
-  const bool continuing = side && std::filesystem::exists(out) &&
-                          std::filesystem::equivalent(out, state_dir.empty() ? "." : state_dir, ec) &&
-                          std::filesystem::path(args.input).stem() == "state";
+  const auto [out, append] = prepare_run_output(args, side.has_value(), start.frame);
   const std::filesystem::path csv_path = out / "stats.csv";
-  bool append = false;
-  if (continuing) {
-    if (std::filesystem::exists(csv_path)) {
-      std::string header;
-      const std::string last = last_line(csv_path, &header);
-      if (header != kStatsHeader) {
-        throw InputError(csv_path.string() + " has other columns than this version writes: resume "
-                         "into another folder with --out");
-      }
-      const std::string expected = std::to_string(start.frame) + ",";
-      if (last.rfind(expected, 0) != 0) {
-        throw InputError(csv_path.string() + " does not end at the saved state's frame " +
-                         std::to_string(start.frame) +
-                         ": resume into another folder with --out, so that no line is lost");
-      }
-      append = true;
-    }
-  } else if (std::filesystem::is_directory(out) && holds_a_run(out)) {
-    if (!args.force) {
-      throw InputError("--out '" + out.string() +
-                       "' holds another run (stats.csv, state or frames): give a new or empty "
-                       "folder, or --force to replace that run's files");
-    }
-    remove_run(out);
-  }
-  prepare_output_folder(out, "--out");
   const std::filesystem::path frames_dir = out / "frames";
-  prepare_output_folder(frames_dir, "--out");
-
-  // A time step beyond the integrator's stable range: the scene's own step is split into stable
-  // substeps (same frame length) when that costs at most 100 times the steps; a step the user
-  // chose is kept, with a warning.
-  const Scalar stable_dt = sim::stable_time_step(scene.model, settings.integrator);
+  const Scalar stable_dt = fit_time_step(settings, scene.model, args.dt || args.substeps || side);
   const std::string integrator_name(sim::to_string(settings.integrator));
-  if (settings.dt > stable_dt) {
-    const Scalar frame_time = settings.dt * settings.substeps;
-    const auto [dt, substeps] = stable_split(frame_time, stable_dt);
-    const bool user_step = args.dt || args.substeps || side;
-    if (!user_step && substeps <= 100 * settings.substeps) {
-      std::fprintf(stderr,
-                   "crumple simulate: the scene's time step %.3g s is beyond %s's stable range "
-                   "(about %.3g s for the stiffest spring): using %d substeps of %.3g s per frame "
-                   "instead of %d (same frame length); --dt and --substeps override\n",
-                   settings.dt, integrator_name.c_str(), stable_dt, substeps, dt, settings.substeps);
-      settings.dt = dt;
-      settings.substeps = substeps;
-    } else {
-      std::fprintf(stderr,
-                   "crumple: warning: the time step %.3g s is beyond %s's stable range (about "
-                   "%.3g s for the stiffest spring): the run will likely diverge. Use --dt %.3g "
-                   "--substeps %d (same frame length) or -i implicit-euler\n",
-                   settings.dt, integrator_name.c_str(), stable_dt, dt, substeps);
-    }
-  }
 
   const std::string spec_text = scene.spec;
   const auto faces = std::vector<Face>(scene.model.topology().faces().begin(), scene.model.topology().faces().end());
@@ -388,28 +448,7 @@ int run_simulate(const SimulateArgs& args) {
     }
     summary.add(s, settings.detector.thickness);
   };
-  // Final state: X3D MassSpring + JSON side file (settings needed to resume bit for bit).
-  const auto save_state = [&] {
-    io::write_mass_spring(out / "state.x3d", to_mass_spring(simulation.model(), simulation.state()));
-    const std::string side_json = JsonObject()
-                                      .add("format", "crumple-sim-state")
-                                      .add("version", 1)
-                                      .add("scene", spec_text)
-                                      .add("seed", static_cast<long long>(start.seed))
-                                      .add("frame", static_cast<long long>(simulation.frame()))
-                                      .add("time", simulation.state().time)
-                                      .add("dt", settings.dt)
-                                      .add("substeps", settings.substeps)
-                                      .add("integrator", sim::to_string(settings.integrator))
-                                      .add("method", settings.method.to_string())
-                                      .add("thickness", settings.detector.thickness)
-                                      .add("kinds", settings.detector.kinds.to_string())
-                                      .add("response", settings.response)
-                                      .add("passes", settings.passes)
-                                      .add("detector_state", simulation.detector_state())
-                                      .str();
-    write_file_atomically(out / "state.json", [&](std::ostream& os) { os << side_json << "\n"; });
-  };
+  const auto save = [&] { save_state(out, simulation, settings, spec_text, start.seed); };
 
   // SIGINT and SIGTERM finish the current frame, then leave complete files and a state to resume.
   g_interrupted = 0;
@@ -446,7 +485,7 @@ int run_simulate(const SimulateArgs& args) {
   progress.finish();
   std::fclose(csv);
   csv = nullptr;
-  save_state();
+  save();
 
   if (diverged) {
     const Scalar frame_time = settings.dt * settings.substeps;
@@ -470,23 +509,7 @@ int run_simulate(const SimulateArgs& args) {
                  static_cast<long long>(simulation.frame()), (out / "state.x3d").string().c_str());
     status = 128 + static_cast<int>(g_interrupted);
   }
-  if (!args.quiet) {
-    const double n = static_cast<double>(std::max<long long>(summary.frames - 1, 1));
-    const auto yes = [](bool b) { return b ? "yes" : "no"; };
-    std::printf("\n  %-28s %lld (%lld written to %s)\n", "frames simulated", summary.frames - 1, summary.frames,
-                frames_dir.string().c_str());
-    std::printf("  %-28s %.4g s\n", "simulated time", simulation.state().time);
-    std::printf("  %-28s %.3f / %.3f / %.3f\n", "ms per frame: integrate/detect/response", summary.integrate_ms / n,
-                summary.detect_ms / n, summary.response_ms / n);
-    std::printf("  %-28s %.1f%% .. %.1f%%\n", "collision share min..max", 100 * summary.share_min,
-                100 * summary.share_max);
-    std::printf("  %-28s 0%%: %s  ~30%%: %s  ~50%%: %s  >=80%%: %s\n", "share reached", yes(summary.hit0),
-                yes(summary.hit30), yes(summary.hit50), yes(summary.hit80));
-    std::printf("  %-28s %lld of %lld\n", "frames with a pair < h/2", summary.close_frames, summary.frames);
-    std::printf("  %-28s %.3g m\n", "max obstacle penetration", summary.max_penetration);
-    std::printf("  %-28s %s%s, %s\n", "wrote", csv_path.string().c_str(), append ? " (appended)" : "",
-                (out / "state.x3d").string().c_str());
-  }
+  if (!args.quiet) print_summary(summary, simulation, frames_dir, csv_path, append, out);
   return status;
 }
 
