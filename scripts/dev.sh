@@ -38,10 +38,20 @@ case "${1:-}" in
     ;;
   demo)
     install_deps
-    build release
+    # Only what the demo runs: the command-line tool (no tests, no benchmarks).
+    cmake --preset release >/dev/null
+    cmake --build --preset release -j "$JOBS" --target crumple_cli
     # The thesis scene: 10x10 cloth hanging from a corner, 600 frames; prints a summary table
-    # (collision share reached, ms per frame by part); frames, stats.csv and state in demo-out/.
-    ./build/release/apps/cli/crumple simulate hanging-cloth --frames 600 --every 10 --out demo-out
+    # (collision share reached, ms per frame by part); frames, stats.csv and state in demo-out/
+    # (--force: a previous demo's files there are replaced).
+    ./build/release/apps/cli/crumple simulate hanging-cloth --frames 600 --every 10 --out demo-out --force
+    cat <<'EOF'
+
+Look at the result (every 10th frame in demo-out/frames, statistics in demo-out/stats.csv):
+  ./build/release/apps/cli/crumple render hanging-cloth --frame 160 --out demo-out/frame160.png
+  ./build/release/apps/cli/crumple render demo-out/frames --video demo-out/video --force
+(the second writes one PNG per saved frame, and demo-out/video/video.mp4 when ffmpeg is installed)
+EOF
     ;;
   test)
     install_deps

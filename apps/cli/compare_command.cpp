@@ -1,4 +1,6 @@
 #include "commands.hpp"
+#include "options.hpp"
+#include "progress.hpp"
 
 #include <crumple/core/error.hpp>
 #include <crumple/core/json.hpp>
@@ -20,12 +22,8 @@ namespace {
 
 struct CompareArgs {
   std::vector<std::string> files;
-  std::string method = "stochastic";
+  DetectionArgs detection;
   std::string against = "naive";
-  std::optional<double> thickness;
-  std::optional<double> thickness_rel;
-  std::string kinds = "vf,ee";
-  int threads = 0;
   int n = 24;
   int frames = 60;
   long long seed = 1;
@@ -51,35 +49,38 @@ std::string stats_json(const DetectorStats& stats) {
   return object.str();
 }
 
+/// Largest built-in sequence: n x n quads (the naive reference is quadratic in n²).
+constexpr int kMaxSize = 1000;
+constexpr int kMaxFrames = 100000;
+
 int run_compare(const CompareArgs& args) {
-  const MethodSpec method_spec = MethodSpec::parse(args.method);
+  const MethodSpec method_spec = method_of(args.detection);
   const MethodSpec reference_spec = MethodSpec::parse(args.against);
-  DetectorOptions options;
-  options.kinds = ContactKinds::parse(args.kinds);
-  options.threads = args.threads;
+  check_detection_args(args.detection);
 
   std::unique_ptr<FrameSource> frames;
-  std::optional<Scalar> default_thickness;
+  std::optional<Scalar> own_thickness;
   if (args.files.empty()) {
-    if (args.n < 2) throw InputError("--size must be >= 2");
-    if (args.frames < 1) throw InputError("--frames must be >= 1");
+    if (args.n < 2 || args.n > kMaxSize) {
+      throw InputError("--size must be between 2 and " + std::to_string(kMaxSize) +
+                       " (n x n quads), got " + std::to_string(args.n));
+    }
+    if (args.frames < 1 || args.frames > kMaxFrames) {
+      throw InputError("--frames must be between 1 and " + std::to_string(kMaxFrames) + ", got " +
+                       std::to_string(args.frames));
+    }
     if (args.seed < 0) throw InputError("--seed must be >= 0");
     auto folding = std::make_unique<FoldingSequence>(
         FoldingParams{.n = args.n, .frames = static_cast<std::size_t>(args.frames),
                       .seed = static_cast<std::uint64_t>(args.seed)});
-    default_thickness = folding->thickness();
+    own_thickness = folding->thickness();
     frames = std::move(folding);
   } else {
-    frames = std::make_unique<FileFrames>(std::vector<std::filesystem::path>(args.files.begin(), args.files.end()));
+    frames = std::make_unique<FileFrames>(frame_files(args.files));
   }
-  const Scalar diagonal = compute_bounds(frames->mesh().positions()).diagonal();
-  if (args.thickness) {
-    options.thickness = *args.thickness;
-  } else if (args.thickness_rel) {
-    options.thickness = *args.thickness_rel * diagonal;
-  } else {
-    options.thickness = default_thickness ? *default_thickness : 1e-3 * diagonal;
-  }
+  const DetectorOptions options =
+      detector_options(args.detection, frames->mesh().positions(), own_thickness);
+  check_contact_budget(frames->mesh().topology(), frames->mesh().positions(), options, args.detection.max_contacts);
 
   auto method = make_detector(method_spec, options);
   auto reference = make_detector(reference_spec, options);
@@ -90,7 +91,9 @@ int run_compare(const CompareArgs& args) {
                 frames->mesh().num_faces(), frames->size());
     std::fflush(stdout);
   }
+  Progress progress("compare", "frame", frames->size(), frames->size() > 1);
   const auto on_frame = [&](const FrameComparison& f) {
+    progress.clear();
     if (args.json) {
       std::cout << JsonObject()
                        .add("frame", f.frame)
@@ -113,8 +116,10 @@ int run_compare(const CompareArgs& args) {
                   f.match.false_contacts, f.match.recall(), f.ms, f.reference_ms);
       std::fflush(stdout);
     }
+    progress.update(f.frame + 1);
   };
   const ComparisonSummary s = compare_detectors(*method, *reference, *frames, on_frame);
+  progress.finish();
   if (args.json) {
     std::cout << JsonObject()
                      .add("summary", true)
@@ -150,22 +155,13 @@ Run add_compare_command(CLI::App& app) {
       "recall and the time of each, then a summary line. Without FILE, runs on the built-in\n"
       "folding sequence (a lattice folded over itself with a travelling ripple, seeded; thickness\n"
       "a quarter of the edge length; see docs/stochastic.md).");
-  app.add_option("FILE", args->files, "Frame files (.obj .ply .off .x3d), same connectivity")
-      ->check(CLI::ExistingFile);
-  app.add_option("-m,--method", args->method, "Method SPEC to measure (see `crumple detect --help`)")
-      ->capture_default_str();
+  app.add_option("FILE", args->files,
+                 "Frame files (.obj .ply .off .x3d) or folders of them (sorted by name), same "
+                 "connectivity");
+  add_detection_options(app, args->detection,
+                        {.thickness_default = "the built-in sequence's, or 1e-3 of the first "
+                                              "frame's bounding-box diagonal"});
   app.add_option("-a,--against", args->against, "Reference method SPEC")->capture_default_str();
-  auto* thick = app.add_option("-t,--thickness", args->thickness,
-                               "Contact thickness h (default: the built-in sequence's, or 1e-3 of "
-                               "the first frame's bounding-box diagonal)");
-  app.add_option("-r,--thickness-rel", args->thickness_rel,
-                 "Thickness as a fraction of the first frame's bounding-box diagonal")
-      ->excludes(thick);
-  app.add_option("-k,--kinds", args->kinds, "Contact kinds: comma-separated vf, ee, tt")
-      ->capture_default_str();
-  app.add_option("-j,--threads", args->threads, "Worker threads (0 = all cores)")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
   app.add_option("--size", args->n, "Built-in sequence: lattice resolution n (n x n quads)")
       ->capture_default_str();
   app.add_option("--frames", args->frames, "Built-in sequence: number of frames")->capture_default_str();

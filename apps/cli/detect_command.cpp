@@ -1,12 +1,17 @@
 #include "commands.hpp"
+#include "options.hpp"
+#include "outputs.hpp"
+#include "progress.hpp"
 
 #include <crumple/core/error.hpp>
 #include <crumple/core/json.hpp>
+#include <crumple/core/timing.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/io/frames.hpp>
 #include <crumple/mesh/shapes.hpp>
 
 #include <chrono>
+#include <map>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -15,34 +20,16 @@
 #include <string>
 #include <vector>
 
-#include <unistd.h>
-
 namespace crumple::cli {
 
 namespace {
 
 struct DetectArgs {
   std::vector<std::string> files;
-  std::string method = "naive";
-  std::optional<double> thickness;
-  std::optional<double> thickness_rel;
-  std::string kinds = "vf,ee";
-  int threads = 0;
+  DetectionArgs detection;
   std::string contacts;
   bool json = false;
 };
-
-std::string methods_help() {
-  std::string out = "Detection method SPEC, NAME[:key=value,...]. Methods:";
-  for (const MethodInfo& m : all_methods()) {
-    out += "\n  " + std::string(m.name) + " — " + std::string(m.summary);
-    for (const ParamInfo& p : m.params) {
-      out += "\n      " + std::string(p.key) + "=" + std::string(p.default_value) + "  " +
-             std::string(p.description);
-    }
-  }
-  return out;
-}
 
 std::string stats_json(const DetectorStats& stats) {
   JsonObject object;
@@ -68,37 +55,39 @@ struct Input {
 };
 
 int run_detect(const DetectArgs& args) {
-  const MethodSpec spec = MethodSpec::parse(args.method);
-  DetectorOptions options;
-  options.kinds = ContactKinds::parse(args.kinds);
-  options.threads = args.threads;
+  const MethodSpec spec = method_of(args.detection);
+  check_detection_args(args.detection);
 
   Input input;
-  Scalar default_thickness = 0;
+  std::optional<Scalar> own_thickness;
   if (args.files.empty()) {
     const shapes::FoldedClothParams params;
     input.scene = shapes::folded_cloth(params);
-    default_thickness = params.thickness;
+    own_thickness = params.thickness;
   } else {
-    std::vector<std::filesystem::path> paths(args.files.begin(), args.files.end());
-    input.files.emplace(std::move(paths));
+    input.files.emplace(frame_files(args.files));
+  }
+  const bool several = input.size() > 1;
+  // Outputs checked before any work; one contact file per frame, never one name twice.
+  if (!args.contacts.empty()) {
+    if (several) {
+      std::map<std::string, std::string> names;
+      for (std::size_t i = 0; i < input.size(); ++i) {
+        const auto [it, fresh] = names.emplace(input.stem(i) + ".tsv", input.name(i));
+        if (!fresh) {
+          throw InputError("--contacts: frames '" + it->second + "' and '" + input.name(i) +
+                           "' would both write " + it->first +
+                           "; give frames with distinct file names");
+        }
+      }
+      prepare_output_folder(args.contacts, "--contacts");
+    } else {
+      check_output_file(args.contacts, "--contacts");
+    }
   }
   const TriMesh& mesh = input.first();
-  const Scalar diagonal = compute_bounds(mesh.positions()).diagonal();
-  if (args.thickness) {
-    options.thickness = *args.thickness;
-  } else if (args.thickness_rel) {
-    options.thickness = *args.thickness_rel * diagonal;
-  } else if (input.scene) {
-    options.thickness = default_thickness;
-  } else {
-    options.thickness = 1e-3 * diagonal;
-  }
-
-  const bool several = input.size() > 1;
-  if (!args.contacts.empty() && several) {
-    std::filesystem::create_directories(args.contacts);
-  }
+  const DetectorOptions options = detector_options(args.detection, mesh.positions(), own_thickness);
+  check_contact_budget(mesh.topology(), mesh.positions(), options, args.detection.max_contacts);
 
   std::unique_ptr<Detector> detector = make_detector(spec, options);
   detector->set_topology(mesh.topology_ptr());
@@ -108,17 +97,15 @@ int run_detect(const DetectArgs& args) {
                 mesh.num_vertices(), mesh.num_faces(), mesh.num_edges());
     std::fflush(stdout);
   }
-  const bool progress = several && ::isatty(STDERR_FILENO);
+  Progress progress("detect", "frame", input.size(), several);
   ContactSet contacts;
   Positions previous;
   for (std::size_t i = 0; i < input.size(); ++i) {
-    if (progress) std::fprintf(stderr, "\r[%zu/%zu] %s ", i + 1, input.size(), input.name(i).c_str());
     Positions current = input.positions(i);
     const auto start = std::chrono::steady_clock::now();
     detector->update(previous, current, contacts);
-    const double ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    if (progress) std::fprintf(stderr, "\r\033[K");
+    const double ms = ms_since(start);
+    progress.clear();
     if (args.json) {
       std::cout << JsonObject()
                        .add("frame", i)
@@ -142,6 +129,7 @@ int run_detect(const DetectArgs& args) {
       write_contacts_file(out, contacts);
     }
     previous = std::move(current);
+    progress.update(i + 1);
   }
   return 0;
 }
@@ -156,20 +144,12 @@ Run add_detect_command(CLI::App& app) {
       "runs on the built-in folded cloth (32x32 lattice folded over itself, thickness 0.02).\n"
       "Contact: vertex-face or edge-edge pair sharing no vertex closer than the thickness;\n"
       "tt: faces sharing no vertex that intersect.");
-  app.add_option("FILE", args->files, "Frame files (.obj .ply .off .x3d), same connectivity")
-      ->check(CLI::ExistingFile);
-  app.add_option("-m,--method", args->method, methods_help())->capture_default_str();
-  auto* thick = app.add_option("-t,--thickness", args->thickness,
-                               "Contact thickness h in scene units (default: 1e-3 of the first "
-                               "frame's bounding-box diagonal)");
-  app.add_option("-r,--thickness-rel", args->thickness_rel,
-                 "Thickness as a fraction of the first frame's bounding-box diagonal")
-      ->excludes(thick);
-  app.add_option("-k,--kinds", args->kinds, "Contact kinds to report: comma-separated vf, ee, tt")
-      ->capture_default_str();
-  app.add_option("-j,--threads", args->threads, "Worker threads (0 = all cores)")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+  app.add_option("FILE", args->files,
+                 "Frame files (.obj .ply .off .x3d) or folders of them (sorted by name), same "
+                 "connectivity");
+  add_detection_options(app, args->detection,
+                        {.thickness_default = "1e-3 of the first frame's bounding-box diagonal "
+                                              "(0.02 for the built-in cloth)"});
   app.add_option("-c,--contacts", args->contacts,
                  "Write the sorted contact list: to this file for one frame, or into this "
                  "folder as <frame-stem>.tsv for several. Lines: 'vf V F d', 'ee A0 A1 B0 B1 d', "

@@ -3,8 +3,33 @@
 
 #include <crumple/core/error.hpp>
 
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <iostream>
 #include <map>
+
+namespace {
+
+/// Flushes and closes stdout: output that never reached its file (a full disk, a closed pipe)
+/// is an error, reported like any other. Returns false after printing the reason.
+bool close_stdout() {
+  // std::cout writes straight into stdout's buffer (synchronised with stdio).
+  errno = 0;
+  const bool flushed = std::fflush(stdout) == 0 && !std::ferror(stdout);
+  const int flush_errno = errno;  // 0 when the failure came from an earlier flush
+  std::cout.flush();
+  const bool stream_ok = static_cast<bool>(std::cout);
+  const bool closed = std::fclose(stdout) == 0;
+  if (stream_ok && flushed && closed) return true;
+  const int err = flush_errno != 0 ? flush_errno : errno;
+  std::fprintf(stderr, "crumple: error: cannot write the standard output: %s\n",
+               err != 0 ? std::strerror(err) : "write error");
+  return false;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -34,18 +59,33 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    const int code = app.exit(e);  // --help and --version print here too
+    return !close_stdout() && code == 0 ? 1 : code;
   }
+  int status = 0;
   try {
     for (auto& [sub, run] : commands) {
-      if (sub->parsed()) return run();
+      if (sub->parsed()) status = run();
     }
   } catch (const crumple::Error& e) {
+    std::cout.flush();
     std::cerr << "crumple: error: " << e.what() << "\n";
-    return 1;
+    status = 1;
+  } catch (const std::filesystem::filesystem_error& e) {
+    // The file system's refusal (permissions, full disk, a file where a folder should be) is
+    // the user's to fix: its message names the path and the OS's reason.
+    std::cout.flush();
+    std::cerr << "crumple: error: " << e.what() << "\n";
+    status = 1;
+  } catch (const std::bad_alloc&) {
+    std::cout.flush();
+    std::cerr << "crumple: error: out of memory\n";
+    status = 1;
   } catch (const std::exception& e) {
+    std::cout.flush();
     std::cerr << "crumple: internal error: " << e.what() << "\n";
-    return 2;
+    status = 2;
   }
-  return 0;
+  if (!close_stdout() && status == 0) status = 1;
+  return status;
 }

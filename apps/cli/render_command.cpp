@@ -3,6 +3,10 @@
 // the viewer's colouring (red edges in collision, VF contacts as segments) and written as PNG;
 // `--video DIR` writes one PNG per frame (and an MP4 when ffmpeg is on PATH).
 #include "commands.hpp"
+#include "options.hpp"
+#include "outputs.hpp"
+#include "process.hpp"
+#include "progress.hpp"
 #include "sim_glue.hpp"
 
 #include <crumple/core/error.hpp>
@@ -26,8 +30,6 @@
 #include <string>
 #include <vector>
 
-#include <unistd.h>
-
 namespace crumple::cli {
 
 namespace {
@@ -42,15 +44,12 @@ struct RenderArgs {
   bool wireframe = false;
   bool springs = false;
   int supersample = 2;
-  std::optional<std::string> method;
-  std::optional<double> thickness;
-  std::optional<double> thickness_rel;
-  std::optional<std::string> kinds;
+  DetectionArgs detection;
   std::optional<std::string> response;
   std::optional<std::uint64_t> seed;
-  int threads = 0;
   std::string video;
   long long every = 1;
+  bool force = false;
   bool quiet = false;
 };
 
@@ -111,39 +110,6 @@ bool looks_like_file(const std::string& input) {
          (std::filesystem::exists(input) || !std::filesystem::path(input).extension().empty());
 }
 
-bool is_mesh_file(const std::filesystem::path& p) {
-  std::string ext = p.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return std::tolower(c); });
-  return ext == ".obj" || ext == ".ply" || ext == ".off" || ext == ".x3d";
-}
-
-std::vector<std::filesystem::path> frame_files(const std::filesystem::path& dir) {
-  std::vector<std::filesystem::path> files;
-  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
-    if (entry.is_regular_file() && is_mesh_file(entry.path())) files.push_back(entry.path());
-  }
-  std::sort(files.begin(), files.end());
-  if (files.empty()) {
-    throw InputError(std::string("folder '")
-                         .append(dir.string())
-                         .append("' holds no .obj .ply .off .x3d frame"));
-  }
-  return files;
-}
-
-bool on_path(const std::string& program) {
-  const char* path = std::getenv("PATH");
-  if (path == nullptr) return false;
-  std::stringstream in(path);
-  for (std::string dir; std::getline(in, dir, ':');) {
-    if (dir.empty()) continue;
-    const std::filesystem::path candidate = std::filesystem::path(dir) / program;
-    if (::access(candidate.c_str(), X_OK) == 0) return true;
-  }
-  return false;
-}
-
 /// Draws and writes frames with one camera set-up and one size.
 class Painter {
  public:
@@ -151,6 +117,15 @@ class Painter {
       : size_(parse_size(args.size)),
         camera_(args.camera ? parse_camera(*args.camera) : CameraArg{}) {
     if (args.supersample < 1 || args.supersample > 4) throw InputError("--aa must be 1..4");
+    // The rasteriser holds colour and depth for every sample: bound them (~1.5 GB).
+    constexpr long long kMaxSamples = 1LL << 27;
+    const long long samples = static_cast<long long>(size_.width) * size_.height *
+                              args.supersample * args.supersample;
+    if (samples > kMaxSamples) {
+      throw InputError("--size " + args.size + " with --aa " + std::to_string(args.supersample) +
+                       " needs " + std::to_string(samples) + " samples, more than " +
+                       std::to_string(kMaxSamples) + ": lower --aa or --size");
+    }
     options_.wireframe = args.wireframe;
     options_.masses_springs = args.springs;
     supersample_ = args.supersample;
@@ -225,19 +200,19 @@ void render_scene(const RenderArgs& args, Output& output) {
                                    apply_params(sim::SceneSpec::parse("file"), args.params));
   }
   sim::Settings settings = scene.settings;
-  if (args.method) settings.method = MethodSpec::parse(*args.method);
-  if (args.thickness) settings.detector.thickness = *args.thickness;
-  if (args.thickness_rel)
-    settings.detector.thickness = *args.thickness_rel * compute_bounds(scene.state.x).diagonal();
-  if (args.kinds) settings.detector.kinds = ContactKinds::parse(*args.kinds);
+  settings.method = method_of(args.detection, settings.method);
+  settings.detector.thickness =
+      thickness_of(args.detection, scene.state.x, settings.detector.thickness);
+  if (args.detection.kinds) settings.detector.kinds = ContactKinds::parse(*args.detection.kinds);
   if (args.response) {
     if (*args.response != "on" && *args.response != "off") {
       throw InputError("--response expects on or off, got '" + *args.response + "'");
     }
     settings.response = *args.response == "on";
   }
-  settings.detector.threads = args.threads;
-  if (!(settings.detector.thickness >= 0)) throw InputError("--thickness must be >= 0");
+  settings.detector.threads = args.detection.threads;
+  check_contact_budget(scene.model.topology(), scene.state.x, settings.detector,
+                       args.detection.max_contacts);
   sim::Simulation simulation(std::move(scene.model), std::move(scene.state), scene.field,
                              std::move(scene.obstacles), std::move(scene.kinematics), settings);
   std::vector<Edge> springs;
@@ -253,7 +228,9 @@ void render_scene(const RenderArgs& args, Output& output) {
                                      static_cast<std::size_t>(simulation.model().num_particles()));
   const long long last = args.frame.value_or(0);
   output.last = last;
+  Progress progress("render", "frame", static_cast<std::size_t>(last + 1), !args.quiet);
   for (long long f = 0;; ++f) {
+    progress.update(static_cast<std::size_t>(f));
     output.frame(f, simulation.model().topology(), simulation.state().x, simulation.contacts(), springs, pinned,
                  render::obstacle_meshes(simulation.obstacles(), simulation.state().time, simulation.state().x));
     if (f >= last) break;
@@ -264,7 +241,8 @@ void render_scene(const RenderArgs& args, Output& output) {
 void render_files(const RenderArgs& args, Output& output) {
   const std::filesystem::path input(args.input);
   const bool folder = std::filesystem::is_directory(input);
-  io::FrameSequence frames(folder ? frame_files(input) : std::vector<std::filesystem::path>{input});
+  io::FrameSequence frames(folder ? frame_files({args.input})
+                                 : std::vector<std::filesystem::path>{input});
   // A video of a folder without --frame runs over every frame.
   const long long index =
       args.frame.value_or(args.video.empty() ? 0 : static_cast<long long>(frames.size()) - 1);
@@ -278,14 +256,10 @@ void render_files(const RenderArgs& args, Output& output) {
                          .append(std::to_string(frames.size()))
                          .append(frames.size() == 1 ? " frame" : " frames"));
   }
-  DetectorOptions options;
-  options.threads = args.threads;
-  options.thickness = args.thickness ? *args.thickness
-                                     : args.thickness_rel.value_or(1e-3) *
-                                           compute_bounds(frames.first().positions()).diagonal();
-  if (!(options.thickness >= 0)) throw InputError("--thickness must be >= 0");
-  if (args.kinds) options.kinds = ContactKinds::parse(*args.kinds);
-  auto detector = make_detector(MethodSpec::parse(args.method.value_or("naive")), options);
+  const DetectorOptions options = detector_options(args.detection, frames.first().positions());
+  check_contact_budget(frames.first().topology(), frames.first().positions(), options,
+                       args.detection.max_contacts);
+  auto detector = make_detector(method_of(args.detection), options);
   detector->set_topology(frames.first().topology_ptr());
   ContactSet contacts;
   const Topology& topology = frames.first().topology();
@@ -296,7 +270,9 @@ void render_files(const RenderArgs& args, Output& output) {
     return;
   }
   Positions previous;
+  Progress progress("render", "frame", static_cast<std::size_t>(index + 1), !args.quiet);
   for (long long f = 0; f <= index; ++f) {
+    progress.update(static_cast<std::size_t>(f));
     Positions x = frames.positions(static_cast<std::size_t>(f));
     if (previous.empty()) {
       detector->update(x, contacts);
@@ -306,6 +282,31 @@ void render_files(const RenderArgs& args, Output& output) {
     output.frame(f, topology, x, contacts);
     previous = std::move(x);
   }
+}
+
+/// Whether `name` is a picture or the video of a `--video` folder.
+bool is_video_file(const std::filesystem::path& name) {
+  const std::string stem = name.stem().string();
+  if (name.filename() == "video.mp4") return true;
+  return name.extension() == ".png" && stem.size() == 6 &&
+         std::all_of(stem.begin(), stem.end(), [](char c) { return c >= '0' && c <= '9'; });
+}
+
+/// Creates the --video folder. Pictures of another video there would be mixed into this one:
+/// refused, or removed with --force.
+void prepare_video_folder(const std::filesystem::path& dir, bool force) {
+  prepare_output_folder(dir, "--video");
+  std::vector<std::filesystem::path> stale;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    if (entry.is_regular_file() && is_video_file(entry.path().filename())) stale.push_back(entry.path());
+  }
+  if (stale.empty()) return;
+  if (!force) {
+    throw InputError("--video '" + dir.string() + "' holds the pictures of another video (" +
+                     stale.front().filename().string() +
+                     ", ...): give a new or empty folder, or --force to replace them");
+  }
+  for (const auto& path : stale) std::filesystem::remove(path);
 }
 
 int run_render(RenderArgs args) {
@@ -320,10 +321,9 @@ int run_render(RenderArgs args) {
   const bool file = looks_like_file(args.input);
   if (file && !std::filesystem::exists(args.input))
     throw InputError("no such file, folder or scene: '" + args.input + "'");
-  if (!args.video.empty()) std::filesystem::create_directories(args.video);
-  if (!args.out.empty() && std::filesystem::path(args.out).has_parent_path()) {
-    std::filesystem::create_directories(std::filesystem::path(args.out).parent_path());
-  }
+  check_detection_args(args.detection);
+  if (!args.out.empty()) check_output_file(args.out, "--out");
+  if (!args.video.empty()) prepare_video_folder(args.video, args.force);
   Output output{args, painter};
   const bool mass_spring = file && !std::filesystem::is_directory(args.input) &&
                            io::format_from_path(args.input) == io::MeshFormat::X3d &&
@@ -338,14 +338,20 @@ int run_render(RenderArgs args) {
     if (!args.quiet)
       std::printf("crumple render: wrote %lld PNGs to %s\n", output.pictures, args.video.c_str());
     if (on_path("ffmpeg")) {
-      const std::string command =
-          std::string("ffmpeg -y -loglevel error -framerate 30 -pattern_type glob -i '")
-              .append((std::filesystem::path(args.video) / "[0-9][0-9][0-9][0-9][0-9][0-9].png")
-                          .string())
-              .append("' -pix_fmt yuv420p -vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2' '")
-              .append(mp4)
-              .append("'");
-      if (std::system(command.c_str()) != 0) throw Error("ffmpeg failed: " + command);
+      // Run in the video folder with relative names: no shell, and no folder name reaches
+      // ffmpeg's glob pattern.
+      const std::vector<std::string> command{
+          "ffmpeg", "-nostdin", "-y", "-loglevel", "error", "-framerate", "30",
+          "-pattern_type", "glob", "-i", "[0-9][0-9][0-9][0-9][0-9][0-9].png",
+          "-pix_fmt", "yuv420p", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "video.mp4"};
+      if (!args.quiet) {
+        std::fprintf(stderr, "crumple render: encoding %lld pictures into %s with ffmpeg\n",
+                     output.pictures, mp4.c_str());
+      }
+      const int status = run_program(command, args.video);
+      if (status != 0) {
+        throw Error("ffmpeg failed (exit status " + std::to_string(status) + ") writing " + mp4);
+      }
       if (!args.quiet) std::printf("crumple render: wrote %s\n", mp4.c_str());
     } else if (!args.quiet) {
       std::printf("crumple render: ffmpeg is not on PATH: no MP4, PNGs only\n");
@@ -383,27 +389,21 @@ Run add_render_command(CLI::App& app) {
   app.add_flag("--springs", args->springs, "Draw the masses and springs alone (as in the thesis)");
   app.add_option("--aa", args->supersample, "Anti-aliasing: 1..4 samples per pixel along each axis")
       ->capture_default_str();
-  app.add_option("-m,--method", args->method,
-                 "Detection method SPEC; default: the scene's (naive)");
-  auto* thick =
-      app.add_option("-t,--thickness", args->thickness,
-                     "Contact thickness (scene units); default: the scene's, or 1e-3 of the\n"
-                     "first frame's bounding-box diagonal for files");
-  app.add_option("-r,--thickness-rel", args->thickness_rel,
-                 "Thickness as a fraction of the first frame's bounding-box diagonal")
-      ->excludes(thick);
-  app.add_option("-k,--kinds", args->kinds,
-                 "Contact kinds: comma-separated vf, ee, tt; default vf,ee");
+  add_detection_options(app, args->detection,
+                        {.method_default = std::string("the scene's, or ") + kDefaultMethod +
+                                           " for files",
+                         .thickness_default = "the scene's, or 1e-3 of the first frame's "
+                                              "bounding-box diagonal for files"});
   app.add_option("--response", args->response,
                  "Scenes: self-collision response on|off; default: the scene's");
   app.add_option("-s,--seed", args->seed, "Scenes: seed of the random perturbation; default 1");
-  app.add_option("-j,--threads", args->threads, "Detector threads (0 = all cores)")
-      ->capture_default_str();
   app.add_option(
       "--video", args->video,
       "Write DIR/NNNNNN.png for frames 0..--frame (every --every), and DIR/video.mp4 when\n"
       "ffmpeg is on PATH");
   app.add_option("--every", args->every, "With --video: every K-th frame")->capture_default_str();
+  app.add_flag("--force", args->force,
+               "With --video: replace the pictures of another video in DIR");
   app.add_flag("-q,--quiet", args->quiet, "Print nothing on success");
   return [args]() { return run_render(*args); };
 }

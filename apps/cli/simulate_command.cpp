@@ -1,6 +1,9 @@
 // `crumple simulate`: runs a built-in scene or a model from a file, writes frames, per-frame
 // statistics and the final state (X3D MassSpring + a JSON side file) so a run can be resumed.
 #include "commands.hpp"
+#include "options.hpp"
+#include "outputs.hpp"
+#include "progress.hpp"
 #include "sim_glue.hpp"
 
 #include <crumple/core/error.hpp>
@@ -9,7 +12,10 @@
 #include <crumple/sim/scene.hpp>
 
 #include <algorithm>
+#include <cmath>
+#include <cerrno>
 #include <csignal>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -26,8 +32,9 @@ namespace crumple::cli {
 
 namespace {
 
+/// The signal (SIGINT or SIGTERM) that asked the run to stop after the current frame, or 0.
 volatile std::sig_atomic_t g_interrupted = 0;
-extern "C" void on_sigint(int) { g_interrupted = 1; }
+extern "C" void on_stop_signal(int signal) { g_interrupted = signal; }
 
 struct SimulateArgs {
   std::string input = "hanging-cloth";
@@ -36,18 +43,24 @@ struct SimulateArgs {
   std::optional<double> dt;
   std::optional<int> substeps;
   std::optional<std::string> integrator;
-  std::optional<std::string> method;
-  std::optional<double> thickness;
-  std::optional<std::string> kinds;
+  DetectionArgs detection;
   std::optional<std::string> response;
   std::optional<int> passes;
   std::optional<std::uint64_t> seed;
-  int threads = 0;
-  std::string out = "crumple-out";
+  std::optional<std::string> out;  ///< default: the resumed state's folder, else kDefaultOut
   std::string format = "obj";
   long long every = 1;
+  bool force = false;
   bool quiet = false;
 };
+
+constexpr const char* kDefaultOut = "crumple-out";
+
+/// Columns of stats.csv.
+constexpr const char* kStatsHeader =
+    "frame,time,integrate_ms,detect_ms,response_ms,vf,ee,tt,collision_share,min_distance,"
+    "obstacle_penetration,cg_iterations,corrections,energy,max_speed,min_x,min_y,min_z,max_x,"
+    "max_y,max_z";
 
 std::string scenes_help() {
   std::string out = "Built-in scene SPEC, NAME[:key=value,...], or a file (.x3d .obj .ply .off). Scenes:";
@@ -167,12 +180,176 @@ struct Summary {
   }
 };
 
+/// The files of a run in `out`: stats.csv, state.x3d, state.json and frames/.
+bool holds_a_run(const std::filesystem::path& out) {
+  std::error_code ec;
+  for (const char* name : {"stats.csv", "state.x3d", "state.json", "frames"}) {
+    if (std::filesystem::exists(out / name, ec)) return true;
+  }
+  return false;
+}
+
+/// Removes the files of another run from `out` (--force): frames/NNNNNN.*, stats.csv, state.*.
+void remove_run(const std::filesystem::path& out) {
+  for (const char* name : {"stats.csv", "state.x3d", "state.json"}) std::filesystem::remove(out / name);
+  const std::filesystem::path frames = out / "frames";
+  if (!std::filesystem::is_directory(frames)) return;
+  for (const auto& entry : std::filesystem::directory_iterator(frames)) {
+    const std::string stem = entry.path().stem().string();
+    if (entry.is_regular_file() && stem.size() == 6 &&
+        std::all_of(stem.begin(), stem.end(), [](char c) { return c >= '0' && c <= '9'; })) {
+      std::filesystem::remove(entry.path());
+    }
+  }
+}
+
+/// The last line of a text file ("" when none).
+std::string last_line(const std::filesystem::path& path, std::string* first = nullptr) {
+  std::ifstream in(path);
+  std::string line, last;
+  bool at_first = true;
+  while (std::getline(in, line)) {
+    if (at_first && first) *first = line;
+    at_first = false;
+    if (!line.empty()) last = line;
+  }
+  return last;
+}
+
+/// A step length within `kind`'s stable range that divides `frame_time`: (dt, substeps).
+std::pair<Scalar, int> stable_split(Scalar frame_time, Scalar stable_dt) {
+  const double n = std::ceil(frame_time / (0.9 * stable_dt));
+  const int substeps = n < 1 ? 1 : n > 1e9 ? 1000000000 : static_cast<int>(n);
+  return {frame_time / substeps, substeps};
+}
+
+/// The final state: X3D MassSpring + JSON side file (the settings needed to resume bit for bit).
+void save_state(const std::filesystem::path& out, const sim::Simulation& simulation,
+                const sim::Settings& settings, const std::string& spec_text, std::uint64_t seed) {
+  io::write_mass_spring(out / "state.x3d", to_mass_spring(simulation.model(), simulation.state()));
+  const std::string side_json = JsonObject()
+                                    .add("format", "crumple-sim-state")
+                                    .add("version", 1)
+                                    .add("scene", spec_text)
+                                    .add("seed", static_cast<long long>(seed))
+                                    .add("frame", static_cast<long long>(simulation.frame()))
+                                    .add("time", simulation.state().time)
+                                    .add("dt", settings.dt)
+                                    .add("substeps", settings.substeps)
+                                    .add("integrator", sim::to_string(settings.integrator))
+                                    .add("method", settings.method.to_string())
+                                    .add("thickness", settings.detector.thickness)
+                                    .add("kinds", settings.detector.kinds.to_string())
+                                    .add("response", settings.response)
+                                    .add("passes", settings.passes)
+                                    .add("detector_state", simulation.detector_state())
+                                    .str();
+  write_file_atomically(out / "state.json", [&](std::ostream& os) { os << side_json << "\n"; });
+}
+
+/// The summary table on stdout.
+void print_summary(const Summary& summary, const sim::Simulation& simulation,
+                   const std::filesystem::path& frames_dir, const std::filesystem::path& csv_path,
+                   bool append, const std::filesystem::path& out) {
+  const double n = static_cast<double>(std::max<long long>(summary.frames - 1, 1));
+  const auto yes = [](bool b) { return b ? "yes" : "no"; };
+  std::printf("\n  %-28s %lld (%lld written to %s)\n", "frames simulated", summary.frames - 1, summary.frames,
+              frames_dir.string().c_str());
+  std::printf("  %-28s %.4g s\n", "simulated time", simulation.state().time);
+  std::printf("  %-28s %.3f / %.3f / %.3f\n", "ms per frame: integrate/detect/response", summary.integrate_ms / n,
+              summary.detect_ms / n, summary.response_ms / n);
+  std::printf("  %-28s %.1f%% .. %.1f%%\n", "collision share min..max", 100 * summary.share_min,
+              100 * summary.share_max);
+  std::printf("  %-28s 0%%: %s  ~30%%: %s  ~50%%: %s  >=80%%: %s\n", "share reached", yes(summary.hit0),
+              yes(summary.hit30), yes(summary.hit50), yes(summary.hit80));
+  std::printf("  %-28s %lld of %lld\n", "frames with a pair < h/2", summary.close_frames, summary.frames);
+  std::printf("  %-28s %.3g m\n", "max obstacle penetration", summary.max_penetration);
+  std::printf("  %-28s %s%s, %s\n", "wrote", csv_path.string().c_str(), append ? " (appended)" : "",
+              (out / "state.x3d").string().c_str());
+}
+
+/// Where a run writes: the folder, and whether stats.csv is continued.
+struct RunOutput {
+  std::filesystem::path out;
+  bool append = false;
+};
+
+/// The output folder, checked and created before any work. Resuming DIR/state.x3d continues the
+/// run in DIR (stats.csv appended, when it ends at the state's frame); any other folder holding
+/// a run is refused, or cleared of that run's files with --force.
+RunOutput prepare_run_output(const SimulateArgs& args, bool resumed, std::int64_t start_frame) {
+  const std::filesystem::path input(args.input);
+  const std::filesystem::path state_dir = input.parent_path().empty() ? "." : input.parent_path();
+  RunOutput result;
+  result.out = args.out ? std::filesystem::path(*args.out)
+               : resumed ? state_dir
+                         : std::filesystem::path(kDefaultOut);
+  const std::filesystem::path& out = result.out;
+  std::error_code ec;
+  const bool continuing = resumed && input.stem() == "state" && std::filesystem::exists(out) &&
+                          std::filesystem::equivalent(out, state_dir, ec);
+  const std::filesystem::path csv_path = out / "stats.csv";
+  if (continuing) {
+    if (std::filesystem::exists(csv_path)) {
+      std::string header;
+      const std::string last = last_line(csv_path, &header);
+      if (header != kStatsHeader) {
+        throw InputError(csv_path.string() + " has other columns than this version writes: resume "
+                         "into another folder with --out");
+      }
+      if (last.rfind(std::to_string(start_frame) + ",", 0) != 0) {
+        throw InputError(csv_path.string() + " does not end at the saved state's frame " +
+                         std::to_string(start_frame) +
+                         ": resume into another folder with --out, so that no line is lost");
+      }
+      result.append = true;
+    }
+  } else if (std::filesystem::is_directory(out) && holds_a_run(out)) {
+    if (!args.force) {
+      throw InputError("--out '" + out.string() +
+                       "' holds another run (stats.csv, state or frames): give a new or empty "
+                       "folder, or --force to replace that run's files");
+    }
+    remove_run(out);
+  }
+  prepare_output_folder(out, "--out");
+  prepare_output_folder(out / "frames", "--out");
+  return result;
+}
+
+/// A time step beyond the integrator's stable range: the scene's own step is split into stable
+/// substeps (same frame length) when that costs at most 100 times the steps; a step the user
+/// chose (`user_step`) is kept, with a warning. Returns the stable step estimate.
+Scalar fit_time_step(sim::Settings& settings, const sim::Model& model, bool user_step) {
+  const Scalar stable_dt = sim::stable_time_step(model, settings.integrator);
+  if (!(settings.dt > stable_dt)) return stable_dt;
+  const std::string name(sim::to_string(settings.integrator));
+  const auto [dt, substeps] = stable_split(settings.dt * settings.substeps, stable_dt);
+  if (!user_step && substeps <= 100 * settings.substeps) {
+    std::fprintf(stderr,
+                 "crumple simulate: the scene's time step %.3g s is beyond %s's stable range "
+                 "(about %.3g s for the stiffest spring): using %d substeps of %.3g s per frame "
+                 "instead of %d (same frame length); --dt and --substeps override\n",
+                 settings.dt, name.c_str(), stable_dt, substeps, dt, settings.substeps);
+    settings.dt = dt;
+    settings.substeps = substeps;
+  } else {
+    std::fprintf(stderr,
+                 "crumple: warning: the time step %.3g s is beyond %s's stable range (about "
+                 "%.3g s for the stiffest spring): the run will likely diverge. Use --dt %.3g "
+                 "--substeps %d (same frame length) or -i implicit-euler\n",
+                 settings.dt, name.c_str(), stable_dt, dt, substeps);
+  }
+  return stable_dt;
+}
+
 int run_simulate(const SimulateArgs& args) {
   if (args.frames < 0) throw InputError("--frames must be >= 0");
   if (args.every < 1) throw InputError("--every must be >= 1");
   if (args.format != "obj" && args.format != "ply" && args.format != "x3d" && args.format != "off") {
     throw InputError("--format expects obj, ply, off or x3d, got '" + args.format + "'");
   }
+  check_detection_args(args.detection);
   std::optional<SideFile> side;
   Start start = load(args, side);
   sim::Scene& scene = start.scene;
@@ -195,23 +372,26 @@ int run_simulate(const SimulateArgs& args) {
   if (args.dt) settings.dt = *args.dt;
   if (args.substeps) settings.substeps = *args.substeps;
   if (args.integrator) settings.integrator = sim::parse_integrator(*args.integrator);
-  if (args.method) settings.method = MethodSpec::parse(*args.method);
-  if (args.thickness) settings.detector.thickness = *args.thickness;
-  if (args.kinds) settings.detector.kinds = ContactKinds::parse(*args.kinds);
+  settings.method = method_of(args.detection, settings.method);
+  settings.detector.thickness = thickness_of(args.detection, scene.state.x, settings.detector.thickness);
+  if (args.detection.kinds) settings.detector.kinds = ContactKinds::parse(*args.detection.kinds);
   if (args.response) settings.response = parse_on_off(*args.response);
   if (args.passes) settings.passes = *args.passes;
-  settings.detector.threads = args.threads;
-  if (!(settings.dt > 0)) throw InputError("--dt must be > 0");
+  settings.detector.threads = args.detection.threads;
+  if (!(settings.dt > 0 && std::isfinite(settings.dt))) throw InputError("--dt must be > 0");
   if (settings.substeps < 1) throw InputError("--substeps must be >= 1");
   if (settings.passes < 1) throw InputError("--passes must be >= 1");
-  if (!(settings.detector.thickness >= 0)) throw InputError("--thickness must be >= 0");
 
-  const std::filesystem::path out(args.out);
+  const auto [out, append] = prepare_run_output(args, side.has_value(), start.frame);
+  const std::filesystem::path csv_path = out / "stats.csv";
   const std::filesystem::path frames_dir = out / "frames";
-  std::filesystem::create_directories(frames_dir);
+  const Scalar stable_dt = fit_time_step(settings, scene.model, args.dt || args.substeps || side);
+  const std::string integrator_name(sim::to_string(settings.integrator));
 
   const std::string spec_text = scene.spec;
   const auto faces = std::vector<Face>(scene.model.topology().faces().begin(), scene.model.topology().faces().end());
+  check_contact_budget(scene.model.topology(), scene.state.x, settings.detector,
+                       args.detection.max_contacts);
   sim::Simulation simulation(std::move(scene.model), std::move(scene.state), scene.field,
                              std::move(scene.obstacles), std::move(scene.kinematics), settings, start.frame);
   // The stochastic detector's kept pairs and generator, when the method is unchanged.
@@ -229,19 +409,26 @@ int run_simulate(const SimulateArgs& args) {
                 "per frame, %s, detector %s, thickness %.6g m, response %s\n",
                 start.source.c_str(), simulation.model().num_particles(), simulation.model().springs().size(),
                 faces.size(), simulation.model().topology().num_edges(), settings.dt, settings.substeps,
-                std::string(sim::to_string(settings.integrator)).c_str(), settings.method.to_string().c_str(),
+                integrator_name.c_str(), settings.method.to_string().c_str(),
                 settings.detector.thickness, settings.response ? "on" : "off");
     std::fflush(stdout);
   }
 
   // Statistics: one complete line at a time, flushed, so an interrupted run leaves whole lines.
-  const std::filesystem::path csv_path = out / "stats.csv";
-  std::FILE* csv = std::fopen(csv_path.string().c_str(), "w");
-  if (!csv) throw ParseError(csv_path.string(), {}, "cannot open for writing");
-  std::fputs("frame,time,integrate_ms,detect_ms,response_ms,vf,ee,tt,collision_share,min_distance,"
-             "obstacle_penetration,cg_iterations,corrections\n",
-             csv);
-  std::fflush(csv);
+  std::FILE* csv = std::fopen(csv_path.string().c_str(), append ? "a" : "w");
+  if (!csv) throw InputError("cannot write " + csv_path.string() + ": " + std::strerror(errno));
+  const auto write_csv = [&](const std::string& text) {
+    if (std::fputs(text.c_str(), csv) < 0 || std::fflush(csv) != 0) {
+      throw InputError("cannot write " + csv_path.string() + ": " + std::strerror(errno));
+    }
+  };
+  struct CloseCsv {
+    std::FILE*& file;
+    ~CloseCsv() {
+      if (file) std::fclose(file);
+    }
+  } close_csv{csv};
+  if (!append) write_csv(std::string(kStatsHeader) + "\n");
 
   Summary summary;
   const auto record = [&](const sim::FrameStats& s) {
@@ -250,87 +437,79 @@ int run_simulate(const SimulateArgs& args) {
         csv_number(s.detect_ms) + "," + csv_number(s.response_ms) + "," + std::to_string(s.vf) + "," +
         std::to_string(s.ee) + "," + std::to_string(s.tt) + "," + csv_number(s.collision_share) + "," +
         csv_number(s.min_distance) + "," + csv_number(s.obstacle_penetration) + "," +
-        std::to_string(s.cg_iterations) + "," + std::to_string(s.corrections) + "\n";
-    std::fputs(line.c_str(), csv);
-    std::fflush(csv);
+        std::to_string(s.cg_iterations) + "," + std::to_string(s.corrections) + "," +
+        csv_number(s.energy) + "," + csv_number(s.max_speed) + "," + csv_number(s.bounds.min.x()) + "," +
+        csv_number(s.bounds.min.y()) + "," + csv_number(s.bounds.min.z()) + "," +
+        csv_number(s.bounds.max.x()) + "," + csv_number(s.bounds.max.y()) + "," +
+        csv_number(s.bounds.max.z()) + "\n";
+    write_csv(line);
     if ((s.frame - start.frame) % args.every == 0) {
       io::write_mesh(frames_dir / frame_name(s.frame, args.format), simulation.state().x, faces);
     }
     summary.add(s, settings.detector.thickness);
   };
+  const auto save = [&] { save_state(out, simulation, settings, spec_text, start.seed); };
 
+  // SIGINT and SIGTERM finish the current frame, then leave complete files and a state to resume.
   g_interrupted = 0;
   struct sigaction action {};
-  action.sa_handler = on_sigint;
+  action.sa_handler = on_stop_signal;
   sigemptyset(&action.sa_mask);
-  struct sigaction previous {};
-  ::sigaction(SIGINT, &action, &previous);
+  struct sigaction previous_int {}, previous_term {};
+  ::sigaction(SIGINT, &action, &previous_int);
+  ::sigaction(SIGTERM, &action, &previous_term);
+  struct RestoreSignals {
+    struct sigaction &int_action, &term_action;
+    ~RestoreSignals() {
+      ::sigaction(SIGINT, &int_action, nullptr);
+      ::sigaction(SIGTERM, &term_action, nullptr);
+    }
+  } restore_signals{previous_int, previous_term};
 
-  const bool progress = !args.quiet && ::isatty(STDERR_FILENO);
-  int status = 0;
-  try {
+  Progress progress("simulate", "frame", static_cast<std::size_t>(args.frames), !args.quiet);
+  std::optional<sim::DivergenceError> diverged;
+  if (append) {
+    summary.add(simulation.current_stats(), settings.detector.thickness);  // already on file
+  } else {
     record(simulation.current_stats());
+  }
+  try {
     for (long long k = 0; k < args.frames; ++k) {
       if (g_interrupted) break;
       record(simulation.advance_frame());
-      if (progress) {
-        const int width = 30;
-        const int done = static_cast<int>((k + 1) * width / std::max<long long>(args.frames, 1));
-        std::fprintf(stderr, "\r[%s%s] frame %lld/%lld", std::string(static_cast<std::size_t>(done), '#').c_str(),
-                     std::string(static_cast<std::size_t>(width - done), '.').c_str(), k + 1, args.frames);
-      }
+      progress.update(static_cast<std::size_t>(k + 1));
     }
-  } catch (...) {
-    ::sigaction(SIGINT, &previous, nullptr);
-    std::fclose(csv);
-    throw;
+  } catch (const sim::DivergenceError& e) {
+    diverged = e;  // the simulation is back at the last good frame
   }
-  if (progress) std::fprintf(stderr, "\r\033[K");
+  progress.finish();
   std::fclose(csv);
+  csv = nullptr;
+  save();
 
-  // Final state: X3D MassSpring + JSON side file (settings needed to resume bit for bit).
-  io::write_mass_spring(out / "state.x3d", to_mass_spring(simulation.model(), simulation.state()));
-  const std::string side_json = JsonObject()
-                                    .add("format", "crumple-sim-state")
-                                    .add("version", 1)
-                                    .add("scene", spec_text)
-                                    .add("seed", static_cast<long long>(start.seed))
-                                    .add("frame", static_cast<long long>(simulation.frame()))
-                                    .add("time", simulation.state().time)
-                                    .add("dt", settings.dt)
-                                    .add("substeps", settings.substeps)
-                                    .add("integrator", sim::to_string(settings.integrator))
-                                    .add("method", settings.method.to_string())
-                                    .add("thickness", settings.detector.thickness)
-                                    .add("kinds", settings.detector.kinds.to_string())
-                                    .add("response", settings.response)
-                                    .add("passes", settings.passes)
-                                    .add("detector_state", simulation.detector_state())
-                                    .str();
-  write_file_atomically(out / "state.json", [&](std::ostream& os) { os << side_json << "\n"; });
-  ::sigaction(SIGINT, &previous, nullptr);
-
+  if (diverged) {
+    const Scalar frame_time = settings.dt * settings.substeps;
+    const auto [dt, substeps] = stable_split(frame_time, std::min(settings.dt / 4, stable_dt));
+    const std::string state = (out / "state.x3d").string();
+    std::fprintf(stderr,
+                 "crumple: error: %s.\n"
+                 "  Frames up to %lld are written; the last good state (frame %lld) is saved in %s.\n"
+                 "  Resume it with a smaller time step or a stable integrator, e.g.\n"
+                 "    crumple simulate %s --dt %.3g --substeps %d\n"
+                 "    crumple simulate %s -i implicit-euler\n",
+                 diverged->what(), static_cast<long long>(simulation.frame()),
+                 static_cast<long long>(simulation.frame()), state.c_str(), state.c_str(), dt,
+                 substeps, state.c_str());
+    return 1;
+  }
+  int status = 0;
   if (g_interrupted) {
-    std::fprintf(stderr, "crumple: interrupted after frame %lld; files are complete\n",
-                 static_cast<long long>(simulation.frame()));
-    status = 130;
+    std::fprintf(stderr, "crumple: %s after frame %lld; files are complete, resume with `crumple simulate %s`\n",
+                 g_interrupted == SIGTERM ? "terminated" : "interrupted",
+                 static_cast<long long>(simulation.frame()), (out / "state.x3d").string().c_str());
+    status = 128 + static_cast<int>(g_interrupted);
   }
-  if (!args.quiet) {
-    const double n = static_cast<double>(std::max<long long>(summary.frames - 1, 1));
-    const auto yes = [](bool b) { return b ? "yes" : "no"; };
-    std::printf("\n  %-28s %lld (%lld written to %s)\n", "frames simulated", summary.frames - 1, summary.frames,
-                frames_dir.string().c_str());
-    std::printf("  %-28s %.4g s\n", "simulated time", simulation.state().time);
-    std::printf("  %-28s %.3f / %.3f / %.3f\n", "ms per frame: integrate/detect/response", summary.integrate_ms / n,
-                summary.detect_ms / n, summary.response_ms / n);
-    std::printf("  %-28s %.1f%% .. %.1f%%\n", "collision share min..max", 100 * summary.share_min,
-                100 * summary.share_max);
-    std::printf("  %-28s 0%%: %s  ~30%%: %s  ~50%%: %s  >=80%%: %s\n", "share reached", yes(summary.hit0),
-                yes(summary.hit30), yes(summary.hit50), yes(summary.hit80));
-    std::printf("  %-28s %lld of %lld\n", "frames with a pair < h/2", summary.close_frames, summary.frames);
-    std::printf("  %-28s %.3g m\n", "max obstacle penetration", summary.max_penetration);
-    std::printf("  %-28s %s, %s\n", "wrote", csv_path.string().c_str(), (out / "state.x3d").string().c_str());
-  }
+  if (!args.quiet) print_summary(summary, simulation, frames_dir, csv_path, append, out);
   return status;
 }
 
@@ -342,8 +521,9 @@ Run add_simulate_command(CLI::App& app) {
       "Simulate a mass-spring cloth with self-collision detection (and response), writing one mesh\n"
       "per frame to DIR/frames/NNNNNN.EXT (the initial state first), per-frame statistics to\n"
       "DIR/stats.csv and the final state to DIR/state.x3d (MassSpring node) + DIR/state.json;\n"
-      "`crumple simulate DIR/state.x3d` resumes the run bit for bit. Ctrl-C finishes the current\n"
-      "frame and leaves every file complete.");
+      "`crumple simulate DIR/state.x3d` resumes the run bit for bit. Ctrl-C or SIGTERM finishes\n"
+      "the current frame and leaves every file complete. The state is checked after every step:\n"
+      "a diverging run stops with an error and saves its last good frame's state.");
   app.add_option("SCENE", args->input, scenes_help())->capture_default_str();
   app.add_option("-p,--param", args->params,
                  "Scene key=value (repeatable), e.g. -p nx=20; for files: pins, stiffness, ...");
@@ -352,18 +532,21 @@ Run add_simulate_command(CLI::App& app) {
   app.add_option("--substeps", args->substeps, "Steps per frame; default: the scene's");
   app.add_option("-i,--integrator", args->integrator,
                  "explicit-euler, symplectic-euler, rk4 or implicit-euler; default: the scene's");
-  app.add_option("-m,--method", args->method, "Detection method SPEC (see `crumple detect --help`); default naive");
-  app.add_option("-t,--thickness", args->thickness, "Contact thickness (m); default: the scene's");
-  app.add_option("-k,--kinds", args->kinds, "Contact kinds: comma-separated vf, ee, tt; default vf,ee");
+  add_detection_options(app, args->detection,
+                        {.method_default = std::string("the scene's (") + kDefaultMethod + ")",
+                         .thickness_default = "the scene's"});
   app.add_option("--response", args->response, "Self-collision response on|off; default: the scene's");
   app.add_option("--passes", args->passes, "Response sweeps per step; default 4");
   app.add_option("-s,--seed", args->seed, "Seed of the scene's random perturbation; default 1");
-  app.add_option("-j,--threads", args->threads, "Detector threads (0 = all cores)")->capture_default_str();
-  app.add_option("-o,--out", args->out, "Output folder")->capture_default_str();
+  app.add_option("-o,--out", args->out,
+                 std::string("Output folder; default: the resumed state's folder (the run goes "
+                             "on there, stats.csv appended), else ") + kDefaultOut);
+  app.add_flag("--force", args->force,
+               "Replace the files of another run (frames, stats.csv, state) in --out");
   app.add_option("-f,--format", args->format, "Frame format: obj, ply, off or x3d")->capture_default_str();
   app.add_option("--every", args->every, "Write every K-th frame only (stats keep every frame)")
       ->capture_default_str();
-  app.add_flag("-q,--quiet", args->quiet, "No header, progress bar or summary");
+  app.add_flag("-q,--quiet", args->quiet, "No header, progress or summary");
   return [args]() { return run_simulate(*args); };
 }
 

@@ -3,13 +3,13 @@
 // end-to-end run of bench_test.cpp would not notice it: the plans are checked here directly.
 #include <gtest/gtest.h>
 
-#include "bench_suite.hpp"
+#include <report/bench_suite.hpp>
 
 #include <crumple/detect/compare.hpp>
 
 #include <vector>
 
-namespace crumple::cli::bench {
+namespace crumple::bench {
 namespace {
 
 TEST(BenchPlan, StepsFeedTheFramesInOrderEachWithTheMotionFromTheOneBefore) {
@@ -73,4 +73,4 @@ TEST(BenchPlan, TimingRunsTimeExactlyThePlansTimedFrames) {
 }
 
 }  // namespace
-}  // namespace crumple::cli::bench
+}  // namespace crumple::bench

@@ -8,7 +8,9 @@
 
 #include <support/stb_image.hpp>
 
+#include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -116,6 +118,46 @@ TEST(Render, BadInputsGiveAClearError) {
     EXPECT_NE(r.out.find(needle), std::string::npos) << args << "\n" << r.out;
   }
   EXPECT_FALSE(std::filesystem::exists(dir / "x.png"));
+}
+
+/// `text` quoted for the test's own shell (the command line that starts crumple).
+std::string shell_quote(const std::string& text) {
+  std::string out = "'";
+  for (char c : text) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+// A --video folder whose name holds a quote and a command substitution: ffmpeg (a fake one that
+// records its arguments and folder) gets the names as plain arguments and nothing is executed.
+TEST(Render, VideoFolderNameIsNeverRunAsACommand) {
+  const testing::TempDir dir;
+  const auto bin = dir / "bin";
+  std::filesystem::create_directories(bin);
+  const auto record = dir / "ffmpeg-args.txt";
+  {
+    std::ofstream fake(bin / "ffmpeg");
+    fake << "#!/bin/sh\npwd > " << shell_quote(record.string()) << "\n"
+         << "for a in \"$@\"; do printf '%s\\n' \"$a\"; done >> " << shell_quote(record.string())
+         << "\n";
+  }
+  std::filesystem::permissions(bin / "ffmpeg", std::filesystem::perms::owner_all);
+  const std::string video = "v'$(touch PWNED)'`touch PWNED2`";
+  const auto r = testing::run_program(
+      "cd " + shell_quote(dir.path().string()) + " && PATH=" + shell_quote(bin.string()) +
+          ":\"$PATH\" " + CRUMPLE_CLI,
+      "render hanging-cloth:nx=4,ny=4 --frame 1 --size 40x30 --video " + shell_quote(video));
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "PWNED")) << "a shell ran the folder's name";
+  EXPECT_FALSE(std::filesystem::exists(dir / "PWNED2")) << "a shell ran the folder's name";
+  EXPECT_TRUE(std::filesystem::exists(dir / video / "000001.png"));
+  std::ifstream in(record);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  ASSERT_FALSE(lines.empty()) << "the fake ffmpeg did not run\n" << r.out;
+  EXPECT_EQ(std::filesystem::path(lines[0]), std::filesystem::canonical(dir / video));
+  EXPECT_EQ(lines.back(), "video.mp4");
+  EXPECT_NE(std::find(lines.begin(), lines.end(), "[0-9][0-9][0-9][0-9][0-9][0-9].png"),
+            lines.end());
 }
 
 }  // namespace

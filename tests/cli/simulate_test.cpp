@@ -145,7 +145,7 @@ TEST(Simulate, InterruptLeavesCompleteFiles) {
   EXPECT_EQ(WEXITSTATUS(status), 130);
   const auto lines = read_lines(dir / "stats.csv");
   ASSERT_GE(lines.size(), 10u);
-  for (const auto& line : lines) EXPECT_EQ(count_fields(line), 13u) << line;
+  for (const auto& line : lines) EXPECT_EQ(count_fields(line), count_fields(lines[0])) << line;
   const io::MassSpringData state = io::read_mass_spring(dir / "state.x3d");
   EXPECT_EQ(state.positions.size(), 49u);
   for (const auto& entry : std::filesystem::directory_iterator(dir / "frames")) {

@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
+#include <limits>
 #include <string>
 
 namespace crumple::sim {
@@ -290,6 +292,37 @@ std::unique_ptr<Integrator> make_integrator(IntegratorKind kind, const Integrato
     case IntegratorKind::ImplicitEuler: return std::make_unique<ImplicitEuler>(options);
   }
   throw InputError("unknown integrator");
+}
+
+Scalar stable_time_step(const Model& model, IntegratorKind kind) {
+  constexpr Scalar kInfinity = std::numeric_limits<Scalar>::infinity();
+  if (kind == IntegratorKind::ImplicitEuler) return kInfinity;
+  const auto mass = model.mass();
+  std::vector<Scalar> row(mass.size(), 0);  // Gershgorin row sums of M^-1/2 K M^-1/2
+  Scalar zeta = kInfinity;
+  for (const Spring& s : model.springs()) {
+    if (!(s.stiffness > 0)) continue;
+    const auto a = static_cast<std::size_t>(s.a), b = static_cast<std::size_t>(s.b);
+    const bool free_a = !model.pinned(s.a), free_b = !model.pinned(s.b);
+    if (!free_a && !free_b) continue;
+    const Scalar coupling = free_a && free_b ? s.stiffness / std::sqrt(mass[a] * mass[b]) : 0;
+    if (free_a) row[a] += s.stiffness / mass[a] + coupling;
+    if (free_b) row[b] += s.stiffness / mass[b] + coupling;
+    zeta = std::min(zeta, s.damping_ratio);
+  }
+  const Scalar omega = std::sqrt(row.empty() ? 0 : *std::max_element(row.begin(), row.end()));
+  if (!(omega > 0)) return kInfinity;
+  switch (kind) {
+    case IntegratorKind::ExplicitEuler:
+      return (zeta < 1 ? 2 * zeta : 2 / (zeta + std::sqrt(zeta * zeta - 1))) / omega;
+    case IntegratorKind::SymplecticEuler: {
+      const Scalar u = 2 * (std::sqrt(zeta * zeta + 1) - zeta);
+      return (zeta > 0 ? std::min(u, 1 / zeta) : u) / omega;
+    }
+    case IntegratorKind::Rk4: return 2.78 / omega;
+    case IntegratorKind::ImplicitEuler: break;
+  }
+  return kInfinity;
 }
 
 }  // namespace crumple::sim

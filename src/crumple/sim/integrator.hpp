@@ -54,6 +54,17 @@ class Integrator {
   int last_iterations_ = 0;
 };
 
+/// The largest step h that `kind` is expected to keep stable on `model`'s springs (s): the linear
+/// stability bound of each scheme on x'' = −ω²x − 2ζωx', with ω² bounded above by Gershgorin's
+/// theorem on M⁻¹K (row of particle i: Σ over its springs of k/mᵢ + k/√(mᵢmⱼ), pinned
+/// neighbours adding k/mᵢ only) and ζ the smallest damping ratio of a spring:
+///   explicit Euler  hω < 2ζ (ζ < 1; 2/(ζ + √(ζ²−1)) above), gains energy without damping;
+///   symplectic Euler  hω < min(2(√(ζ²+1) − ζ), 1/ζ);
+///   RK4  hω < 2.78;  implicit Euler: infinity (unconditionally stable).
+/// Infinity for a model without springs or free particles. An estimate, not a guarantee: the
+/// nonlinear springs, contacts and obstacles can still make a run diverge below it.
+Scalar stable_time_step(const Model& model, IntegratorKind kind);
+
 std::unique_ptr<Integrator> make_integrator(IntegratorKind kind, const IntegratorOptions& options = {});
 
 }  // namespace crumple::sim

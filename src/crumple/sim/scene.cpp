@@ -137,11 +137,29 @@ ForceField force_field(const SceneSpec& spec) {
   return f;
 }
 
+/// A lattice resolution key of a scene: an integer in 1..kMaxLatticeSide.
+constexpr long long kMaxLatticeSide = 100'000;
+/// Most particles of a scene lattice: a simulation needs about 1 KB per particle.
+constexpr long long kMaxLatticeVertices = 4'000'000;
+
+Index lattice_count(const SceneSpec& spec, std::string_view key) {
+  const long long v = spec.get_int(key);
+  if (v < 1 || v > kMaxLatticeSide) {
+    throw InputError("scene '" + spec.name() + "': key '" + std::string(key) + "' must be between 1 and " +
+                     std::to_string(kMaxLatticeSide) + ", got " + std::to_string(v));
+  }
+  return static_cast<Index>(v);
+}
+
 /// Lattice nx × ny of size w × d lying horizontally at height y: lattice vertex (i, j) at
 /// (i w/nx, y, j d/ny).
 TriMesh horizontal_lattice(Index nx, Index ny, Scalar w, Scalar d, Scalar y) {
   if (nx < 1 || ny < 1) throw InputError("scene lattice needs at least 1 x 1 quads");
-  if (static_cast<long long>(nx + 1) * (ny + 1) > 50'000'000) throw InputError("scene lattice too large");
+  const long long vertices = (static_cast<long long>(nx) + 1) * (static_cast<long long>(ny) + 1);
+  if (vertices > kMaxLatticeVertices) {
+    throw InputError("scene lattice of " + std::to_string(nx) + " x " + std::to_string(ny) + " quads has " +
+                     std::to_string(vertices) + " vertices, more than " + std::to_string(kMaxLatticeVertices));
+  }
   TriMesh flat = shapes::lattice(nx, ny, w, d);
   Positions x = flat.positions();
   for (Vec3& p : x) p = Vec3(p.x(), y, p.y());
@@ -175,7 +193,7 @@ Scene finish(const SceneSpec& spec, Cloth cloth, Scalar jitter_rel, std::uint64_
 }
 
 Scene hanging_cloth(const SceneSpec& spec, std::uint64_t seed) {
-  const Index nx = static_cast<Index>(spec.get_int("nx")), ny = static_cast<Index>(spec.get_int("ny"));
+  const Index nx = lattice_count(spec, "nx"), ny = lattice_count(spec, "ny");
   const Scalar size = spec.get_double("size");
   Scalar depth = spec.get_double("depth");
   if (!(depth >= 0)) throw InputError("scene key 'depth' must be >= 0 (0 = size)");
@@ -189,7 +207,7 @@ Scene hanging_cloth(const SceneSpec& spec, std::uint64_t seed) {
 }
 
 Scene cloth_on_sphere(const SceneSpec& spec, std::uint64_t seed) {
-  const Index n = static_cast<Index>(spec.get_int("n"));
+  const Index n = lattice_count(spec, "n");
   const Scalar size = spec.get_double("size");
   const TriMesh mesh = horizontal_lattice(n, n, size, size, spec.get_double("height"));
   Scene s = finish(spec, make_cloth(mesh, cloth_params(spec)), spec.get_double("jitter"), seed);
@@ -204,7 +222,7 @@ Scene cloth_on_sphere(const SceneSpec& spec, std::uint64_t seed) {
 }
 
 Scene twisted_ribbon(const SceneSpec& spec, std::uint64_t seed) {
-  const Index nx = static_cast<Index>(spec.get_int("nx")), ny = static_cast<Index>(spec.get_int("ny"));
+  const Index nx = lattice_count(spec, "nx"), ny = lattice_count(spec, "ny");
   const Scalar length = spec.get_double("length"), width = spec.get_double("width");
   const TriMesh mesh = horizontal_lattice(nx, ny, length, width, 1);
   ClothParams params = cloth_params(spec);
@@ -241,7 +259,7 @@ Scene twisted_ribbon(const SceneSpec& spec, std::uint64_t seed) {
 }
 
 Scene crumple_scene(const SceneSpec& spec, std::uint64_t seed) {
-  const Index n = static_cast<Index>(spec.get_int("n"));
+  const Index n = lattice_count(spec, "n");
   const Scalar size = spec.get_double("size");
   const Scalar thickness_guess = spec.get_double("thickness") * size / static_cast<Scalar>(n);
   const TriMesh mesh = horizontal_lattice(n, n, size, size, thickness_guess);

@@ -1,16 +1,23 @@
 #include <crumple/core/error.hpp>
 #include <crumple/sim/simulation.hpp>
 
+#include <crumple/core/timing.hpp>
+
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <limits>
 
 namespace crumple::sim {
 
 namespace {
 using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+
+std::string number(Scalar v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3g", v);
+  return buf;
 }
 }  // namespace
 
@@ -45,7 +52,15 @@ Simulation::Simulation(Model model, State state, ForceField field,
   CRUMPLE_CHECK(state_.x.size() == static_cast<std::size_t>(model_.num_particles()) &&
                     state_.v.size() == state_.x.size(),
                 "state must have #V positions and velocities");
+  CRUMPLE_CHECK(settings_.max_spread_growth > 1, "max_spread_growth must be > 1");
+  for (std::size_t i = 0; i < state_.x.size(); ++i) {
+    if (!state_.x[i].allFinite() || !state_.v[i].allFinite()) {
+      throw InputError("particle " + std::to_string(i) +
+                       " starts with a non-finite position or velocity");
+    }
+  }
   integrator_ = make_integrator(settings_.integrator, settings_.integrator_options);
+  if (!state_.x.empty()) initial_spread_ = compute_bounds(state_.x).diagonal();
   detector_ = make_detector(settings_.method, settings_.detector);
   detector_->set_topology(model_.topology_ptr());
 }
@@ -98,6 +113,34 @@ void Simulation::step() {
   contacts_valid_ = false;
 }
 
+void Simulation::check_state(int step) const {
+  const std::int64_t frame = frame_ + 1;
+  const auto fail = [&](const std::string& what) {
+    throw DivergenceError("the simulation diverged at frame " + std::to_string(frame) + " (step " +
+                              std::to_string(step) + " of " + std::to_string(settings_.substeps) +
+                              "): " + what,
+                          frame, step);
+  };
+  Scalar max_speed2 = 0;
+  for (std::size_t i = 0; i < state_.x.size(); ++i) {
+    if (!state_.x[i].allFinite() || !state_.v[i].allFinite()) {
+      fail("particle " + std::to_string(i) + " has a non-finite position or velocity");
+    }
+    max_speed2 = std::max(max_speed2, state_.v[i].squaredNorm());
+  }
+  if (!(initial_spread_ > 0)) return;
+  const Scalar step_length = std::sqrt(max_speed2) * settings_.dt;
+  if (step_length > initial_spread_) {
+    fail("a particle moves " + number(step_length) + " m in one step, more than the mesh's size (" +
+         number(initial_spread_) + " m)");
+  }
+  const Scalar spread = compute_bounds(state_.x).diagonal();
+  if (spread > settings_.max_spread_growth * initial_spread_) {
+    fail("the particles spread over " + number(spread) + " m, " +
+         number(spread / initial_spread_) + " times their initial extent");
+  }
+}
+
 FrameStats Simulation::frame_stats() {
   if (!contacts_valid_) detect_now();
   FrameStats s;
@@ -118,6 +161,9 @@ FrameStats Simulation::frame_stats() {
   }
   s.cg_iterations = cg_iterations_;
   s.corrections = corrections_;
+  s.energy = compute_energy(model_, field_, state_).total();
+  for (const Vec3& v : state_.v) s.max_speed = std::max(s.max_speed, v.norm());
+  if (!state_.x.empty()) s.bounds = compute_bounds(state_.x);
   integrate_ms_ = detect_ms_ = response_ms_ = 0;
   cg_iterations_ = 0;
   corrections_ = 0;
@@ -127,7 +173,20 @@ FrameStats Simulation::frame_stats() {
 FrameStats Simulation::current_stats() { return frame_stats(); }
 
 FrameStats Simulation::advance_frame() {
-  for (int k = 0; k < settings_.substeps; ++k) step();
+  const State start = state_;
+  for (int k = 0; k < settings_.substeps; ++k) {
+    step();
+    try {
+      check_state(k + 1);
+    } catch (const DivergenceError&) {
+      state_ = start;
+      contacts_valid_ = false;
+      integrate_ms_ = detect_ms_ = response_ms_ = 0;
+      cg_iterations_ = 0;
+      corrections_ = 0;
+      throw;
+    }
+  }
   ++frame_;
   return frame_stats();
 }

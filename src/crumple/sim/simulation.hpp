@@ -13,7 +13,11 @@
 ///     `passes` Gauss–Seidel sweeps until no contact approaches; then obstacles again (3).
 /// Contacts are detected once per step with response on (the detection at a frame's end serves
 /// the next step), once per frame with it off. Deterministic: the same inputs give the same bits.
+///
+/// After every step the state is checked (`DivergenceError`): a diverging run stops at once
+/// instead of producing frames of huge or NaN coordinates.
 
+#include <crumple/core/error.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/response/contact_response.hpp>
 #include <crumple/response/obstacle.hpp>
@@ -31,16 +35,37 @@ namespace crumple::sim {
 /// Sets the driven (pinned) particles' positions and velocities for time `state.time`.
 using Kinematics = std::function<void(State& state)>;
 
+/// Thrown by `Simulation::advance_frame` when a step leaves a non-finite position or velocity, a
+/// particle moving farther than the initial spread in one step, or a spread (bounding-box
+/// diagonal of the particles) beyond `Settings::max_spread_growth` times the initial one. The
+/// simulation is then back at the start of the frame (the last good state, frame `frame - 1`).
+class DivergenceError : public Error {
+ public:
+  DivergenceError(const std::string& what, std::int64_t frame, int step)
+      : Error(what), frame_(frame), step_(step) {}
+  /// The frame being computed when the state went bad.
+  std::int64_t frame() const { return frame_; }
+  /// Its step (1-based) that went bad.
+  int step() const { return step_; }
+
+ private:
+  std::int64_t frame_;
+  int step_;
+};
+
 /// How a simulation steps, detects and responds.
 struct Settings {
   Scalar dt = 1.0 / 600;  ///< step length h (s)
   int substeps = 10;      ///< steps per frame
   IntegratorKind integrator = IntegratorKind::ImplicitEuler;
   IntegratorOptions integrator_options;
-  MethodSpec method{Method::Naive};
+  MethodSpec method{Method::Kdop};
   DetectorOptions detector;  ///< thickness h_c, contact kinds, threads
   bool response = false;     ///< self-collision response on/off
   int passes = 4;            ///< Gauss–Seidel sweeps per step (>= 1)
+  /// Largest spread of the particles, as a multiple of the initial one, before the run counts
+  /// as diverged (see `DivergenceError`). A cloth's springs keep it near its own size.
+  Scalar max_spread_growth = 10;
 };
 
 /// Figures of one frame (timings summed over its steps).
@@ -57,6 +82,9 @@ struct FrameStats {
   Scalar obstacle_penetration = 0;  ///< deepest vertex inside an obstacle at the frame's end (m)
   int cg_iterations = 0;            ///< summed over the frame's steps (implicit Euler)
   std::size_t corrections = 0;      ///< response corrections applied over the frame's steps
+  Scalar energy = 0;     ///< total mechanical energy at the frame's end (`compute_energy`, J)
+  Scalar max_speed = 0;  ///< largest particle speed at the frame's end (m/s)
+  Bounds bounds{Vec3::Zero(), Vec3::Zero()};  ///< box of the particles at the frame's end
 };
 
 /// Share of mesh edges (0..1) in at least one contact: both edges of every EE contact and the
@@ -72,6 +100,7 @@ class Simulation {
   /// except detection.
   FrameStats current_stats();
   /// Runs `substeps` steps, then detects at the new positions; returns the new frame's stats.
+  /// Throws `DivergenceError` after restoring the frame's starting state when a step diverges.
   FrameStats advance_frame();
   /// One step (see the file comment).
   void step();
@@ -96,6 +125,8 @@ class Simulation {
  private:
   void detect_now();
   void obstacles_pass();
+  /// Throws `DivergenceError` (frame being computed, step) when the state is not sane.
+  void check_state(int step) const;
   FrameStats frame_stats();
 
   Model model_;
@@ -105,6 +136,7 @@ class Simulation {
   Kinematics kinematics_;
   Settings settings_;
   std::int64_t frame_;
+  Scalar initial_spread_ = 0;  ///< bounding-box diagonal of the particles at construction
   std::unique_ptr<Integrator> integrator_;
   std::unique_ptr<Detector> detector_;
   ContactSet contacts_;

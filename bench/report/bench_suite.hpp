@@ -15,7 +15,7 @@
 #include <string>
 #include <vector>
 
-namespace crumple::cli::bench {
+namespace crumple::bench {
 
 using sim::Recording;
 using sim::record_scene;
@@ -81,4 +81,4 @@ std::string source_commit();
 /// Current UTC date and time, ISO 8601.
 std::string utc_now();
 
-}  // namespace crumple::cli::bench
+}  // namespace crumple::bench

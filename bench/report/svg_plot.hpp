@@ -7,7 +7,7 @@
 #include <utility>
 #include <vector>
 
-namespace crumple::cli {
+namespace crumple::bench {
 
 struct PlotSeries {
   std::string label;
@@ -33,4 +33,4 @@ struct PlotSpec {
 /// a valid document with the title and a "no data" note.
 std::string render_svg(const PlotSpec& spec, const std::vector<PlotSeries>& series);
 
-}  // namespace crumple::cli
+}  // namespace crumple::bench

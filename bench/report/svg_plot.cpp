@@ -8,7 +8,7 @@
 #include <cstdio>
 #include <limits>
 
-namespace crumple::cli {
+namespace crumple::bench {
 namespace {
 
 constexpr std::array<const char*, 12> kColours = {"#1f77b4", "#d62728", "#2ca02c", "#ff7f0e",
@@ -195,4 +195,4 @@ std::string render_svg(const PlotSpec& spec, const std::vector<PlotSeries>& seri
   return out;
 }
 
-}  // namespace crumple::cli
+}  // namespace crumple::bench

@@ -2,6 +2,7 @@
 #include "bench_suite.hpp"
 
 #include <crumple/core/error.hpp>
+#include <crumple/core/timing.hpp>
 
 #include <algorithm>
 #include <array>
@@ -11,7 +12,7 @@
 #include <fstream>
 #include <thread>
 
-namespace crumple::cli::bench {
+namespace crumple::bench {
 
 std::vector<FeedStep> feed_steps(const TimingPlan& plan) {
   std::vector<FeedStep> steps;
@@ -57,7 +58,7 @@ std::vector<Timing> time_methods_against_first(std::shared_ptr<const Topology> t
       for (const FeedStep& step : steps) {
         const auto start = std::chrono::steady_clock::now();
         detector->update(frames[step.previous], frames[step.frame], out);
-        const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        const double ms = ms_since(start);
         if (!step.timed) continue;
         const std::size_t k = step.frame - plan.timed_from;
         samples[m][k].push_back(ms);
@@ -141,4 +142,4 @@ std::string utc_now() {
   return buf;
 }
 
-}  // namespace crumple::cli::bench
+}  // namespace crumple::bench
