@@ -80,6 +80,7 @@ void bind_errors(py::module_& m) {
 
 PositionsArg positions_arg(py::handle value, const char* what) {
   PositionsArg out;
+  const bool given_array = py::isinstance<py::array>(value);
   py::array array = py::array::ensure(value);
   if (!array) throw py::value_error(std::string(what) + ": expected an (n, 3) array");
   if (array.ndim() != 2 || array.shape(1) != 3) {
@@ -97,6 +98,7 @@ PositionsArg positions_arg(py::handle value, const char* what) {
   if (Dense::check_(array) && array.dtype().is(py::dtype::of<double>())) {
     out.keep = array;
     out.view = PositionsView(static_cast<const Vec3*>(array.data()), n);
+    out.copied = !given_array;  // a list or other sequence was converted by NumPy
     return out;
   }
   Dense dense = Dense::ensure(array);  // one converted copy (dtype and/or layout)
