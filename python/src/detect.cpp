@@ -68,16 +68,21 @@ class PyDetector {
     detector_ = make_detector(spec_, options);
   }
 
-  void set_topology(const TriMesh& mesh) {
+  /// Exclusive use of the detector, or RuntimeError while another thread runs an update.
+  std::unique_lock<std::mutex> guard() {
     std::unique_lock lock(busy_, std::try_to_lock);
     if (!lock) throw std::runtime_error("Detector is in use by another thread");
+    return lock;
+  }
+
+  void set_topology(const TriMesh& mesh) {
+    const auto lock = guard();
     detector_->set_topology(mesh.topology_ptr());
     has_topology_ = true;
   }
 
   PyContacts update(py::handle previous, py::handle positions) {
-    std::unique_lock lock(busy_, std::try_to_lock);
-    if (!lock) throw std::runtime_error("Detector is in use by another thread");
+    const auto lock = guard();
     if (!has_topology_) throw std::runtime_error("Detector.update: call set_topology(mesh) first");
     PositionsArg current = positions_arg(positions, "positions");
     PositionsArg before;
@@ -248,7 +253,8 @@ A float64 C-contiguous array is read in place; any other dtype or layout is conv
 Raises ValueError on a wrong shape or count, crumple.InputError on non-finite coordinates,
 RuntimeError before set_topology. Returns a Contacts.
 )doc")
-      .def_property_readonly("stats", [](const PyDetector& d) {
+      .def_property_readonly("stats", [](PyDetector& d) {
+        const auto lock = d.guard();
         py::dict out;
         for (const auto& [key, value] : d.detector().stats().items()) out[py::str(key)] = value;
         return out;
@@ -263,12 +269,16 @@ RuntimeError before set_topology. Returns a Contacts.
       .def_property_readonly("capabilities", [](const PyDetector& d) {
         return capabilities_dict(d.detector().capabilities());
       }, "dict: exact, stochastic, uses_motion.")
-      .def("save_state", [](const PyDetector& d) { return d.detector().save_state(); },
+      .def("save_state", [](PyDetector& d) {
+             const auto lock = d.guard();
+             return d.detector().save_state();
+           },
            "The state carried across frames (before the last update) as one line of text; empty "
            "for exact methods.")
       .def(
           "load_state",
           [](PyDetector& d, const std::string& text) {
+            const auto lock = d.guard();
             if (!d.has_topology()) throw std::runtime_error("Detector.load_state: call set_topology(mesh) first");
             d.detector().load_state(text);
           },

@@ -273,3 +273,23 @@ def test_gil_released_during_update(data):
     # as long as the update. Released, this thread keeps running beside it.
     gaps = np.diff([t0] + [t for t in ticks if t0 < t < t1] + [t1])
     assert gaps.max() < 0.5 * (t1 - t0), (gaps.max(), t1 - t0)
+
+
+def test_a_detector_busy_in_another_thread_refuses_other_calls(data):
+    m = crumple.read_mesh(data / ARMADILLO[0])
+    keep = np.all(m.faces < 1200, axis=1)
+    det = crumple.Detector("naive", thickness=crumple.default_thickness(m.vertices), threads=1)
+    det.set_topology(crumple.TriMesh(m.vertices[:1200], m.faces[keep]))
+    x = np.ascontiguousarray(m.vertices[:1200])
+    worker = threading.Thread(target=det.update, args=(x,))
+    refused = 0
+    worker.start()
+    while worker.is_alive():
+        try:
+            det.stats  # noqa: B018 -- reading it is the check
+        except RuntimeError as e:
+            assert "in use" in str(e)
+            refused += 1
+    worker.join()
+    assert refused > 0
+    assert det.stats  # free again once the update is done
