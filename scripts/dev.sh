@@ -3,7 +3,7 @@
 #   bash scripts/dev.sh demo   install what is missing, build Release, run `crumple simulate` on the
 #                              thesis' hanging-cloth scene and print a summary table
 #   bash scripts/dev.sh test   install what is missing, build Release and the asan preset, run
-#                              every test of both (ends with ctest's summary)
+#                              every test of both, then the Python tests (pytest's summary last)
 #   bash scripts/dev.sh deps   only install the Debian packages
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -11,7 +11,8 @@ cd "$(dirname "$0")/.."
 JOBS=${JOBS:-$(nproc)}
 PACKAGES=(g++ cmake make libeigen3-dev libtbb-dev libpugixml-dev libcli11-dev libgtest-dev
           libgmock-dev libbenchmark-dev libglfw3-dev libimgui-dev libstb-dev xvfb xauth
-          libgl1-mesa-dri libgl-dev)
+          libgl1-mesa-dri libgl-dev pybind11-dev python3-dev python3-numpy python3-pytest
+          python3-matplotlib)
 
 install_deps() {
   local missing=()
@@ -61,6 +62,10 @@ EOF
     ctest --preset release -j "$JOBS" --timeout 900
     echo "== AddressSanitizer + UBSan tests"
     ctest --preset asan -j "$JOBS" --timeout 1500
+    echo "== Python tests (module in build/release/python, Debian's /usr/bin/python3)"
+    [ -d build/release/python/crumple ] || { echo "no Python module: reconfigure build/release with -DCRUMPLE_BUILD_PYTHON=ON" >&2; exit 1; }
+    PYTHONPATH="$PWD/build/release/python" PYTHONDONTWRITEBYTECODE=1 \
+      /usr/bin/python3 -m pytest tests/python -q -p no:cacheprovider
     ;;
   *)
     echo "usage: bash scripts/dev.sh demo|test|deps" >&2

@@ -1,0 +1,68 @@
+"""Python `Detector.update` against the C++ call's time, on cloth-ball 92 -> 93.
+
+    PYTHONPATH=build/release/python /usr/bin/python3 bench/python/update_vs_cli.py \
+        [--cli build/release/apps/cli/crumple] [--method kdop] [--threads 2] [--repeat 5]
+
+C++: `crumple detect 92.ply 93.ply --json`, the detector's wall time of frame 93 ("ms": one
+`update(previous, positions, contacts)` with the contact set of frame 92 reused). Python: a new
+detector, `update(x92)`, its result dropped (so the records are reused, as the CLI does), then
+the timed `update(x92, x93)` plus building every result array. Runs alternate (CLI, Python)
+so that the machine's drift hits both; prints each pair and the ratio of the medians.
+"""
+
+import argparse
+import json
+import pathlib
+import statistics
+import subprocess
+import time
+
+import crumple
+
+REPO = pathlib.Path(__file__).resolve().parents[2]
+FRAMES = REPO.parent / "shared" / "data" / "sample-scalable-ccd" / "cloth-ball" / "frames"
+
+
+def cli_ms(cli, frames, method, threads):
+    out = subprocess.run([str(cli), "detect", *map(str, frames), "--method", method,
+                          "--threads", str(threads), "--json"],
+                         capture_output=True, text=True, check=True).stdout
+    return json.loads(out.splitlines()[-1])["ms"]
+
+
+def python_ms(meshes, method, threads):
+    x0, x1 = meshes[0].vertices, meshes[1].vertices
+    det = crumple.Detector(method, thickness=crumple.default_thickness(x0), threads=threads)
+    det.set_topology(meshes[0])
+    det.update(x0)  # frame 92, result dropped at once
+    start = time.perf_counter()
+    c = det.update(x0, x1)
+    arrays = [c.vf.vertex, c.vf.face, c.vf.distance, c.vf.barycentric, c.vf.normal, c.ee.edges,
+              c.ee.vertices, c.ee.s, c.ee.t, c.ee.distance, c.ee.normal, c.tt.faces]
+    ms = (time.perf_counter() - start) * 1e3
+    assert not det.last_positions_copied
+    return ms, len(c), len(arrays)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--cli", type=pathlib.Path, default=REPO / "build/release/apps/cli/crumple")
+    p.add_argument("--method", default="kdop")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--repeat", type=int, default=5)
+    args = p.parse_args()
+    frames = [FRAMES / "cloth_ball92.ply", FRAMES / "cloth_ball93.ply"]
+    meshes = [crumple.read_mesh(f) for f in frames]
+    cs, ps = [], []
+    for i in range(args.repeat):
+        cs.append(cli_ms(args.cli, frames, args.method, args.threads))
+        ms, contacts, _ = python_ms(meshes, args.method, args.threads)
+        ps.append(ms)
+        print(f"run {i}: C++ {cs[-1]:.1f} ms, Python {ps[-1]:.1f} ms ({contacts} contacts)")
+    c, q = statistics.median(cs), statistics.median(ps)
+    print(f"median: C++ {c:.1f} ms, Python {q:.1f} ms, ratio {q / c:.3f} "
+          f"({args.method}, {args.threads} threads, cloth-ball 93)")
+
+
+if __name__ == "__main__":
+    main()

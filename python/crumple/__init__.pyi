@@ -1,0 +1,165 @@
+"""Type stub of crumple (the extension crumple._crumple). Shapes: n vertices, m faces,
+e edges, k contacts of one kind."""
+
+import os
+from typing import Any, Sequence, Union, overload
+
+import numpy as np
+import numpy.typing as npt
+
+_Path = Union[str, os.PathLike[str]]
+_Positions = npt.ArrayLike  # (n, 3) real; float64 C-contiguous is read in place
+_Faces = npt.ArrayLike  # (m, 3) integer
+
+class Error(ValueError):
+    """Base of every error crumple raises."""
+
+class ParseError(Error):
+    """A file that cannot be read or written, or whose content is malformed."""
+    file: str
+    line: int | None  # 1-based, text formats
+    byte_offset: int | None  # binary formats
+    message: str  # without the location prefix
+
+class InputError(Error):
+    """Invalid input that is not a file (method spec, mesh arrays, thickness, state text)."""
+
+class PreconditionError(Error):
+    """A violated library precondition; the message names the library's file and line."""
+
+class TriMesh:
+    """Validated, immutable triangle mesh; array properties are read-only views (no copy)."""
+    def __init__(self, vertices: _Positions, faces: _Faces) -> None:
+        """vertices (n, 3) float64/float32 (copied into the mesh), faces (m, 3) int, 0-based.
+        Raises ValueError (shape, dtype), InputError (non-finite, id out of range, repeat)."""
+    @property
+    def num_vertices(self) -> int: ...
+    @property
+    def num_faces(self) -> int: ...
+    @property
+    def num_edges(self) -> int: ...
+    @property
+    def vertices(self) -> npt.NDArray[np.float64]:
+        """(n, 3) float64 view."""
+    @property
+    def faces(self) -> npt.NDArray[np.int32]:
+        """(m, 3) int32 view, file order."""
+    @property
+    def edges(self) -> npt.NDArray[np.int32]:
+        """(e, 2) int32 view, first appearance over faces, each (min id, max id)."""
+    @property
+    def face_edges(self) -> npt.NDArray[np.int32]:
+        """(m, 3) int32 view: edge of side k (corners k, (k+1)%3)."""
+    def adjacency(self, kind: str) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]:
+        """CSR (offsets (rows+1,) int64, neighbours (total,) int32 view), rows sorted. kind:
+        vertex_vertices, vertex_edges, vertex_faces, edge_faces, edge_edges, face_faces."""
+    @property
+    def report(self) -> dict[str, int]:
+        """zero_area_faces, non_manifold_edges, boundary_edges, isolated_vertices,
+        duplicate_faces."""
+
+def read_mesh(path: _Path) -> TriMesh:
+    """.obj .ply .off .x3d; raises ParseError (file, line or byte_offset)."""
+
+def write_mesh(path: _Path, mesh: TriMesh) -> None:
+    """By extension, atomically; positions round-trip bit for bit. ParseError if unwritable."""
+
+def default_thickness(positions: _Positions) -> float:
+    """1e-3 of the bounding-box diagonal (the CLI's default thickness)."""
+
+def methods() -> list[dict[str, Any]]:
+    """Every method: name, summary, capabilities {exact, stochastic, uses_motion},
+    params {key: (default, description)}."""
+
+class VertexFaceContacts:
+    """k vertex-face contacts sorted by (vertex, face); read-only views, row stride 64 bytes."""
+    def __len__(self) -> int: ...
+    @property
+    def vertex(self) -> npt.NDArray[np.int32]:
+        """(k,)"""
+    @property
+    def face(self) -> npt.NDArray[np.int32]:
+        """(k,)"""
+    @property
+    def distance(self) -> npt.NDArray[np.float64]:
+        """(k,) < thickness"""
+    @property
+    def barycentric(self) -> npt.NDArray[np.float64]:
+        """(k, 3) of the closest point on the face"""
+    @property
+    def normal(self) -> npt.NDArray[np.float64]:
+        """(k, 3) unit, from the face's closest point towards the vertex"""
+
+class EdgeEdgeContacts:
+    """k edge-edge contacts sorted by vertex ids of (a, b); read-only views, stride 72 bytes."""
+    def __len__(self) -> int: ...
+    @property
+    def edges(self) -> npt.NDArray[np.int32]:
+        """(k, 2) mesh edge ids of a and b"""
+    @property
+    def vertices(self) -> npt.NDArray[np.int32]:
+        """(k, 2, 2): [:, 0] edge a's vertex ids (increasing), [:, 1] edge b's; a < b"""
+    @property
+    def s(self) -> npt.NDArray[np.float64]:
+        """(k,) closest point on a = (1-s) x[a0] + s x[a1]"""
+    @property
+    def t(self) -> npt.NDArray[np.float64]:
+        """(k,) closest point on b = (1-t) x[b0] + t x[b1]"""
+    @property
+    def distance(self) -> npt.NDArray[np.float64]:
+        """(k,)"""
+    @property
+    def normal(self) -> npt.NDArray[np.float64]:
+        """(k, 3) unit, from a's closest point towards b's"""
+
+class TriangleTriangleContacts:
+    """k intersecting face pairs sharing no vertex."""
+    def __len__(self) -> int: ...
+    @property
+    def faces(self) -> npt.NDArray[np.int32]:
+        """(k, 2), face0 < face1"""
+
+class Contacts:
+    """One update's contacts; its arrays stay valid while referenced (later updates never
+    rewrite a live result)."""
+    @property
+    def vf(self) -> VertexFaceContacts: ...
+    @property
+    def ee(self) -> EdgeEdgeContacts: ...
+    @property
+    def tt(self) -> TriangleTriangleContacts: ...
+    def __len__(self) -> int: ...
+    def write(self, path: _Path) -> None:
+        """The CLI's --contacts text format."""
+
+class Detector:
+    def __init__(self, method: str = "kdop", *, thickness: float, kinds: str = "vf,ee",
+                 threads: int = 0) -> None:
+        """method: the CLI's --method spec NAME[:key=value,...]; thickness h >= 0; kinds:
+        comma-separated vf, ee, tt; threads: 0 = all. InputError on bad values."""
+    def set_topology(self, mesh: TriMesh) -> None: ...
+    @overload
+    def update(self, positions: _Positions) -> Contacts: ...
+    @overload
+    def update(self, previous: _Positions, positions: _Positions) -> Contacts:
+        """update(positions) or update(previous, positions); (n, 3) real arrays. GIL released
+        while detecting. ValueError (shape, count), InputError (non-finite), RuntimeError
+        (no topology)."""
+    @property
+    def stats(self) -> dict[str, float]: ...
+    @property
+    def last_positions_copied(self) -> bool: ...
+    @property
+    def method(self) -> str: ...
+    @property
+    def thickness(self) -> float: ...
+    @property
+    def kinds(self) -> str: ...
+    @property
+    def threads(self) -> int: ...
+    @property
+    def capabilities(self) -> dict[str, bool]: ...
+    def save_state(self) -> str: ...
+    def load_state(self, text: str) -> None: ...
+
+__all__: Sequence[str]

@@ -1,0 +1,48 @@
+#pragma once
+/// \file
+/// Shared pieces of the Python module `crumple._crumple`: NumPy views over library buffers and
+/// the conversion of user arrays into positions and faces.
+
+#include <crumple/core/types.hpp>
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <cstddef>
+#include <vector>
+
+namespace crumple::python {
+
+namespace py = pybind11;
+
+/// A read-only NumPy view of `shape`/`strides` (bytes) over `data`, keeping `owner` alive. No
+/// copy: the array reads the library's storage for as long as it lives.
+template <class T>
+py::array readonly_view(const T* data, std::vector<py::ssize_t> shape,
+                        std::vector<py::ssize_t> strides, py::handle owner) {
+  py::array out(py::dtype::of<T>(), std::move(shape), std::move(strides), data, owner);
+  py::detail::array_proxy(out.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
+  return out;
+}
+
+/// Positions given from Python: a view over the caller's array when it is float64, C-contiguous
+/// and (n, 3) — `Vec3` is three packed doubles — otherwise one converted copy (float32, other
+/// real dtypes, strided arrays). `copied` says which.
+struct PositionsArg {
+  PositionsView view;
+  Positions storage;  // the converted copy, when one was needed
+  py::object keep;    // the array viewed, kept alive while `view` is used
+  bool copied = false;
+};
+/// Throws ValueError unless `value` is a real (n, 3) array (`what` names the argument).
+PositionsArg positions_arg(py::handle value, const char* what);
+
+/// Faces from an (m, 3) integer array; ValueError on another shape, a non-integer dtype or an
+/// id outside int32 (range and repeats are the library's checks, `TriMesh::create`).
+std::vector<Face> faces_arg(py::handle value);
+
+void bind_errors(py::module_& m);
+void bind_mesh(py::module_& m);
+void bind_detect(py::module_& m);
+
+}  // namespace crumple::python

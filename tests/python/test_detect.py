@@ -1,0 +1,295 @@
+"""Detection from Python against the CLI's results on the shared real meshes, array handling,
+zero-copy promises, errors, state and the GIL."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import crumple
+from conftest import run_cli
+
+FUNNEL = ["sample-scalable-ccd/cloth-funnel/frames/227.ply",
+          "sample-scalable-ccd/cloth-funnel/frames/228.ply"]
+ARMADILLO = ["sample-scalable-ccd/armadillo-rollers/frames/326.ply",
+             "sample-scalable-ccd/armadillo-rollers/frames/327.ply"]
+CUBES = "ipc-toolkit-tests/two-cubes-intersecting.ply"
+
+
+def detect_frames(paths, method, kinds="vf,ee", threads=2):
+    """What `crumple detect FILES --method M` does, from Python: one detector, each frame after
+    the first with the previous positions."""
+    meshes = [crumple.read_mesh(p) for p in paths]
+    det = crumple.Detector(method, thickness=crumple.default_thickness(meshes[0].vertices),
+                           kinds=kinds, threads=threads)
+    det.set_topology(meshes[0])
+    out, previous = [], None
+    for m in meshes:
+        out.append(det.update(m.vertices) if previous is None else det.update(previous, m.vertices))
+        previous = m.vertices
+    return det, out
+
+
+def parse_contacts(text):
+    vf, ee, tt = [], [], []
+    for line in text.splitlines():
+        kind, *rest = line.split()
+        {"vf": vf, "ee": ee, "tt": tt}[kind].append(rest)
+    return vf, ee, tt
+
+
+def check_same_as_cli(tmp_path, cli, paths, method, kinds="vf,ee"):
+    det, results = detect_frames(paths, method, kinds)
+    outdir = tmp_path / "cli"
+    run_cli(cli, "detect", *paths, "--method", method, "--kinds", kinds, "--threads", 2,
+            "--contacts", outdir if len(paths) > 1 else outdir.with_suffix(".tsv"))
+    for path, c in zip(paths, results):
+        expected = (outdir / (path.stem + ".tsv")) if len(paths) > 1 else outdir.with_suffix(".tsv")
+        text = expected.read_text()
+        # The same text (17 significant digits: bit-identical distances) ...
+        mine = tmp_path / "mine.tsv"
+        c.write(mine)
+        assert mine.read_text() == text, f"{method} {path.name}"
+        # ... and the arrays say the same as that text.
+        vf, ee, tt = parse_contacts(text)
+        assert (len(c.vf), len(c.ee), len(c.tt)) == (len(vf), len(ee), len(tt))
+        if vf:
+            vf = np.array(vf, dtype=float)
+            np.testing.assert_array_equal(c.vf.vertex, vf[:, 0])
+            np.testing.assert_array_equal(c.vf.face, vf[:, 1])
+            np.testing.assert_array_equal(c.vf.distance, vf[:, 2])
+        if ee:
+            ee = np.array(ee, dtype=float)
+            np.testing.assert_array_equal(c.ee.vertices.reshape(-1, 4), ee[:, :4])
+            np.testing.assert_array_equal(c.ee.distance, ee[:, 4])
+        if tt:
+            np.testing.assert_array_equal(c.tt.faces, np.array(tt, dtype=int))
+    return det, results
+
+
+def test_kdop_funnel_two_frames_same_as_cli(tmp_path, cli, data):
+    det, (c0, c1) = check_same_as_cli(tmp_path, cli, [data / p for p in FUNNEL], "kdop")
+    assert len(c0.vf) > 1000 and len(c1.ee) > 1000  # a real workload, not an empty set
+    assert det.stats["candidates"] > 0
+
+
+@pytest.mark.parametrize("method", ["hash", "sap:axis=y"])
+def test_other_exact_methods_armadillo_same_as_cli(tmp_path, cli, data, method):
+    check_same_as_cli(tmp_path, cli, [data / p for p in ARMADILLO], method)
+
+
+def test_stochastic_spec_with_keys_same_as_cli(tmp_path, cli, data):
+    check_same_as_cli(tmp_path, cli, [data / p for p in FUNNEL],
+                      "stochastic:variant=vertex,active=50,seed=7")
+
+
+@pytest.mark.parametrize("method", [m["name"] for m in crumple.methods()])
+def test_every_method_with_tt_same_as_cli(tmp_path, cli, data, method):
+    _, (c,) = check_same_as_cli(tmp_path, cli, [data / CUBES], method, kinds="vf,ee,tt")
+    if method != "stochastic":
+        assert len(c.tt) > 0
+
+
+def test_geometry_of_the_arrays(data):
+    m = crumple.read_mesh(data / FUNNEL[0])
+    _, (c,) = detect_frames([data / FUNNEL[0]], "kdop")
+    x = m.vertices
+    h = crumple.default_thickness(x)
+    # VF: the closest point from the barycentrics, the distance and the normal agree.
+    corners = x[m.faces[c.vf.face]]                         # (k, 3, 3)
+    closest = np.einsum("kc,kcd->kd", c.vf.barycentric, corners)
+    d = x[c.vf.vertex] - closest
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), c.vf.distance, rtol=1e-9, atol=1e-12)
+    assert np.all(c.vf.distance < h)
+    np.testing.assert_allclose(c.vf.barycentric.sum(axis=1), 1.0, atol=1e-12)
+    # EE: edge ids and vertex ids agree; the closest points are distance apart.
+    np.testing.assert_array_equal(m.edges[c.ee.edges], c.ee.vertices)
+    a = c.ee.vertices[:, 0]
+    b = c.ee.vertices[:, 1]
+    pa = (1 - c.ee.s)[:, None] * x[a[:, 0]] + c.ee.s[:, None] * x[a[:, 1]]
+    pb = (1 - c.ee.t)[:, None] * x[b[:, 0]] + c.ee.t[:, None] * x[b[:, 1]]
+    np.testing.assert_allclose(np.linalg.norm(pb - pa, axis=1), c.ee.distance, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(c.ee.normal, axis=1)[c.ee.distance > 0], 1.0, atol=1e-12)
+
+
+def test_results_are_views_over_the_records(data):
+    m = crumple.read_mesh(data / FUNNEL[0])
+    det = crumple.Detector("kdop", thickness=crumple.default_thickness(m.vertices), threads=2)
+    det.set_topology(m)
+    c = det.update(m.vertices)
+    vf, ee = c.vf, c.ee
+    # One record per row: every field of row i lies in record i (64 bytes VF, 72 bytes EE).
+    assert vf.vertex.strides == (64,) and vf.distance.strides == (64,)
+    assert vf.barycentric.strides == (64, 8) and vf.normal.strides == (64, 8)
+    assert vf.distance.ctypes.data - vf.vertex.ctypes.data == 8
+    assert ee.edges.strides[0] == ee.s.strides[0] == ee.normal.strides[0]
+    assert ee.vertices.ctypes.data - ee.edges.ctypes.data == 8
+    for arr in (vf.vertex, vf.face, vf.distance, vf.barycentric, vf.normal, ee.edges,
+                ee.vertices, ee.s, ee.t, ee.distance, ee.normal):
+        assert not arr.flags.owndata and not arr.flags.writeable
+    # Reading a field twice gives the same memory, from any view object of the result.
+    assert np.shares_memory(c.vf.distance, vf.distance)
+    assert np.shares_memory(c.ee.normal, ee.normal)
+
+
+def test_a_result_survives_later_updates_and_the_buffer_is_reused(data):
+    m0, m1 = (crumple.read_mesh(data / p) for p in FUNNEL)
+    det = crumple.Detector("kdop", thickness=crumple.default_thickness(m0.vertices), threads=2)
+    det.set_topology(m0)
+    first = det.update(m0.vertices)
+    dist = first.vf.distance
+    saved = dist.copy()
+    second = det.update(m0.vertices, m1.vertices)
+    assert not np.shares_memory(second.vf.distance, dist)  # a live result is never rewritten
+    np.testing.assert_array_equal(dist, saved)
+    del first, dist
+    # No Python reference to the earlier results left: the detector may rewrite those records.
+    del second
+    third = det.update(m0.vertices)
+    np.testing.assert_array_equal(third.vf.distance, saved)
+
+
+def test_positions_layouts(data):
+    m = crumple.read_mesh(data / FUNNEL[0])
+    x32 = m.vertices.astype(np.float32)
+    x = x32.astype(np.float64)  # the float32 values, exactly
+    det = crumple.Detector("kdop", thickness=crumple.default_thickness(x), threads=2)
+    det.set_topology(m)
+    ref = det.update(x)
+    assert det.last_positions_copied is False  # float64 C-contiguous: read in place
+    wide = np.zeros((len(x), 5))
+    wide[:, 1:4] = x
+    cases = {"float32": x32, "fortran": np.asfortranarray(x), "strided": wide[:, 1:4],
+             "every other row": np.repeat(x, 2, axis=0)[::2], "list": x.tolist()}
+    for name, positions in cases.items():
+        c = det.update(positions)
+        assert det.last_positions_copied is True, name
+        for f in ("vertex", "face", "distance"):
+            np.testing.assert_array_equal(getattr(c.vf, f), getattr(ref.vf, f), err_msg=name)
+        np.testing.assert_array_equal(c.ee.vertices, ref.ee.vertices, err_msg=name)
+
+
+def test_bad_positions_and_state_errors(data):
+    m = crumple.read_mesh(data / CUBES)
+    det = crumple.Detector("kdop", thickness=0.01)
+    with pytest.raises(RuntimeError, match="set_topology"):
+        det.update(m.vertices)
+    det.set_topology(m)
+    x = np.array(m.vertices)
+    with pytest.raises(ValueError, match=r"\(n, 3\)"):
+        det.update(x[:, :2])
+    with pytest.raises(ValueError, match=r"\(n, 3\)"):
+        det.update(x.ravel())
+    with pytest.raises(ValueError, match="rows"):
+        det.update(x[:-1])
+    with pytest.raises(ValueError, match="previous"):
+        det.update(x[:-1], x)
+    with pytest.raises(ValueError, match="real dtype"):
+        det.update(x.astype(str))
+    x[3, 1] = np.inf
+    with pytest.raises(crumple.InputError, match="vertex 3"):
+        det.update(x)
+
+
+@pytest.mark.parametrize("args, match", [
+    (("octree",), "kdop"),                # lists the valid names
+    (("kdop:bogus=1",), "bogus"),
+    (("stochastic:active=many",), "active"),
+])
+def test_bad_method_specs(args, match):
+    with pytest.raises(crumple.InputError, match=match):
+        crumple.Detector(*args, thickness=0.1)
+
+
+def test_bad_options():
+    with pytest.raises(crumple.InputError):
+        crumple.Detector("kdop", thickness=-1.0)
+    with pytest.raises(crumple.InputError):
+        crumple.Detector("kdop", thickness=0.1, kinds="vf,xx")
+    with pytest.raises(crumple.InputError):
+        crumple.Detector("kdop", thickness=0.1, threads=-2)
+    with pytest.raises(TypeError):
+        crumple.Detector("kdop")  # thickness is required, keyword-only
+    d = crumple.Detector("sap", thickness=0.5, kinds="ee,tt", threads=1)
+    assert (d.method, d.thickness, d.kinds, d.threads) == ("sap", 0.5, "ee,tt", 1)
+    assert d.capabilities == {"exact": True, "stochastic": False, "uses_motion": False}
+
+
+def test_stats_have_the_cli_json_keys(cli, data):
+    import json
+    path = data / CUBES
+    det, _ = detect_frames([path], "kdop")
+    line = run_cli(cli, "detect", path, "--method", "kdop", "--threads", 2, "--json")
+    assert set(det.stats) == set(json.loads(line)["stats"])
+
+
+def test_save_and_load_state_replays_the_last_update(data):
+    m0, m1 = (crumple.read_mesh(data / p) for p in FUNNEL)
+    spec = "stochastic:active=20,seed=3"
+    h = crumple.default_thickness(m0.vertices)
+    a = crumple.Detector(spec, thickness=h, threads=1)
+    a.set_topology(m0)
+    a.update(m0.vertices)
+    last = a.update(m0.vertices, m1.vertices)
+    state = a.save_state()
+    assert state
+    b = crumple.Detector(spec, thickness=h, threads=1)
+    b.set_topology(m0)
+    b.load_state(state)
+    again = b.update(m0.vertices, m1.vertices)
+    np.testing.assert_array_equal(again.vf.vertex, last.vf.vertex)
+    np.testing.assert_array_equal(again.ee.vertices, last.ee.vertices)
+    exact = crumple.Detector("kdop", thickness=h)
+    exact.set_topology(m0)
+    assert exact.save_state() == ""
+    with pytest.raises(crumple.InputError):
+        exact.load_state("junk")
+    with pytest.raises(crumple.InputError):
+        b.load_state("not a state")
+
+
+def test_gil_released_during_update(data):
+    m = crumple.read_mesh(data / ARMADILLO[0])
+    det = crumple.Detector("naive", thickness=crumple.default_thickness(m.vertices), threads=1)
+    det.set_topology(crumple.TriMesh(m.vertices[:1200], m.faces[np.all(m.faces < 1200, axis=1)]))
+    x = np.ascontiguousarray(m.vertices[:1200])
+    window = []
+
+    def work():
+        t0 = time.perf_counter()
+        det.update(x)
+        window.extend([t0, time.perf_counter()])
+
+    ticks = []
+    worker = threading.Thread(target=work)
+    worker.start()
+    while worker.is_alive():
+        ticks.append(time.perf_counter())
+    worker.join()
+    t0, t1 = window
+    assert t1 - t0 > 0.05  # long enough for the check below to mean something
+    # Holding the GIL would stop this thread for the whole update: a gap in its ticks at least
+    # as long as the update. Released, this thread keeps running beside it.
+    gaps = np.diff([t0] + [t for t in ticks if t0 < t < t1] + [t1])
+    assert gaps.max() < 0.5 * (t1 - t0), (gaps.max(), t1 - t0)
+
+
+def test_a_detector_busy_in_another_thread_refuses_other_calls(data):
+    m = crumple.read_mesh(data / ARMADILLO[0])
+    keep = np.all(m.faces < 1200, axis=1)
+    det = crumple.Detector("naive", thickness=crumple.default_thickness(m.vertices), threads=1)
+    det.set_topology(crumple.TriMesh(m.vertices[:1200], m.faces[keep]))
+    x = np.ascontiguousarray(m.vertices[:1200])
+    worker = threading.Thread(target=det.update, args=(x,))
+    refused = 0
+    worker.start()
+    while worker.is_alive():
+        try:
+            det.stats  # noqa: B018 -- reading it is the check
+        except RuntimeError as e:
+            assert "in use" in str(e)
+            refused += 1
+    worker.join()
+    assert refused > 0
+    assert det.stats  # free again once the update is done
