@@ -11,7 +11,7 @@ cd "$(dirname "$0")/.."
 JOBS=${JOBS:-$(nproc)}
 PACKAGES=(g++ cmake make libeigen3-dev libtbb-dev libpugixml-dev libcli11-dev libgtest-dev
           libgmock-dev libbenchmark-dev libglfw3-dev libimgui-dev libstb-dev xvfb xauth
-          libgl1-mesa-dri libgl-dev)
+          libgl1-mesa-dri libgl-dev libgmp-dev)
 
 install_deps() {
   local missing=()
