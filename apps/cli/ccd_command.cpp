@@ -16,7 +16,7 @@ struct CcdArgs {
   std::string queries;
   double min_separation = 0;
   double time_tolerance = 1e-6;
-  long long max_boxes = 100000;
+  long long max_boxes = 10000;
   bool stats = false;
 };
 }  // namespace
@@ -31,7 +31,7 @@ Run add_ccd_command(CLI::App& app) {
       ->check(CLI::NonNegativeNumber);
   app.add_option("--time-tolerance", args->time_tolerance, "Time tolerance of the reported TOI (default 1e-6)")
       ->check(CLI::PositiveNumber);
-  app.add_option("--max-boxes", args->max_boxes, "Box budget per query before a conservative hit (default 100000)")
+  app.add_option("--max-boxes", args->max_boxes, "Box budget per query before a conservative hit (default 10000)")
       ->check(CLI::PositiveNumber);
   app.add_flag("--stats", args->stats, "Print the count of each outcome to stderr");
   return [args]() {

@@ -5,7 +5,7 @@
 //  - oracle kYes  => the narrow phase hits (no false negative), and its toi ≤ the oracle's
 //                    witness time (and ≤ the exact toi when the oracle knows it);
 //  - every kHitTolerance => the stated tolerance holds: within
-//    [toi, toi + time_tolerance] the exact distance is ≤ √3 (δ + 2 err + ε), checked exactly at
+//    [toi, toi + time_tolerance] the exact distance is ≤ δ (1 + σ) + ε + 2‖err‖, checked exactly at
 //    33 times with the Lipschitz slack L · time_tolerance / 64;
 //  - oracle kNo  => a narrow-phase hit is a false positive: counted and printed.
 #include <crumple/geometry/ccd.hpp>
@@ -322,9 +322,10 @@ void check(const Case& c, const CcdOptions& base, Tally& tally, std::int64_t ora
       break;
   }
   if (r.hit && r.outcome == CcdOutcome::kHitTolerance) {
-    const Scalar err = ccd_rounding_bound(c.start, c.end).maxCoeff();
+    const Scalar err = ccd_rounding_bound(c.start, c.end).norm();
     const Scalar tol = std::clamp(o.time_tolerance, 0x1p-40, 1.0);
-    const Scalar reach = (std::sqrt(3.0) * (c.delta + 2 * err + epsilon(c, o)) + lipschitz(c) * tol / 64) * (1 + 1e-9);
+    const Scalar reach = ((c.delta * (1 + o.separation_tolerance) + 2 * err + epsilon(c, o)) * (1 + 1e-9) +
+                          lipschitz(c) * tol / 64);
     const co::Q reach2 = co::Q(reach) * co::Q(reach);
     bool ok = false;
     for (int k = 0; k <= 32 && !ok; ++k) {

@@ -177,6 +177,18 @@ TEST(Ccd, CoplanarityFilterRejectsSkewMotion) {
   EXPECT_EQ(r.outcome, CcdOutcome::kSeparatedCoplanarity);
 }
 
+TEST(Ccd, NearParallelEdgesAreSeparatedByADirection) {
+  // cloth-funnel 227->228: two nearly parallel edges about 1e-6 apart (the scene is ~1 wide).
+  // Bisection alone spent its whole budget (100000 boxes) on this pair.
+  const CcdPoints s = pts(Vec3(0x1.0ed1cp-6, -0x1.b89f84p-5, -0x1.3071c6p-1), Vec3(0x1.6475ccp-6, -0x1.a73e9ep-5, -0x1.315076p-1),
+                          Vec3(0x1.0ed65cp-6, -0x1.b89f84p-5, -0x1.30714p-1), Vec3(0x1.647baap-6, -0x1.a73e9ep-5, -0x1.314fcep-1));
+  const CcdPoints e = pts(Vec3(0x1.0f677cp-6, -0x1.b989c4p-5, -0x1.320276p-1), Vec3(0x1.653a82p-6, -0x1.a81fa4p-5, -0x1.32e16ap-1),
+                          Vec3(0x1.0f60c6p-6, -0x1.b989c4p-5, -0x1.3202fcp-1), Vec3(0x1.65321ep-6, -0x1.a81fa4p-5, -0x1.32e232p-1));
+  const CcdResult r = edge_edge_ccd(s, e);
+  EXPECT_NE(r.outcome, CcdOutcome::kHitBudget);
+  EXPECT_LT(r.boxes, 1000);
+}
+
 TEST(Ccd, BudgetGivesAConservativeHit) {
   CcdOptions o;
   o.max_boxes = 1;

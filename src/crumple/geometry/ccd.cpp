@@ -34,6 +34,8 @@ struct Prepared {
   std::array<Vec3, 2> a, b, c;
   Vec3 bound;  // err + δ, rounded up, per axis
   Vec3 err;
+  Scalar delta = 0;
+  Scalar delta2_up = 0;  // ≥ δ²
   bool face = false;
 };
 
@@ -80,6 +82,8 @@ Prepared prepare(CcdPair pair, const CcdPoints& start, const CcdPoints& end, Sca
     p.err[k] = kCornerErrorFactor * m[k] + kUnderflowSlack;
     p.bound[k] = round_up(p.err[k] + delta);
   }
+  p.delta = delta;
+  p.delta2_up = round_up(delta * delta);
   return p;
 }
 
@@ -87,13 +91,19 @@ Prepared prepare(CcdPair pair, const CcdPoints& start, const CcdPoints& end, Sca
 /// t = 0 and t = 1 (VF: vertex - triangle corner, 6 points; EE: a_i - b_j, 8 points). Each is one
 /// rounded subtraction, error ≤ 2 u max|coord| ≤ err. Returns false when some axis separates the
 /// hull from [-bound, bound]; `extent` receives the largest |coordinate| of the points.
+struct Hull {
+  std::array<Vec3, 8> points;
+  int count = 0;
+};
+
 bool hull_may_touch(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Vec3& bound,
-                    Scalar& extent) {
+                    Scalar& extent, Hull& hull) {
   Vec3 lo = Vec3::Constant(INFINITY);
   Vec3 hi = Vec3::Constant(-INFINITY);
   const auto add = [&](const Vec3& d) {
     lo = lo.cwiseMin(d);
     hi = hi.cwiseMax(d);
+    hull.points[hull.count++] = d;
   };
   for (const CcdPoints* x : {&start, &end}) {
     const CcdPoints& q = *x;
@@ -113,6 +123,48 @@ bool hull_may_touch(CcdPair pair, const CcdPoints& start, const CcdPoints& end, 
     if (lo[k] > bound[k] || hi[k] < -bound[k]) return false;
   }
   return true;
+}
+
+/// Filter 3: a separating direction. For any vector n, F·n over the domain lies in the hull of
+/// the difference points' projections. The computed projection of a point errs from the exact
+/// one by at most Σ|n_k| err_k (the point's own rounding) + γ_3 Σ|d_k n_k| (the dot product);
+/// all projections beyond δ‖n‖ plus that, on one side, prove ‖F‖ > δ everywhere.
+bool separated_along(const Vec3& n, const Hull& hull, const Vec3& err, Scalar delta) {
+  const Scalar nn = n.x() * n.x() + n.y() * n.y() + n.z() * n.z();
+  if (!(nn > 0) || !std::isfinite(nn)) return false;
+  Scalar lo = INFINITY, hi = -INFINITY, mag = 0;
+  for (int i = 0; i < hull.count; ++i) {
+    const Vec3& d = hull.points[i];
+    const Scalar x = d.x() * n.x(), y = d.y() * n.y(), z = d.z() * n.z();
+    const Scalar s = (x + y) + z;
+    lo = std::min(lo, s);
+    hi = std::max(hi, s);
+    mag = std::max(mag, std::abs(x) + std::abs(y) + std::abs(z));
+  }
+  const Scalar slack = std::abs(n.x()) * err.x() + std::abs(n.y()) * err.y() + std::abs(n.z()) * err.z();
+  const Scalar bound = (delta * std::sqrt(nn) + slack + 4 * kU * mag) * (1 + 16 * kU) + kUnderflowSlack;
+  return lo > bound || hi < -bound;
+}
+
+/// Directions worth trying: the triangle's normals (VF), the edges' common normals and the
+/// perpendicular from edge a's line to b0 (EE, for near-parallel edges), at t = 0 and t = 1.
+bool separated_by_a_direction(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Hull& hull,
+                              const Vec3& err, Scalar delta) {
+  for (const CcdPoints* x : {&start, &end}) {
+    const CcdPoints& q = *x;
+    if (pair == CcdPair::kVertexFace) {
+      if (separated_along((q[2] - q[1]).cross(q[3] - q[1]), hull, err, delta)) return true;
+    } else {
+      const Vec3 da = q[1] - q[0], db = q[3] - q[2];
+      if (separated_along(da.cross(db), hull, err, delta)) return true;
+      const Scalar aa = da.squaredNorm();
+      if (aa > 0) {
+        const Vec3 w = q[2] - q[0];
+        if (separated_along(w - (w.dot(da) / aa) * da, hull, err, delta)) return true;
+      }
+    }
+  }
+  return false;
 }
 
 /// det[a; b; c] of three vectors whose entries are each one rounded difference of inputs,
@@ -181,7 +233,9 @@ struct LaterFirst {
   }
 };
 
-CcdResult bisect(const Prepared& p, Scalar eps, Scalar tol_t, std::int64_t max_boxes) {
+CcdResult bisect(const Prepared& p, Scalar eps, Scalar sigma, Scalar tol_t, std::int64_t max_boxes) {
+  const Scalar reach = p.delta * (1 + sigma) + eps + p.err.norm();
+  const Scalar reach2 = reach * reach;
   std::vector<Box> storage;
   storage.reserve(64);
   std::priority_queue<Box, std::vector<Box>, LaterFirst> queue(LaterFirst{}, std::move(storage));
@@ -227,17 +281,24 @@ CcdResult bisect(const Prepared& p, Scalar eps, Scalar tol_t, std::int64_t max_b
     for (int k = 0; k < 3; ++k) {
       if (lo[k] > p.bound[k] || hi[k] < -p.bound[k]) rejected = true;
     }
+    if (!rejected && p.delta > 0) {
+      // Euclidean distance from 0 to the box [lo - err, hi + err] (each gap rounded at most
+      // 2 u high, the sum of squares 8 u) above δ: no point of the box within δ.
+      Scalar sum = 0;
+      for (int k = 0; k < 3; ++k) {
+        const Scalar gap = std::max({lo[k] - p.err[k], -hi[k] - p.err[k], Scalar(0)});
+        sum += gap * gap;
+      }
+      rejected = sum * (1 - 16 * kU) > p.delta2_up;
+    }
     if (rejected) continue;
-    // Witness corners: inside the domain and within bound + ε on every axis, i.e. a point of
-    // the box at L∞ distance ≤ δ + 2 err + ε. Earliest witness time: 0 (t0), 1 (t1), none.
+    // Witness corners: inside the domain and at computed Euclidean distance ≤ reach =
+    // δ (1 + σ) + ε + ‖err‖, i.e. a point of the box truly within δ (1 + σ) + ε + 2‖err‖. Earliest witness
+    // time: 0 (t0), 1 (t1), 2 (none).
     int witness = 2;
     for (int i = 0; i < 8 && witness > 0; ++i) {
       if (p.face && us[(i >> 1) & 1] + vs[i & 1] > 1) continue;  // exact sum
-      bool near = true;
-      for (int k = 0; k < 3; ++k) {
-        if (std::abs(f[i][k]) > p.bound[k] + eps) near = false;
-      }
-      if (near) witness = std::min(witness, i >> 2);
+      if (f[i].squaredNorm() <= reach2) witness = std::min(witness, i >> 2);
     }
     const bool t_small = box.t1 - box.t0 <= tol_t;
     if (witness == 0 || (witness == 1 && t_small)) {
@@ -303,6 +364,7 @@ std::string_view to_string(CcdOutcome outcome) {
   switch (outcome) {
     case CcdOutcome::kSeparatedHull: return "separated-hull";
     case CcdOutcome::kSeparatedCoplanarity: return "separated-coplanarity";
+    case CcdOutcome::kSeparatedDirection: return "separated-direction";
     case CcdOutcome::kSeparatedBisection: return "separated-bisection";
     case CcdOutcome::kHitTolerance: return "hit-tolerance";
     case CcdOutcome::kHitPrecision: return "hit-precision";
@@ -323,7 +385,7 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   const Scalar delta = options.min_separation;
   CRUMPLE_CHECK(delta >= 0 && delta <= kMaxMagnitude, "ccd: min_separation must be finite and >= 0");
   CRUMPLE_CHECK(options.max_boxes >= 1, "ccd: max_boxes must be >= 1");
-  CRUMPLE_CHECK(options.distance_tolerance >= 0 && options.time_tolerance >= 0,
+  CRUMPLE_CHECK(options.distance_tolerance >= 0 && options.time_tolerance >= 0 && options.separation_tolerance >= 0,
                 "ccd: tolerances must be >= 0");
   CcdResult result;
   if (!in_range(start, end)) {
@@ -334,7 +396,8 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   }
   const Prepared p = prepare(pair, start, end, delta);
   Scalar extent = 0;
-  if (!hull_may_touch(pair, start, end, p.bound, extent)) {
+  Hull hull;
+  if (!hull_may_touch(pair, start, end, p.bound, extent, hull)) {
     result.outcome = CcdOutcome::kSeparatedHull;
     return result;
   }
@@ -343,9 +406,13 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
     result.outcome = CcdOutcome::kSeparatedCoplanarity;
     return result;
   }
+  if (separated_by_a_direction(pair, start, end, hull, p.err, delta)) {
+    result.outcome = CcdOutcome::kSeparatedDirection;
+    return result;
+  }
   const Scalar eps = std::max(options.distance_tolerance * extent, 4 * p.err.maxCoeff());
   const Scalar tol_t = std::clamp(options.time_tolerance, kMinWidth, Scalar(1));
-  return bisect(p, eps, tol_t, options.max_boxes);
+  return bisect(p, eps, options.separation_tolerance, tol_t, options.max_boxes);
 }
 
 CcdResult vertex_face_ccd(const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {

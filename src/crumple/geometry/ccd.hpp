@@ -19,12 +19,12 @@
 ///    Euclidean distance δ. Every rejection is certified by a rounding-error bound, never a
 ///    fixed epsilon.
 ///  - Conservative time: when `hit`, `toi` ≤ the first time the distance is ≤ δ.
-///  - Tolerance (outcome `kHitTolerance` only): some time in [toi, toi + time_tolerance] has a
-///    point of each primitive whose coordinate-wise difference is at most δ + 2·err + ε on
-///    every axis (Euclidean: √3 times that), where err
-///    is `ccd_rounding_bound` (≈ 7e-15 × the largest coordinate) and ε the distance tolerance
-///    (`distance_tolerance` × the query's extent). So a hit at `toi` is never far from a real
-///    near-contact; false positives are pairs whose distance stays in (δ, √3(δ + 2err + ε)].
+///  - Tolerance (outcome `kHitTolerance` only): some time in [toi, toi + time_tolerance] brings
+///    the primitives within Euclidean distance δ (1 + σ) + ε + 2‖err‖ (up to a relative 1e-15), where
+///    err is `ccd_rounding_bound` (≈ 7e-15 × the largest coordinate) and ε the distance
+///    tolerance (`distance_tolerance` × the query's extent). So a hit at `toi` is never far from
+///    a real near-contact; its false positives stay within δ (1 + σ) + ε + 2‖err‖ (σ:
+///    `separation_tolerance`).
 ///  - Other hit outcomes (`kHitBudget`, `kHitPrecision`, `kHitOutOfRange`) are conservative
 ///    only: the time is still a lower bound of the first contact, but no contact is claimed.
 ///  - Bounded work: at most `max_boxes` boxes are examined, then a hit is reported at the
@@ -42,12 +42,13 @@ namespace crumple::geometry {
 /// endpoints then edge b's.
 enum class CcdPair : std::uint8_t { kVertexFace, kEdgeEdge };
 
-/// How a query was decided; the first three are "no hit".
+/// How a query was decided; the first four are "no hit".
 enum class CcdOutcome : std::uint8_t {
   kSeparatedHull,         ///< the difference points' hull misses the δ box on some axis
   kSeparatedCoplanarity,  ///< δ = 0 and the 4 points are never coplanar (Bernstein signs)
+  kSeparatedDirection,    ///< the difference points project beyond δ along a normal direction
   kSeparatedBisection,    ///< every box of the bisection was rejected
-  kHitTolerance,          ///< a box corner at t ≤ t0 + time_tolerance is within δ + ε (+ err)
+  kHitTolerance,          ///< a box corner at t ≤ t0 + time_tolerance is within δ(1+σ) + ε + 2‖err‖
   kHitPrecision,          ///< a box could not be split further (dyadic depth limit)
   kHitBudget,             ///< `max_boxes` reached; reported at the earliest live time
   kHitOutOfRange,         ///< non-finite input or magnitude > 2^1000; reported at t = 0
@@ -65,8 +66,11 @@ struct CcdOptions {
   /// ε relative to the query's extent (the largest |coordinate| of the difference points);
   /// never below 4 × the rounding bound.
   Scalar distance_tolerance = 1e-6;
+  /// σ ≥ 0: with δ > 0, a hit may be reported once the primitives are within δ (1 + σ) + ε
+  /// (the δ-sphere is met tangentially, so demanding δ + ε alone costs many boxes).
+  Scalar separation_tolerance = 0.01;
   /// Most boxes examined before a conservative hit (≥ 1).
-  std::int64_t max_boxes = 100000;
+  std::int64_t max_boxes = 10000;
 };
 
 struct CcdResult {
