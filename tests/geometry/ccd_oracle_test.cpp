@@ -239,6 +239,39 @@ Case generic(Gen& g) {
   return c;
 }
 
+/// Touching exactly at t = 0 or t = 1 at a shared point, with full 53-bit coordinates (not the
+/// grid): the vertex on a triangle corner f1 or f2, or an endpoint of edge a on one of edge b.
+/// Evaluating F at the contact rounds (e.g. (p - f0) + (f0 - f1)), so these exercise the
+/// rounding bound: without it the bisection rejects some of them.
+Case touching_shared_point(Gen& g) {
+  Case c;
+  c.pair = g.coin() ? CcdPair::kVertexFace : CcdPair::kEdgeEdge;
+  std::uniform_real_distribution<Scalar> unit(-1, 1);
+  const Scalar scale = g.scale() * (1 + unit(g.rng()) / 3);  // not a power of two
+  for (int i = 0; i < 4; ++i) {
+    c.start[i] = Vec3(unit(g.rng()), unit(g.rng()), unit(g.rng())) * scale;
+    c.end[i] = (c.start[i] + Vec3(unit(g.rng()), unit(g.rng()), unit(g.rng())) * (scale / 4)).eval();
+  }
+  const Scalar t = g.coin() ? 0 : 1;
+  CcdPoints& x = t == 0 ? c.start : c.end;
+  const int which = g.integer(0, c.pair == CcdPair::kVertexFace ? 1 : 2);
+  if (c.pair == CcdPair::kVertexFace) {
+    x[0] = x[2 + which];  // p = f1 (u = 1) or f2 (v = 1)
+    c.witness = {t, which == 0 ? 1.0 : 0.0, which == 0 ? 0.0 : 1.0};
+  } else if (which == 0) {
+    x[1] = x[2];  // a1 = b0
+    c.witness = {t, 1.0, 0.0};
+  } else if (which == 1) {
+    x[0] = x[3];  // a0 = b1
+    c.witness = {t, 0.0, 1.0};
+  } else {
+    x[1] = x[3];  // a1 = b1
+    c.witness = {t, 1.0, 1.0};
+  }
+  c.constructed_contact = true;
+  return c;
+}
+
 struct Tally {
   int queries = 0, yes = 0, no = 0, undecided = 0;
   int hits = 0, false_negatives = 0, false_positives = 0;
@@ -370,6 +403,9 @@ void run(const char* name, int n, std::uint64_t seed, const std::function<Case(G
 
 TEST(CcdOracle, VertexFaceContacts) { run("vf-contact", 600, 1, vf_contact); }
 TEST(CcdOracle, EdgeEdgeContacts) { run("ee-contact", 600, 2, ee_contact); }
+TEST(CcdOracle, TouchingAtASharedPointWithFullPrecision) {
+  run("touching-shared-point", 1500, 5, touching_shared_point, 0, 50);
+}
 TEST(CcdOracle, ContactsWithMinimumSeparation) {
   run("vf-contact delta", 200, 3, vf_contact, 0x1p-10);
   run("ee-contact delta", 200, 4, ee_contact, 0x1p-10);
