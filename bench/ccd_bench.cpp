@@ -242,8 +242,11 @@ int main(int argc, char** argv) {
             const CcdPoints s = {m0.positions[q.v[0]], m0.positions[q.v[1]], m0.positions[q.v[2]], m0.positions[q.v[3]]};
             const CcdPoints e = {m1.positions[q.v[0]], m1.positions[q.v[1]], m1.positions[q.v[2]], m1.positions[q.v[3]]};
             const auto d = ccd_oracle::decide(ccd_oracle::make_query(q.pair == CcdPair::kVertexFace, s, e, delta), 300);
+            ccd_oracle::Q crossing;
             if (d.verdict == ccd_oracle::Verdict::kNo) ++fp;
             else if (d.verdict == ccd_oracle::Verdict::kYes) ++yes;
+            else if (delta == 0 && ccd_oracle::certified_crossing(
+                                       ccd_oracle::make_points(q.pair == CcdPair::kVertexFace, s, e), crossing)) ++yes;
             else ++undecided;
           }
         }

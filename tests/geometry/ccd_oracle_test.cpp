@@ -277,6 +277,7 @@ struct Tally {
   int hits = 0, false_negatives = 0, false_positives = 0;
   int toi_late = 0, toi_certified = 0, toi_exact_checked = 0, tolerance_failures = 0;
   int constructed_not_yes = 0;
+  int crossings = 0;  // "yes" certified by a coplanarity crossing
   std::map<std::string, int> outcomes;
 };
 
@@ -321,6 +322,17 @@ void check(const Case& c, const CcdOptions& base, Tally& tally, std::int64_t ora
   } else if (witnessed && co::Q((*c.witness)[0]) < d.toi_hi) {
     d.toi_hi = co::Q((*c.witness)[0]);
     d.exact_toi = d.toi_hi == d.toi_lo;
+  }
+  // δ = 0 and still open: a certified crossing of the coplanarity function inside the
+  // triangle (between the edges) is a contact at an irrational time.
+  co::Q crossing;
+  if (d.verdict != co::Verdict::kYes && c.delta == 0 &&
+      co::certified_crossing(co::make_points(c.pair == CcdPair::kVertexFace, c.start, c.end), crossing)) {
+    if (d.verdict == co::Verdict::kNo) ADD_FAILURE() << "oracle: kNo but a certified crossing: " << hex(c);
+    d.verdict = co::Verdict::kYes;
+    d.exact_toi = false;
+    d.toi_hi = crossing;
+    ++tally.crossings;
   }
   ++tally.queries;
   ++tally.outcomes[std::string(to_string(r.outcome))];
@@ -375,9 +387,9 @@ void check(const Case& c, const CcdOptions& base, Tally& tally, std::int64_t ora
 
 void print(const char* name, const Tally& t) {
   std::printf("[ ccd      ] %-28s n=%5d oracle yes/no/undecided=%d/%d/%d hits=%d FN=%d FP=%d "
-              "toi certified %d/%d (exact %d) late=%d tol-fail=%d |",
+              "toi certified %d/%d (exact %d) late=%d tol-fail=%d crossings=%d |",
               name, t.queries, t.yes, t.no, t.undecided, t.hits, t.false_negatives, t.false_positives,
-              t.toi_certified, t.yes, t.toi_exact_checked, t.toi_late, t.tolerance_failures);
+              t.toi_certified, t.yes, t.toi_exact_checked, t.toi_late, t.tolerance_failures, t.crossings);
   for (const auto& [k, v] : t.outcomes) std::printf(" %s:%d", k.c_str(), v);
   std::printf("\n");
 }
