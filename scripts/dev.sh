@@ -11,8 +11,8 @@ cd "$(dirname "$0")/.."
 JOBS=${JOBS:-$(nproc)}
 PACKAGES=(g++ cmake make libeigen3-dev libtbb-dev libpugixml-dev libcli11-dev libgtest-dev
           libgmock-dev libbenchmark-dev libglfw3-dev libimgui-dev libstb-dev xvfb xauth
-          libgl1-mesa-dri libgl-dev pybind11-dev python3-dev python3-numpy python3-pytest
-          python3-matplotlib)
+          libgl1-mesa-dri libgl-dev libgmp-dev pybind11-dev python3-dev python3-numpy
+          python3-pytest python3-matplotlib)
 
 install_deps() {
   local missing=()

@@ -16,5 +16,6 @@ Run add_info_command(CLI::App& app);
 Run add_simulate_command(CLI::App& app);
 Run add_bench_command(CLI::App& app);
 Run add_render_command(CLI::App& app);
+Run add_ccd_command(CLI::App& app);
 
 }  // namespace crumple::cli

@@ -1,0 +1,282 @@
+// Narrow-phase CCD throughput on the real frame pairs of ../shared/data/sample-scalable-ccd.
+//
+// For each scene: read the two frames, build the vertex–face and edge–edge candidates whose
+// swept boxes (inflated by δ) overlap (sort and sweep on x; pairs sharing a vertex skipped), then
+// run geometry::ccd on every candidate with 1 and 2 threads and report ns per query, the share
+// rejected by each filter, hits by outcome, and, on an evenly spaced sample of the hits, how
+// many the exact GMP oracle (tests/support/ccd_oracle.hpp) certifies as false positives.
+//
+//   ccd_bench [--data DIR] [--max-queries N] [--oracle-sample K] [--scene NAME] [--json]
+//
+// δ is 0 and 1e-3 × the first frame's bounding-box diagonal.
+#include <crumple/geometry/ccd.hpp>
+#include <crumple/io/mesh_io.hpp>
+#include <crumple/mesh/mesh.hpp>
+
+#include "support/ccd_oracle.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace {
+
+using namespace crumple;
+using geometry::CcdOutcome;
+using geometry::CcdPair;
+using geometry::CcdPoints;
+
+struct Scene {
+  const char* name;
+  const char* frame0;
+  const char* frame1;
+};
+
+const Scene kScenes[] = {
+    {"cloth-ball", "cloth-ball/frames/cloth_ball92.ply", "cloth-ball/frames/cloth_ball93.ply"},
+    {"cloth-funnel", "cloth-funnel/frames/227.ply", "cloth-funnel/frames/228.ply"},
+    {"rod-twist", "rod-twist/frames/3036.ply", "rod-twist/frames/3037.ply"},
+    {"armadillo", "armadillo-rollers/frames/326.ply", "armadillo-rollers/frames/327.ply"},
+    {"n-body", "n-body-simulation/frames/balls16_18.ply", "n-body-simulation/frames/balls16_19.ply"},
+};
+
+struct Query {
+  CcdPair pair;
+  std::array<Index, 4> v;
+};
+
+struct Box {
+  Vec3 lo, hi;
+  int kind;  // 0 vertex / edge a, 1 face
+  Index id;
+};
+
+void sweep(std::vector<Box>& boxes, const std::function<void(const Box&, const Box&)>& emit) {
+  std::sort(boxes.begin(), boxes.end(), [](const Box& a, const Box& b) { return a.lo.x() < b.lo.x(); });
+  for (std::size_t i = 0; i < boxes.size(); ++i) {
+    for (std::size_t j = i + 1; j < boxes.size() && boxes[j].lo.x() <= boxes[i].hi.x(); ++j) {
+      const Box& a = boxes[i];
+      const Box& b = boxes[j];
+      if (a.lo.y() > b.hi.y() || b.lo.y() > a.hi.y() || a.lo.z() > b.hi.z() || b.lo.z() > a.hi.z()) continue;
+      emit(a, b);
+    }
+  }
+}
+
+std::vector<Query> candidates(const Positions& x0, const Positions& x1, const std::vector<Face>& faces,
+                              const std::vector<Edge>& edges, Scalar inflate, std::size_t cap) {
+  std::vector<Query> out;
+  const auto swept = [&](std::initializer_list<Index> ids) {
+    Box b;
+    b.lo = Vec3::Constant(INFINITY);
+    b.hi = Vec3::Constant(-INFINITY);
+    for (Index i : ids) {
+      b.lo = b.lo.cwiseMin(x0[i]).cwiseMin(x1[i]);
+      b.hi = b.hi.cwiseMax(x0[i]).cwiseMax(x1[i]);
+    }
+    b.lo.array() -= inflate;
+    b.hi.array() += inflate;
+    return b;
+  };
+  std::vector<Box> boxes;
+  for (Index v = 0; v < static_cast<Index>(x0.size()); ++v) {
+    Box b = swept({v});
+    b.kind = 0;
+    b.id = v;
+    boxes.push_back(b);
+  }
+  for (Index f = 0; f < static_cast<Index>(faces.size()); ++f) {
+    Box b = swept({faces[f][0], faces[f][1], faces[f][2]});
+    b.kind = 1;
+    b.id = f;
+    boxes.push_back(b);
+  }
+  std::size_t vf = 0;
+  sweep(boxes, [&](const Box& a, const Box& b) {
+    if (a.kind == b.kind || vf >= cap) return;
+    const Index v = a.kind == 0 ? a.id : b.id;
+    const Face& f = faces[a.kind == 1 ? a.id : b.id];
+    if (v == f[0] || v == f[1] || v == f[2]) return;
+    out.push_back({CcdPair::kVertexFace, {v, f[0], f[1], f[2]}});
+    ++vf;
+  });
+  boxes.clear();
+  for (Index e = 0; e < static_cast<Index>(edges.size()); ++e) {
+    Box b = swept({edges[e][0], edges[e][1]});
+    b.kind = 0;
+    b.id = e;
+    boxes.push_back(b);
+  }
+  std::size_t ee = 0;
+  sweep(boxes, [&](const Box& a, const Box& b) {
+    if (ee >= cap) return;
+    const Edge& p = edges[a.id];
+    const Edge& q = edges[b.id];
+    if (p[0] == q[0] || p[0] == q[1] || p[1] == q[0] || p[1] == q[1]) return;
+    out.push_back({CcdPair::kEdgeEdge, {p[0], p[1], q[0], q[1]}});
+    ++ee;
+  });
+  return out;
+}
+
+struct Run {
+  double ns_per_query = 0;
+  std::array<long long, 16> outcomes{};
+  std::vector<std::size_t> hits;
+  long long boxes = 0;
+};
+
+Run run(const std::vector<Query>& queries, const Positions& x0, const Positions& x1, Scalar delta, int threads) {
+  geometry::CcdOptions options;
+  options.min_separation = delta;
+  std::vector<Run> parts(threads);
+  const auto work = [&](int k) {
+    Run& part = parts[k];
+    const std::size_t begin = queries.size() * k / threads, end = queries.size() * (k + 1) / threads;
+    for (std::size_t i = begin; i < end; ++i) {
+      const Query& q = queries[i];
+      const CcdPoints s = {x0[q.v[0]], x0[q.v[1]], x0[q.v[2]], x0[q.v[3]]};
+      const CcdPoints e = {x1[q.v[0]], x1[q.v[1]], x1[q.v[2]], x1[q.v[3]]};
+      const geometry::CcdResult r = geometry::ccd(q.pair, s, e, options);
+      ++part.outcomes[static_cast<int>(r.outcome)];
+      part.boxes += r.boxes;
+      if (r.hit) part.hits.push_back(i);
+      if (std::getenv("CCD_BENCH_DUMP") && r.outcome == CcdOutcome::kHitBudget) {
+        std::fprintf(stderr, "%s", q.pair == CcdPair::kVertexFace ? "vf" : "ee");
+        for (const CcdPoints* x : {&s, &e}) {
+          for (const Vec3& p : *x) std::fprintf(stderr, " %a %a %a", p.x(), p.y(), p.z());
+        }
+        std::fprintf(stderr, "\n");
+      }
+    }
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<std::thread> pool;
+  for (int k = 1; k < threads; ++k) pool.emplace_back(work, k);
+  work(0);
+  for (std::thread& t : pool) t.join();
+  const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
+  Run total;
+  total.ns_per_query = queries.empty() ? 0 : ns / static_cast<double>(queries.size());
+  for (const Run& p : parts) {
+    for (int i = 0; i < 16; ++i) total.outcomes[i] += p.outcomes[i];
+    total.boxes += p.boxes;
+    total.hits.insert(total.hits.end(), p.hits.begin(), p.hits.end());
+  }
+  return total;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string data = CRUMPLE_BENCH_DATA_DIR;
+  std::size_t max_queries = 1000000;
+  int oracle_sample = 100;
+  std::string only;
+  bool json = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const auto value = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "ccd_bench: %s needs a value\n", a.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--data") data = value();
+    else if (a == "--max-queries") max_queries = std::stoull(value());
+    else if (a == "--oracle-sample") oracle_sample = std::stoi(value());
+    else if (a == "--scene") only = value();
+    else if (a == "--json") json = true;
+    else {
+      std::fprintf(stderr, "usage: ccd_bench [--data DIR] [--max-queries N] [--oracle-sample K] [--scene NAME] [--json]\n");
+      return 2;
+    }
+  }
+  if (!json) {
+    std::printf("| scene | delta | queries | threads | ns/query | hull | coplanar | direction | bisection-no | hits | budget hits | boxes/query | oracle sample: FP / yes / undecided |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  }
+  for (const Scene& scene : kScenes) {
+    if (!only.empty() && only != scene.name) continue;
+    const std::filesystem::path dir = std::filesystem::path(data) / "sample-scalable-ccd";
+    io::MeshData m0, m1;
+    try {
+      m0 = io::read_mesh_data(dir / scene.frame0);
+      m1 = io::read_mesh_data(dir / scene.frame1);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "ccd_bench: skipping %s: %s\n", scene.name, e.what());
+      continue;
+    }
+    std::vector<Edge> edges;
+    for (const Face& f : m0.faces) {
+      for (int k = 0; k < 3; ++k) {
+        const Index a = f[k], b = f[(k + 1) % 3];
+        edges.push_back({std::min(a, b), std::max(a, b)});
+      }
+    }
+    std::sort(edges.begin(), edges.end());
+    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+    const Scalar diag = compute_bounds(m0.positions).diagonal();
+    for (const Scalar delta : {0.0, 1e-3 * diag}) {
+      const std::vector<Query> queries = candidates(m0.positions, m1.positions, m0.faces, edges, delta, max_queries);
+      Run one, last;
+      for (const int threads : {1, 2}) {
+        last = run(queries, m0.positions, m1.positions, delta, threads);
+        if (threads == 1) one = last;
+        // Oracle sample on the single-thread hits (same set for any thread count).
+        int fp = 0, yes = 0, undecided = 0;
+        if (threads == 1 && oracle_sample > 0 && !one.hits.empty()) {
+          std::vector<std::size_t> hits = one.hits;
+          std::sort(hits.begin(), hits.end());
+          const std::size_t step = std::max<std::size_t>(1, hits.size() / oracle_sample);
+          for (std::size_t k = 0; k < hits.size(); k += step) {
+            const Query& q = queries[hits[k]];
+            const CcdPoints s = {m0.positions[q.v[0]], m0.positions[q.v[1]], m0.positions[q.v[2]], m0.positions[q.v[3]]};
+            const CcdPoints e = {m1.positions[q.v[0]], m1.positions[q.v[1]], m1.positions[q.v[2]], m1.positions[q.v[3]]};
+            const auto d = ccd_oracle::decide(ccd_oracle::make_query(q.pair == CcdPair::kVertexFace, s, e, delta), 300);
+            ccd_oracle::Q crossing;
+            if (d.verdict == ccd_oracle::Verdict::kNo) ++fp;
+            else if (d.verdict == ccd_oracle::Verdict::kYes) ++yes;
+            else if (delta == 0 && ccd_oracle::certified_crossing(
+                                       ccd_oracle::make_points(q.pair == CcdPair::kVertexFace, s, e), crossing)) ++yes;
+            else ++undecided;
+          }
+        }
+        const auto& o = last.outcomes;
+        const long long hits = static_cast<long long>(last.hits.size());
+        const double n = std::max<double>(1, static_cast<double>(queries.size()));
+        const auto pct = [&](CcdOutcome x) { return 100.0 * static_cast<double>(o[static_cast<int>(x)]) / n; };
+        if (json) {
+          std::printf("{\"scene\":\"%s\",\"delta\":%.6g,\"queries\":%zu,\"threads\":%d,\"ns_per_query\":%.1f,"
+                      "\"hull_pct\":%.2f,\"coplanarity_pct\":%.2f,\"direction_pct\":%.2f,\"bisection_no_pct\":%.2f,\"hits\":%lld,"
+                      "\"budget_hits\":%lld,\"boxes_per_query\":%.3f,\"oracle_fp\":%d,\"oracle_yes\":%d,"
+                      "\"oracle_undecided\":%d}\n",
+                      scene.name, delta, queries.size(), threads, last.ns_per_query, pct(CcdOutcome::kSeparatedHull),
+                      pct(CcdOutcome::kSeparatedCoplanarity), pct(CcdOutcome::kSeparatedDirection), pct(CcdOutcome::kSeparatedBisection), hits,
+                      o[static_cast<int>(CcdOutcome::kHitBudget)], static_cast<double>(last.boxes) / n, fp, yes, undecided);
+        } else {
+          std::printf("| %s | %.3g | %zu | %d | %.1f | %.1f%% | %.1f%% | %.1f%% | %.1f%% | %lld | %lld | %.2f | %s |\n", scene.name,
+                      delta, queries.size(), threads, last.ns_per_query, pct(CcdOutcome::kSeparatedHull),
+                      pct(CcdOutcome::kSeparatedCoplanarity), pct(CcdOutcome::kSeparatedDirection),
+                      pct(CcdOutcome::kSeparatedBisection), hits,
+                      o[static_cast<int>(CcdOutcome::kHitBudget)], static_cast<double>(last.boxes) / n,
+                      threads == 1 ? (std::to_string(fp) + " / " + std::to_string(yes) + " / " + std::to_string(undecided)).c_str() : "");
+        }
+        std::fflush(stdout);
+      }
+      if (one.hits.size() != last.hits.size()) {
+        std::fprintf(stderr, "ccd_bench: %s: hit counts differ between 1 and 2 threads\n", scene.name);
+        return 1;
+      }
+    }
+  }
+  return 0;
+}

@@ -1,0 +1,426 @@
+#include <crumple/geometry/ccd.hpp>
+
+#include <crumple/core/error.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <queue>
+#include <vector>
+
+namespace crumple::geometry {
+
+namespace {
+
+/// Unit roundoff of binary64.
+constexpr Scalar kU = 0x1p-53;
+/// Corner-evaluation error factor: the evaluation order below needs 30 u (+ O(u²)); 64 u
+/// leaves a factor of two (docs/ccd.md).
+constexpr Scalar kCornerErrorFactor = 64 * kU;
+/// Absolute term covering underflow: each of the few dozen roundings of a value may err by up
+/// to 2^-1075 beyond the relative model when its result is subnormal.
+constexpr Scalar kUnderflowSlack = 0x1p-1000;
+/// Inputs above this magnitude (or non-finite) get a conservative hit: sums of 6 differences
+/// must not overflow.
+constexpr Scalar kMaxMagnitude = 0x1p1000;
+/// The coplanarity filter multiplies three differences: it runs only below this magnitude.
+constexpr Scalar kMaxSignFilterMagnitude = 0x1p300;
+/// Smallest box width that is split again. Keeps every box bound a dyadic rational with at
+/// most 40 fractional bits, so 1 - t, midpoints and u + v are exact in binary64.
+constexpr Scalar kMinWidth = 0x1p-40;
+
+/// F(t, u, v) = (1 - t) G⁰(u, v) + t G¹(u, v) with G^τ(u, v) = a^τ + u b^τ + v c^τ: for VF the
+/// vertex minus the triangle's point, for EE edge a's point minus edge b's point.
+struct Prepared {
+  std::array<Vec3, 2> a, b, c;
+  Vec3 bound;  // err + δ, rounded up, per axis
+  Vec3 err;
+  Scalar delta = 0;
+  Scalar delta2_up = 0;  // ≥ δ²
+  bool face = false;
+};
+
+/// Rounds a positive sum of a few terms up enough to dominate its exact value.
+Scalar round_up(Scalar x) { return x * (1 + 0x1p-50) + kUnderflowSlack; }
+
+Vec3 max_abs_coordinates(const CcdPoints& start, const CcdPoints& end) {
+  Vec3 m = Vec3::Zero();
+  for (int i = 0; i < 4; ++i) {
+    m = m.cwiseMax(start[i].cwiseAbs()).cwiseMax(end[i].cwiseAbs());
+  }
+  return m;
+}
+
+bool in_range(const CcdPoints& start, const CcdPoints& end) {
+  for (int i = 0; i < 4; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      // !(x <= max) is true for NaN too.
+      if (!(std::abs(start[i][k]) <= kMaxMagnitude) || !(std::abs(end[i][k]) <= kMaxMagnitude)) {
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+Prepared prepare(CcdPair pair, const CcdPoints& start, const CcdPoints& end, Scalar delta) {
+  Prepared p;
+  p.face = pair == CcdPair::kVertexFace;
+  for (int tau = 0; tau < 2; ++tau) {
+    const CcdPoints& x = tau == 0 ? start : end;
+    if (p.face) {
+      p.a[tau] = x[0] - x[1];  // vertex - f0
+      p.b[tau] = x[1] - x[2];  // -(f1 - f0)
+      p.c[tau] = x[1] - x[3];  // -(f2 - f0)
+    } else {
+      p.a[tau] = x[0] - x[2];  // a0 - b0
+      p.b[tau] = x[1] - x[0];  // a1 - a0
+      p.c[tau] = x[2] - x[3];  // -(b1 - b0)
+    }
+  }
+  const Vec3 m = max_abs_coordinates(start, end);
+  for (int k = 0; k < 3; ++k) {
+    p.err[k] = kCornerErrorFactor * m[k] + kUnderflowSlack;
+    p.bound[k] = round_up(p.err[k] + delta);
+  }
+  p.delta = delta;
+  p.delta2_up = round_up(delta * delta);
+  return p;
+}
+
+/// Filter 1: F over the whole domain lies in the convex hull of the difference points at
+/// t = 0 and t = 1 (VF: vertex - triangle corner, 6 points; EE: a_i - b_j, 8 points). Each is one
+/// rounded subtraction, error ≤ 2 u max|coord| ≤ err. Returns false when some axis separates the
+/// hull from [-bound, bound]; `extent` receives the largest |coordinate| of the points.
+struct Hull {
+  std::array<Vec3, 8> points;
+  int count = 0;
+};
+
+bool hull_may_touch(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Vec3& bound,
+                    Scalar& extent, Hull& hull) {
+  Vec3 lo = Vec3::Constant(INFINITY);
+  Vec3 hi = Vec3::Constant(-INFINITY);
+  const auto add = [&](const Vec3& d) {
+    lo = lo.cwiseMin(d);
+    hi = hi.cwiseMax(d);
+    hull.points[hull.count++] = d;
+  };
+  for (const CcdPoints* x : {&start, &end}) {
+    const CcdPoints& q = *x;
+    if (pair == CcdPair::kVertexFace) {
+      add(q[0] - q[1]);
+      add(q[0] - q[2]);
+      add(q[0] - q[3]);
+    } else {
+      add(q[0] - q[2]);
+      add(q[0] - q[3]);
+      add(q[1] - q[2]);
+      add(q[1] - q[3]);
+    }
+  }
+  extent = std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff());
+  for (int k = 0; k < 3; ++k) {
+    if (lo[k] > bound[k] || hi[k] < -bound[k]) return false;
+  }
+  return true;
+}
+
+/// Filter 3: a separating direction. For any vector n, F·n over the domain lies in the hull of
+/// the difference points' projections. The computed projection of a point errs from the exact
+/// one by at most Σ|n_k| err_k (the point's own rounding) + γ_3 Σ|d_k n_k| (the dot product);
+/// all projections beyond δ‖n‖ plus that, on one side, prove ‖F‖ > δ everywhere.
+bool separated_along(const Vec3& n, const Hull& hull, const Vec3& err, Scalar delta) {
+  const Scalar nn = n.x() * n.x() + n.y() * n.y() + n.z() * n.z();
+  if (!(nn > 0) || !std::isfinite(nn)) return false;
+  Scalar lo = INFINITY, hi = -INFINITY, mag = 0;
+  for (int i = 0; i < hull.count; ++i) {
+    const Vec3& d = hull.points[i];
+    const Scalar x = d.x() * n.x(), y = d.y() * n.y(), z = d.z() * n.z();
+    const Scalar s = (x + y) + z;
+    lo = std::min(lo, s);
+    hi = std::max(hi, s);
+    mag = std::max(mag, std::abs(x) + std::abs(y) + std::abs(z));
+  }
+  const Scalar slack = std::abs(n.x()) * err.x() + std::abs(n.y()) * err.y() + std::abs(n.z()) * err.z();
+  const Scalar bound = (delta * std::sqrt(nn) + slack + 4 * kU * mag) * (1 + 16 * kU) + kUnderflowSlack;
+  return lo > bound || hi < -bound;
+}
+
+/// Directions worth trying: the triangle's normals (VF), the edges' common normals and the
+/// perpendicular from edge a's line to b0 (EE, for near-parallel edges), at t = 0 and t = 1.
+bool separated_by_a_direction(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Hull& hull,
+                              const Vec3& err, Scalar delta) {
+  for (const CcdPoints* x : {&start, &end}) {
+    const CcdPoints& q = *x;
+    if (pair == CcdPair::kVertexFace) {
+      if (separated_along((q[2] - q[1]).cross(q[3] - q[1]), hull, err, delta)) return true;
+    } else {
+      const Vec3 da = q[1] - q[0], db = q[3] - q[2];
+      if (separated_along(da.cross(db), hull, err, delta)) return true;
+      const Scalar aa = da.squaredNorm();
+      if (aa > 0) {
+        const Vec3 w = q[2] - q[0];
+        if (separated_along(w - (w.dot(da) / aa) * da, hull, err, delta)) return true;
+      }
+    }
+  }
+  return false;
+}
+
+/// det[a; b; c] of three vectors whose entries are each one rounded difference of inputs,
+/// evaluated in the order of Shewchuk's orient3d, with his a-priori bound
+/// |fl(det) - det| ≤ (7 u + 56 u²) · permanent; we use 8 u · permanent.
+struct Det {
+  Scalar value;
+  Scalar error;
+};
+
+Det det3(const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Scalar bxcy = b.x() * c.y(), cxby = c.x() * b.y();
+  const Scalar cxay = c.x() * a.y(), axcy = a.x() * c.y();
+  const Scalar axby = a.x() * b.y(), bxay = b.x() * a.y();
+  const Scalar value = a.z() * (bxcy - cxby) + b.z() * (cxay - axcy) + c.z() * (axby - bxay);
+  const Scalar permanent = (std::abs(bxcy) + std::abs(cxby)) * std::abs(a.z()) +
+                           (std::abs(cxay) + std::abs(axcy)) * std::abs(b.z()) +
+                           (std::abs(axby) + std::abs(bxay)) * std::abs(c.z());
+  return {value, 8 * kU * permanent};
+}
+
+/// Certified sign (+1, -1, or 0 for "unknown") of a sum of determinants: the sum's rounding
+/// adds at most γ_2 Σ|d_i| ≤ 3 u Σ|d_i| to the determinants' own bounds.
+int certified_sign(const Det* d, int n) {
+  Scalar sum = 0, abs_sum = 0, error = 0;
+  for (int i = 0; i < n; ++i) {
+    sum += d[i].value;
+    abs_sum += std::abs(d[i].value);
+    error += d[i].error;
+  }
+  const Scalar bound = (error + 3 * kU * abs_sum) * (1 + 8 * kU) + kUnderflowSlack;
+  if (sum > bound) return 1;
+  if (sum < -bound) return -1;
+  return 0;
+}
+
+/// Filter 2 (δ = 0 only): contact needs the 4 points coplanar at some t. The coplanarity
+/// function det[x1 - x0, x2 - x0, x3 - x0](t) is a cubic whose Bernstein coefficients on [0, 1]
+/// are, up to positive factors, the sums of the mixed determinants taking j columns at t = 1
+/// (j = 0..3). Same certified strict sign for all four: never coplanar.
+bool never_coplanar(const CcdPoints& start, const CcdPoints& end) {
+  std::array<std::array<Vec3, 3>, 2> col;
+  for (int i = 0; i < 3; ++i) {
+    col[0][i] = start[i + 1] - start[0];
+    col[1][i] = end[i + 1] - end[0];
+  }
+  const auto mixed = [&](int t0, int t1, int t2) { return det3(col[t0][0], col[t1][1], col[t2][2]); };
+  const Det b0[1] = {mixed(0, 0, 0)};
+  const Det b1[3] = {mixed(1, 0, 0), mixed(0, 1, 0), mixed(0, 0, 1)};
+  const Det b2[3] = {mixed(0, 1, 1), mixed(1, 0, 1), mixed(1, 1, 0)};
+  const Det b3[1] = {mixed(1, 1, 1)};
+  const int s = certified_sign(b0, 1);
+  if (s == 0) return false;
+  return certified_sign(b1, 3) == s && certified_sign(b2, 3) == s && certified_sign(b3, 1) == s;
+}
+
+struct Box {
+  Scalar t0, t1, u0, u1, v0, v1;
+  int depth;
+};
+
+/// Earliest t first; among equal t, the deeper box first (depth-first towards a hit).
+struct LaterFirst {
+  bool operator()(const Box& x, const Box& y) const {
+    return x.t0 > y.t0 || (x.t0 == y.t0 && x.depth < y.depth);
+  }
+};
+
+CcdResult bisect(const Prepared& p, Scalar eps, Scalar sigma, Scalar tol_t, std::int64_t max_boxes) {
+  const Scalar reach = p.delta * (1 + sigma) + eps + p.err.norm();
+  const Scalar reach2 = reach * reach;
+  std::vector<Box> storage;
+  storage.reserve(64);
+  std::priority_queue<Box, std::vector<Box>, LaterFirst> queue(LaterFirst{}, std::move(storage));
+  queue.push({0, 1, 0, 1, 0, 1, 0});
+  CcdResult result;
+  while (!queue.empty()) {
+    const Box box = queue.top();
+    queue.pop();
+    if (result.boxes >= max_boxes) {
+      // The popped box has the smallest t0 of every box not yet ruled out.
+      result.hit = true;
+      result.toi = box.t0;
+      result.outcome = CcdOutcome::kHitBudget;
+      return result;
+    }
+    ++result.boxes;
+    // Corner values: index bit 2 = t, bit 1 = u, bit 0 = v.
+    std::array<Vec3, 8> f;
+    const Scalar us[2] = {box.u0, box.u1};
+    const Scalar vs[2] = {box.v0, box.v1};
+    const Scalar ts[2] = {box.t0, box.t1};
+    for (int iu = 0; iu < 2; ++iu) {
+      for (int iv = 0; iv < 2; ++iv) {
+        Vec3 g[2];
+        for (int tau = 0; tau < 2; ++tau) {
+          for (int k = 0; k < 3; ++k) {
+            g[tau][k] = (p.a[tau][k] + us[iu] * p.b[tau][k]) + vs[iv] * p.c[tau][k];
+          }
+        }
+        for (int it = 0; it < 2; ++it) {
+          const Scalar w1 = ts[it];
+          const Scalar w0 = 1 - w1;  // exact: t has at most 40 fractional bits
+          for (int k = 0; k < 3; ++k) f[it * 4 + iu * 2 + iv][k] = w0 * g[0][k] + w1 * g[1][k];
+        }
+      }
+    }
+    Vec3 lo = f[0], hi = f[0];
+    for (int i = 1; i < 8; ++i) {
+      lo = lo.cwiseMin(f[i]);
+      hi = hi.cwiseMax(f[i]);
+    }
+    bool rejected = false;
+    for (int k = 0; k < 3; ++k) {
+      if (lo[k] > p.bound[k] || hi[k] < -p.bound[k]) rejected = true;
+    }
+    if (!rejected && p.delta > 0) {
+      // Euclidean distance from 0 to the box [lo - err, hi + err] (each gap rounded at most
+      // 2 u high, the sum of squares 8 u) above δ: no point of the box within δ.
+      Scalar sum = 0;
+      for (int k = 0; k < 3; ++k) {
+        const Scalar gap = std::max({lo[k] - p.err[k], -hi[k] - p.err[k], Scalar(0)});
+        sum += gap * gap;
+      }
+      rejected = sum * (1 - 16 * kU) > p.delta2_up;
+    }
+    if (rejected) continue;
+    // Witness corners: inside the domain and at computed Euclidean distance ≤ reach =
+    // δ (1 + σ) + ε + ‖err‖, i.e. a point of the box truly within δ (1 + σ) + ε + 2‖err‖. Earliest witness
+    // time: 0 (t0), 1 (t1), 2 (none).
+    int witness = 2;
+    for (int i = 0; i < 8 && witness > 0; ++i) {
+      if (p.face && us[(i >> 1) & 1] + vs[i & 1] > 1) continue;  // exact sum
+      if (f[i].squaredNorm() <= reach2) witness = std::min(witness, i >> 2);
+    }
+    const bool t_small = box.t1 - box.t0 <= tol_t;
+    if (witness == 0 || (witness == 1 && t_small)) {
+      result.hit = true;
+      result.toi = box.t0;
+      result.outcome = CcdOutcome::kHitTolerance;
+      return result;
+    }
+    int axis = -1;
+    if (witness == 1) {
+      axis = 0;  // a near-contact by t1: only the time tolerance is missing (tol_t ≥ kMinWidth)
+    } else {
+      // Width of the corner values along each parameter; split the widest splittable one.
+      Scalar w[3] = {0, 0, 0};  // t, u, v
+      for (int i = 0; i < 8; ++i) {
+        for (int bit = 0; bit < 3; ++bit) {
+          const int mask = 4 >> bit;
+          if (i & mask) continue;
+          w[bit] = std::max(w[bit], (f[i | mask] - f[i]).cwiseAbs().maxCoeff());
+        }
+      }
+      const Scalar widths[3] = {box.t1 - box.t0, box.u1 - box.u0, box.v1 - box.v0};
+      Scalar best = -1;
+      for (int d = 0; d < 3; ++d) {
+        if (widths[d] > kMinWidth && w[d] > best) {
+          best = w[d];
+          axis = d;
+        }
+      }
+    }
+    if (axis < 0) {
+      result.hit = true;
+      result.toi = box.t0;
+      result.outcome = CcdOutcome::kHitPrecision;
+      return result;
+    }
+    Box lo_half = box, hi_half = box;
+    lo_half.depth = hi_half.depth = box.depth + 1;
+    if (axis == 0) {
+      const Scalar mid = (box.t0 + box.t1) / 2;
+      lo_half.t1 = hi_half.t0 = mid;
+    } else if (axis == 1) {
+      const Scalar mid = (box.u0 + box.u1) / 2;
+      lo_half.u1 = hi_half.u0 = mid;
+    } else {
+      const Scalar mid = (box.v0 + box.v1) / 2;
+      lo_half.v1 = hi_half.v0 = mid;
+    }
+    for (const Box& child : {lo_half, hi_half}) {
+      // VF: (u, v) must meet the triangle u, v ≥ 0, u + v ≤ 1 (the sum is exact).
+      if (p.face && child.u0 + child.v0 > 1) continue;
+      queue.push(child);
+    }
+  }
+  result.hit = false;
+  result.outcome = CcdOutcome::kSeparatedBisection;
+  return result;
+}
+
+}  // namespace
+
+std::string_view to_string(CcdOutcome outcome) {
+  switch (outcome) {
+    case CcdOutcome::kSeparatedHull: return "separated-hull";
+    case CcdOutcome::kSeparatedCoplanarity: return "separated-coplanarity";
+    case CcdOutcome::kSeparatedDirection: return "separated-direction";
+    case CcdOutcome::kSeparatedBisection: return "separated-bisection";
+    case CcdOutcome::kHitTolerance: return "hit-tolerance";
+    case CcdOutcome::kHitPrecision: return "hit-precision";
+    case CcdOutcome::kHitBudget: return "hit-budget";
+    case CcdOutcome::kHitOutOfRange: return "hit-out-of-range";
+  }
+  return "unknown";
+}
+
+Vec3 ccd_rounding_bound(const CcdPoints& start, const CcdPoints& end) {
+  const Vec3 m = max_abs_coordinates(start, end);
+  Vec3 err;
+  for (int k = 0; k < 3; ++k) err[k] = kCornerErrorFactor * m[k] + kUnderflowSlack;
+  return err;
+}
+
+CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {
+  const Scalar delta = options.min_separation;
+  CRUMPLE_CHECK(delta >= 0 && delta <= kMaxMagnitude, "ccd: min_separation must be finite and >= 0");
+  CRUMPLE_CHECK(options.max_boxes >= 1, "ccd: max_boxes must be >= 1");
+  CRUMPLE_CHECK(options.distance_tolerance >= 0 && options.time_tolerance >= 0 && options.separation_tolerance >= 0,
+                "ccd: tolerances must be >= 0");
+  CcdResult result;
+  if (!in_range(start, end)) {
+    result.hit = true;
+    result.toi = 0;
+    result.outcome = CcdOutcome::kHitOutOfRange;
+    return result;
+  }
+  const Prepared p = prepare(pair, start, end, delta);
+  Scalar extent = 0;
+  Hull hull;
+  if (!hull_may_touch(pair, start, end, p.bound, extent, hull)) {
+    result.outcome = CcdOutcome::kSeparatedHull;
+    return result;
+  }
+  if (delta == 0 && max_abs_coordinates(start, end).maxCoeff() <= kMaxSignFilterMagnitude &&
+      never_coplanar(start, end)) {
+    result.outcome = CcdOutcome::kSeparatedCoplanarity;
+    return result;
+  }
+  if (separated_by_a_direction(pair, start, end, hull, p.err, delta)) {
+    result.outcome = CcdOutcome::kSeparatedDirection;
+    return result;
+  }
+  const Scalar eps = std::max(options.distance_tolerance * extent, 4 * p.err.maxCoeff());
+  const Scalar tol_t = std::clamp(options.time_tolerance, kMinWidth, Scalar(1));
+  return bisect(p, eps, options.separation_tolerance, tol_t, options.max_boxes);
+}
+
+CcdResult vertex_face_ccd(const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {
+  return ccd(CcdPair::kVertexFace, start, end, options);
+}
+
+CcdResult edge_edge_ccd(const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {
+  return ccd(CcdPair::kEdgeEdge, start, end, options);
+}
+
+}  // namespace crumple::geometry
