@@ -11,7 +11,6 @@
 
 #include <crumple/core/error.hpp>
 #include <crumple/detect/compare.hpp>
-#include <crumple/detect/kdop_tree.hpp>
 #include <crumple/detect/stochastic.hpp>
 #include <crumple/io/frames.hpp>
 #include <crumple/io/mesh_io.hpp>
@@ -302,7 +301,7 @@ class App {
   /// refitted by its last update.
   void kdop_boxes(Batch& batch) {
     const Detector* d = sim_ ? &sim_->detector() : playback_detector_.get();
-    const auto* kdop = dynamic_cast<const KdopDetector*>(d);
+    const BoundingHierarchy* kdop = d != nullptr ? d->hierarchy() : nullptr;
     if (kdop == nullptr) return;
     const render::Rgb colour{60, 170, 90};
     for (const Bounds& b : kdop->node_boxes(kdop_level)) {
@@ -403,7 +402,8 @@ class App {
       } else {
         ImGui::TextDisabled("active pairs: stochastic detector only");
       }
-      if (const auto* kdop = dynamic_cast<const KdopDetector*>(sim_ ? &sim_->detector() : playback_detector_.get())) {
+      const Detector* shown = sim_ ? &sim_->detector() : playback_detector_.get();
+      if (const BoundingHierarchy* kdop = shown != nullptr ? shown->hierarchy() : nullptr) {
         bool on = kdop_level >= 0;
         if (ImGui::Checkbox("k-DOP boxes", &on)) kdop_level = on ? 0 : -1;
         if (on && kdop->levels() > 0) {

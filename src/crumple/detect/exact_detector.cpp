@@ -1,5 +1,6 @@
 #include <crumple/core/parallel.hpp>
-#include <crumple/detect/broad_phase.hpp>
+#include <crumple/core/timing.hpp>
+#include <crumple/detect/exact_detector.hpp>
 #include <crumple/detect/gather.hpp>
 #include <crumple/detect/narrow_phase.hpp>
 #include <crumple/geometry/separation.hpp>
@@ -23,17 +24,6 @@
 namespace crumple {
 
 namespace {
-
-double ms_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-}
-
-void inflate(Box& b, Scalar r) {
-  for (int i = 0; i < 3; ++i) {
-    b.lo[i] -= r;
-    b.hi[i] += r;
-  }
-}
 
 /// The vertex-face sub-pairs of a candidate face pair, indexed by `mask_a | mask_b << 3` (bit k
 /// of each: the face owns corner k, and it lies in the other face's box): codes `side << 2 | k`
@@ -242,8 +232,12 @@ ExactParams ExactParams::from_spec(const MethodSpec& spec) {
   return p;
 }
 
-ExactDetector::ExactDetector(DetectorOptions options, ExactParams params)
-    : Detector(options), params_(params) {}
+ExactDetector::ExactDetector(DetectorOptions options, ExactParams params, std::unique_ptr<BroadPhase> broad_phase)
+    : Detector(options), params_(params), broad_phase_(std::move(broad_phase)) {
+  CRUMPLE_CHECK(broad_phase_ != nullptr, "ExactDetector: null broad phase");
+}
+
+ExactDetector::~ExactDetector() = default;
 
 void ExactDetector::on_topology() {
   const Topology& topo = topology();
@@ -418,29 +412,7 @@ void ExactDetector::on_topology() {
     pf.vertex_mask = vertex_mask[static_cast<std::size_t>(f)];
     pf.edge_mask = edge_mask[static_cast<std::size_t>(f)];
   }
-  on_exact_topology();
-}
-
-void ExactDetector::face_boxes(const FrameInput& in, bool sweep, std::vector<Box>& out) const {
-  const Topology& topo = topology();
-  const std::size_t nf = static_cast<std::size_t>(topo.num_faces());
-  out.resize(nf);
-  const bool swept = sweep && !in.previous.empty();
-  parallel_for_chunks(nf, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t f = begin; f < end; ++f) {
-      const Face& t = topo.face(static_cast<Index>(f));
-      // From the empty box, so that a NaN corner is skipped (`grow`'s minimum and maximum keep
-      // the box's side), as the k-DOPs skip it: a box started at a NaN first corner stayed NaN
-      // and met nothing, losing the contacts of the face's finite side. All corners NaN: empty.
-      Box b = Box::empty();
-      for (Index v : t) b.grow(narrow::at(in.positions, v));
-      if (swept) {
-        for (Index v : t) b.grow(narrow::at(in.previous, v));
-      }
-      inflate(b, in.radius);
-      out[f] = b;
-    }
-  });
+  broad_phase_->build(topo);
 }
 
 void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& out) {
@@ -478,7 +450,8 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
 
   FrameInput in{previous, x, pad / 2, threads, !proximity, {}};
   if (!options().kinds.tt) in.owns = face_owns_;
-  broad_phase(in, candidates_);
+  broad_phase_->update(in, stats_);
+  broad_phase_->self_pairs(candidates_, stats_);
   stats_.set("candidates", static_cast<double>(candidates_.total()));
   stats_.set("broad_ms", ms_since(t0));
 

@@ -29,6 +29,7 @@
 /// thickness plays no part and the pad is the rounding margin alone.
 
 #include <crumple/core/error.hpp>
+#include <crumple/detect/broad_phase/broad_phase.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/detect/gather.hpp>
 
@@ -36,15 +37,13 @@
 #include <array>
 #include <cstddef>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <span>
 #include <utility>
 #include <vector>
 
 namespace crumple {
-
-/// A broad-phase candidate: two faces sharing no vertex, `[0] < [1]`.
-using FacePair = std::array<Index, 2>;
 
 /// Thrown by an exact detector when the contacts of a frame exceed `max_contacts` and
 /// `overflow=error` (the default).
@@ -61,26 +60,6 @@ struct ExactParams {
   bool operator==(const ExactParams&) const = default;
 };
 
-/// Per-frame input of a broad phase.
-struct FrameInput {
-  PositionsView previous;  ///< empty when no motion is given
-  PositionsView positions;
-  Scalar radius = 0;  ///< inflate every face box by this on each side (pad / 2)
-  int threads = 0;
-  /// Only intersections (TT) are asked: no proximity, so a patch that provably cannot
-  /// intersect itself may be skipped (normal-cone culling, kdop_tree.hpp).
-  bool intersection_only = false;
-  /// Per face, what it owns (step 3 above): bit 0 a vertex, bit 1 an edge. Given when only
-  /// proximity (VF, EE) is asked, empty otherwise: then a pair of faces of which neither owns
-  /// a vertex and not both own an edge holds no sub-pair, and a broad phase may leave it out.
-  std::span<const std::uint8_t> owns;
-};
-
-/// Bytes of storage a container holds (what `Spares` hands out first).
-template <class U>
-std::size_t storage_bytes(const std::vector<U>& v) {
-  return v.capacity() * sizeof(U);
-}
 inline std::size_t storage_bytes(const ContactSet& s) {
   return storage_bytes(s.vf) + storage_bytes(s.ee) + storage_bytes(s.tt);
 }
@@ -101,130 +80,22 @@ inline std::size_t storage_bytes(const KeyedContacts& c) {
   return storage_bytes(c.set) + storage_bytes(c.vf_keys) + storage_bytes(c.ee_keys) + storage_bytes(c.tt_keys);
 }
 
-/// Cleared containers (anything with `clear()` and `storage_bytes`) kept for reuse, thread-safe:
-/// a frame fills millions of candidates and tens of MB of contacts, and fresh allocations of
-/// that size cost page faults.
-template <class T>
-class Spares {
+/// The exact detector: the pipeline above over the candidates of a broad phase it owns
+/// (`kdop`, `hash` or `sap`, whichever is given; make_detector.cpp picks it from the spec).
+class ExactDetector final : public Detector {
  public:
-  /// An empty container, with the largest storage given back earlier when there is one: a
-  /// frame's first takers are the candidate loop's chunks, which hold most of its contacts (a
-  /// small container handed to one grows into fresh pages; measured: 790 fewer page faults a
-  /// cloth-ball frame on one thread than taking the last one given back).
-  T take() {
-    const std::lock_guard lock(mutex_);
-    if (spare_.empty()) return {};
-    const auto largest = std::max_element(spare_.begin(), spare_.end(), [](const T& a, const T& b) {
-      return storage_bytes(a) < storage_bytes(b);
-    });
-    T x = std::move(*largest);
-    *largest = std::move(spare_.back());
-    spare_.pop_back();
-    return x;
-  }
-  /// Keeps x's storage for `take` (x is cleared).
-  void give(T&& x) {
-    x.clear();
-    const std::lock_guard lock(mutex_);
-    spare_.push_back(std::move(x));
-  }
-
- private:
-  std::mutex mutex_;
-  std::vector<T> spare_;
-};
-
-/// Thread-safe sink of candidate chunks (each task appends its own vector once).
-class CandidateBuffer {
- public:
-  /// An empty chunk to fill, reusing the storage of a cleared one when there is some.
-  std::vector<FacePair> take() { return spares_.take(); }
-  void add(std::vector<FacePair>&& chunk) {
-    if (chunk.empty()) {
-      if (chunk.capacity() > 0) spares_.give(std::move(chunk));
-      return;
-    }
-    const std::lock_guard lock(mutex_);
-    total_ += chunk.size();
-    chunks_.push_back(std::move(chunk));
-  }
-  std::size_t total() const { return total_; }
-  const std::vector<std::vector<FacePair>>& chunks() const { return chunks_; }
-  /// Forgets the candidates, keeping the chunks' storage for `take`.
-  void clear() {
-    for (auto& chunk : chunks_) spares_.give(std::move(chunk));
-    chunks_.clear();
-    total_ = 0;
-  }
-
- private:
-  std::mutex mutex_;
-  std::vector<std::vector<FacePair>> chunks_;
-  Spares<std::vector<FacePair>> spares_;
-  std::size_t total_ = 0;
-};
-
-/// Axis-aligned box as two corners (plain arrays: the hot loops compare them directly).
-struct Box {
-  std::array<Scalar, 3> lo;
-  std::array<Scalar, 3> hi;
-  bool overlaps(const Box& o) const {
-    return (lo[0] <= o.hi[0]) & (o.lo[0] <= hi[0]) & (lo[1] <= o.hi[1]) & (o.lo[1] <= hi[1]) &
-           (lo[2] <= o.hi[2]) & (o.lo[2] <= hi[2]);
-  }
-  bool contains(const Vec3& p) const {
-    return (lo[0] <= p.x()) & (p.x() <= hi[0]) & (lo[1] <= p.y()) & (p.y() <= hi[1]) &
-           (lo[2] <= p.z()) & (p.z() <= hi[2]);
-  }
-  /// The empty box (lo = +inf, hi = -inf): `grow` and `merge` start from it, and keep a side as
-  /// it is for a NaN coordinate.
-  static Box empty() {
-    constexpr Scalar inf = std::numeric_limits<Scalar>::infinity();
-    return {{inf, inf, inf}, {-inf, -inf, -inf}};
-  }
-  void grow(const Vec3& p) {
-    for (int i = 0; i < 3; ++i) {
-      const auto k = static_cast<std::size_t>(i);
-      lo[k] = std::min(lo[k], p[i]);
-      hi[k] = std::max(hi[k], p[i]);
-    }
-  }
-  void merge(const Box& o) {
-    for (std::size_t k = 0; k < 3; ++k) {
-      lo[k] = std::min(lo[k], o.lo[k]);
-      hi[k] = std::max(hi[k], o.hi[k]);
-    }
-  }
-};
-
-/// True when the faces share a vertex (9 comparisons).
-inline bool faces_share_vertex(const Face& a, const Face& b) {
-  bool s = false;
-  for (Index v : a) s |= (v == b[0]) | (v == b[1]) | (v == b[2]);
-  return s;
-}
-
-/// Base of the exact detectors: owns the shared pipeline; subclasses supply the broad phase.
-class ExactDetector : public Detector {
- public:
+  ExactDetector(DetectorOptions options, ExactParams params, std::unique_ptr<BroadPhase> broad_phase);
+  ~ExactDetector() override;
+  Method method() const override { return broad_phase_->method(); }
+  const BroadPhase& broad_phase() const { return *broad_phase_; }
+  const BoundingHierarchy* hierarchy() const override { return broad_phase_->hierarchy(); }
   /// True when the last frame had more contacts than `max_contacts` (also in stats:
   /// `overflow` = 1, `contacts_dropped`).
   bool overflowed() const { return overflowed_; }
 
  protected:
-  ExactDetector(DetectorOptions options, ExactParams params);
-
   /// The contacts are gathered in canonical order (`detail::gather_sorted`).
   bool sorted_output() const override { return true; }
-  /// Per-topology set-up of the broad phase (positions not known yet).
-  virtual void on_exact_topology() {}
-  /// Adds every candidate (see the file comment) to `out`, each unordered pair once. Sets its
-  /// own timing stats (`refit_ms`, `traversal_ms`).
-  virtual void broad_phase(const FrameInput& in, CandidateBuffer& out) = 0;
-
-  /// Face boxes (current positions, and previous ones when `sweep` and given), inflated by
-  /// `in.radius`; computed in parallel.
-  void face_boxes(const FrameInput& in, bool sweep, std::vector<Box>& out) const;
 
  private:
   void on_topology() final;
@@ -237,6 +108,7 @@ class ExactDetector : public Detector {
   bool wake_orphan_blocks(PositionsView x, Scalar pad, int threads);
 
   ExactParams params_;
+  std::unique_ptr<BroadPhase> broad_phase_;
   bool overflowed_ = false;
   CandidateBuffer candidates_;
   /// (vertex, face) sub-pairs of adjacent faces, by face (then vertex): a run of one face's
