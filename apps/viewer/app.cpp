@@ -4,7 +4,6 @@
 
 #include <crumple/core/error.hpp>
 #include <crumple/detect/compare.hpp>
-#include <crumple/detect/kdop_tree.hpp>
 #include <crumple/detect/stochastic.hpp>
 #include <crumple/io/x3d.hpp>
 
@@ -123,7 +122,7 @@ void App::draw(GlDraw& gl, int width, int height) {
 }
 
 void App::kdop_boxes(Batch& batch) const {
-  const auto* kdop = dynamic_cast<const KdopDetector*>(detector());
+  const BoundingHierarchy* kdop = detector() != nullptr ? detector()->hierarchy() : nullptr;
   if (kdop == nullptr) return;
   const render::Rgb colour{60, 170, 90};
   for (const Bounds& b : kdop->node_boxes(kdop_level)) {

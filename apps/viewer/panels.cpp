@@ -1,7 +1,6 @@
 #include "panels.hpp"
 
 #include <crumple/core/error.hpp>
-#include <crumple/detect/kdop_tree.hpp>
 
 #include <imgui.h>
 
@@ -125,7 +124,7 @@ void Panels::drawing_panel(App& app) {
   } else {
     ImGui::TextDisabled("active pairs: stochastic detector only");
   }
-  if (const auto* kdop = dynamic_cast<const KdopDetector*>(app.detector())) {
+  if (const BoundingHierarchy* kdop = app.detector() != nullptr ? app.detector()->hierarchy() : nullptr) {
     bool on = app.kdop_level >= 0;
     if (ImGui::Checkbox("k-DOP boxes", &on)) app.kdop_level = on ? 0 : -1;
     if (on && kdop->levels() > 0) {

@@ -3,12 +3,14 @@
 # includes a crumple header that was not installed. Variable: PREFIX (an install prefix).
 get_filename_component(PREFIX "${PREFIX}" ABSOLUTE)
 file(GLOB_RECURSE _installed RELATIVE "${PREFIX}" "${PREFIX}/*.hpp")
-foreach(_internal detect/gather.hpp detect/stochastic_engine.hpp detect/narrow_phase.hpp io/io_detail.hpp)
+foreach(_internal detect/gather.hpp detect/stochastic_engine.hpp detect/narrow_phase.hpp
+                  detect/exact/narrow_frame.hpp io/io_detail.hpp)
   if(_installed MATCHES "crumple/${_internal}")
     message(FATAL_ERROR "internal header crumple/${_internal} was installed")
   endif()
 endforeach()
-foreach(_public detect/detector.hpp mesh/mesh.hpp io/mesh_io.hpp render/colouring.hpp sim/scene.hpp)
+foreach(_public detect/detector.hpp detect/exact_detector.hpp detect/broad_phase/broad_phase.hpp
+                mesh/mesh.hpp io/mesh_io.hpp render/colouring.hpp sim/scene.hpp)
   if(NOT _installed MATCHES "crumple/${_public}")
     message(FATAL_ERROR "public header crumple/${_public} was not installed")
   endif()

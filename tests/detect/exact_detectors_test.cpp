@@ -5,9 +5,9 @@
 // (against tests/data/reference/real_meshes.txt; regenerate with bench/exact_bench, see its
 // header). Metamorphic: the result does not depend on k, arity, leaf size, hash cell or table
 // size, sweep axis or thread count.
-#include <crumple/detect/broad_phase.hpp>
+#include <crumple/detect/exact_detector.hpp>
 #include <crumple/detect/detector.hpp>
-#include <crumple/detect/kdop_tree.hpp>
+#include <crumple/detect/broad_phase/kdop_tree.hpp>
 #include <crumple/io/mesh_io.hpp>
 #include <support/meshes.hpp>
 
@@ -799,7 +799,7 @@ TEST(ExactDetectors, KdopParamsOutOfRangeAreRejected) {
   const auto make_with = [](auto set) {
     KdopParams p;
     set(p);
-    return KdopDetector({.thickness = 0.1}, p);
+    return KdopTree(p);
   };
   EXPECT_NO_THROW(make_with([](KdopParams& p) { p.leaf = 64; }));
   EXPECT_THROW(make_with([](KdopParams& p) { p.leaf = 65; }), InputError);

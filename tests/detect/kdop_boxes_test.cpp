@@ -1,12 +1,13 @@
 // The kdop detector's node boxes (what the viewer draws for a level of the hierarchy) and leaves.
-#include <crumple/detect/broad_phase.hpp>
-#include <crumple/detect/kdop_tree.hpp>
+#include <crumple/detect/broad_phase/kdop_tree.hpp>
+#include <crumple/detect/exact_detector.hpp>
 #include <crumple/io/mesh_io.hpp>
 #include <crumple/mesh/shapes.hpp>
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <memory>
 #include <cmath>
 #include <cstring>
 #include <numeric>
@@ -17,6 +18,14 @@
 
 namespace crumple {
 namespace {
+
+/// The exact detector over a k-DOP tree (what `make_detector` builds for `kdop`).
+ExactDetector kdop_detector(DetectorOptions options, const KdopParams& params) {
+  return ExactDetector(options, params.exact, std::make_unique<KdopTree>(params));
+}
+
+/// Its hierarchy, as the viewer sees it.
+const BoundingHierarchy& tree(const Detector& d) { return *d.hierarchy(); }
 
 bool inside(const Vec3& p, const Bounds& b) {
   return (p.array() >= b.min.array()).all() && (p.array() <= b.max.array()).all();
@@ -41,8 +50,8 @@ std::size_t pieces(const Topology& topo, const std::vector<Index>& faces) {
 }
 
 /// The leaves partition the faces into connected patches of 1..leaf faces.
-void expect_patch_leaves(const KdopDetector& d, const Topology& topo, int leaf) {
-  const std::vector<std::vector<Index>> leaves = d.leaf_faces();
+void expect_patch_leaves(const Detector& d, const Topology& topo, int leaf) {
+  const std::vector<std::vector<Index>> leaves = tree(d).leaf_faces();
   ASSERT_FALSE(leaves.empty());
   std::vector<int> seen(static_cast<std::size_t>(topo.num_faces()), 0);
   std::size_t broken = 0;
@@ -78,7 +87,7 @@ TEST(KdopBoxes, LeavesAreConnectedPatches) {
         params.arity = arity;
         params.leaf = leaf;
         params.rebuild = 1;
-        KdopDetector d({.thickness = 1e-3}, params);
+        ExactDetector d = kdop_detector({.thickness = 1e-3}, params);
         d.set_topology(mesh.topology_ptr());
         ContactSet out;
         d.update(mesh.positions(), out);
@@ -86,7 +95,7 @@ TEST(KdopBoxes, LeavesAreConnectedPatches) {
         if (name == "armadillo") {
           // The rebuild keeps the patches grown at the first build: the same leaves.
           const auto sorted_leaves = [&d] {
-            std::vector<std::vector<Index>> leaves = d.leaf_faces();
+            std::vector<std::vector<Index>> leaves = tree(d).leaf_faces();
             for (std::vector<Index>& faces : leaves) std::sort(faces.begin(), faces.end());
             std::sort(leaves.begin(), leaves.end());
             return leaves;
@@ -104,14 +113,14 @@ TEST(KdopBoxes, LeavesAreConnectedPatches) {
 
 TEST(KdopBoxes, LevelsCoverTheMeshAndNest) {
   const TriMesh mesh = shapes::lattice(12, 12, 1, 1);
-  KdopDetector d({.thickness = 0.01}, KdopParams{});
-  EXPECT_EQ(d.levels(), 0);
-  EXPECT_TRUE(d.node_boxes(0).empty()) << "no tree before the first update";
+  ExactDetector d = kdop_detector({.thickness = 0.01}, KdopParams{});
+  EXPECT_EQ(tree(d).levels(), 0);
+  EXPECT_TRUE(tree(d).node_boxes(0).empty()) << "no tree before the first update";
   d.set_topology(mesh.topology_ptr());
   ContactSet out;
   d.update(mesh.positions(), out);
-  ASSERT_GE(d.levels(), 3);  // 288 faces, arity 4, leaves of one patch of at most 48 faces
-  const std::vector<Bounds> root = d.node_boxes(0);
+  ASSERT_GE(tree(d).levels(), 3);  // 288 faces, arity 4, leaves of one patch of at most 48 faces
+  const std::vector<Bounds> root = tree(d).node_boxes(0);
   ASSERT_EQ(root.size(), 1u);
   for (const Vec3& p : mesh.positions()) EXPECT_TRUE(inside(p, root[0]));
   // Inflated by half the thickness (at least): the root is larger than the mesh's bounds.
@@ -119,23 +128,23 @@ TEST(KdopBoxes, LevelsCoverTheMeshAndNest) {
   EXPECT_LT(root[0].min.x(), tight.min.x());
   EXPECT_GT(root[0].max.z(), tight.max.z());
   // (A depth holds the children of the one above; leaves of one patch end at several depths.)
-  for (int depth = 1; depth < d.levels(); ++depth) {
-    const std::vector<Bounds> boxes = d.node_boxes(depth);
+  for (int depth = 1; depth < tree(d).levels(); ++depth) {
+    const std::vector<Bounds> boxes = tree(d).node_boxes(depth);
     EXPECT_FALSE(boxes.empty()) << "depth " << depth;
     for (const Bounds& b : boxes) {
       EXPECT_TRUE(inside(b.min, root[0]) && inside(b.max, root[0])) << "depth " << depth;
     }
   }
   // The root's children: one box per quarter (arity 4), which together hold every vertex.
-  const std::vector<Bounds> children = d.node_boxes(1);
+  const std::vector<Bounds> children = tree(d).node_boxes(1);
   EXPECT_EQ(children.size(), 4u);
   for (const Vec3& p : mesh.positions()) {
     bool found = false;
     for (const Bounds& b : children) found = found || inside(p, b);
     EXPECT_TRUE(found);
   }
-  EXPECT_TRUE(d.node_boxes(d.levels()).empty());
-  EXPECT_TRUE(d.node_boxes(-1).empty());
+  EXPECT_TRUE(tree(d).node_boxes(tree(d).levels()).empty());
+  EXPECT_TRUE(tree(d).node_boxes(-1).empty());
 }
 
 // The default 18-DOP's leaves are refitted by a vectorised path, a swept tree's by the generic
@@ -160,16 +169,17 @@ TEST(KdopBoxes, VectorisedLeafRefitMatchesTheGenericOne) {
     plain.leaf = swept.leaf = 16;
     swept.sweep = true;
     const Scalar h = 0.02 * (variant == 1 ? 1e35 : 1);
-    KdopDetector fast({.thickness = h, .threads = 1}, plain), generic({.thickness = h, .threads = 1}, swept);
+    ExactDetector fast = kdop_detector({.thickness = h, .threads = 1}, plain);
+    ExactDetector generic = kdop_detector({.thickness = h, .threads = 1}, swept);
     fast.set_topology(sheet.topology_ptr());
     generic.set_topology(sheet.topology_ptr());
     ContactSet out;
     fast.update(x, out);
     generic.update(x, x, out);
-    ASSERT_EQ(fast.levels(), generic.levels());
-    ASSERT_GE(fast.levels(), 3);
-    for (int depth = 0; depth < fast.levels(); ++depth) {
-      const std::vector<Bounds> a = fast.node_boxes(depth), b = generic.node_boxes(depth);
+    ASSERT_EQ(tree(fast).levels(), tree(generic).levels());
+    ASSERT_GE(tree(fast).levels(), 3);
+    for (int depth = 0; depth < tree(fast).levels(); ++depth) {
+      const std::vector<Bounds> a = tree(fast).node_boxes(depth), b = tree(generic).node_boxes(depth);
       ASSERT_EQ(a.size(), b.size());
       for (std::size_t n = 0; n < a.size(); ++n) {
         EXPECT_EQ(std::memcmp(&a[n], &b[n], sizeof(Bounds)), 0)

@@ -3,7 +3,7 @@
 // intersection. Checked against naive on adversarial surfaces (a helical ramp whose turns cut
 // through each other with every normal facing up, two stacked sheets, a crumpled sheet, a
 // flipped face) and on the real meshes.
-#include <crumple/detect/kdop_tree.hpp>
+#include <crumple/detect/broad_phase/kdop_tree.hpp>
 #include <crumple/io/mesh_io.hpp>
 #include <crumple/mesh/shapes.hpp>
 #include <support/meshes.hpp>

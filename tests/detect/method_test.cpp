@@ -1,10 +1,10 @@
 #include <crumple/core/error.hpp>
 #include <crumple/detect/compare.hpp>
 #include <crumple/detect/detector.hpp>
-#include <crumple/detect/hash_grid.hpp>
-#include <crumple/detect/kdop_tree.hpp>
+#include <crumple/detect/broad_phase/hash_grid.hpp>
+#include <crumple/detect/broad_phase/kdop_tree.hpp>
 #include <crumple/detect/stochastic.hpp>
-#include <crumple/detect/sweep_prune.hpp>
+#include <crumple/detect/broad_phase/sweep_prune.hpp>
 
 #include <gtest/gtest.h>
 

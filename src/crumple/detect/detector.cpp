@@ -1,10 +1,5 @@
 #include <crumple/core/error.hpp>
 #include <crumple/detect/detector.hpp>
-#include <crumple/detect/hash_grid.hpp>
-#include <crumple/detect/kdop_tree.hpp>
-#include <crumple/detect/naive.hpp>
-#include <crumple/detect/sweep_prune.hpp>
-#include <crumple/detect/stochastic.hpp>
 
 #include <cmath>
 
@@ -82,22 +77,6 @@ void Detector::load_state(std::string_view text) {
   if (text.find_first_not_of(" \t\r\n") == std::string_view::npos) return;
   throw InputError("method " + std::string(to_string(method())) +
                    " keeps no state across frames: cannot restore a saved detector state");
-}
-
-std::unique_ptr<Detector> make_detector(const MethodSpec& spec, const DetectorOptions& options) {
-  switch (spec.method()) {
-    case Method::Naive:
-      return std::make_unique<NaiveDetector>(options);
-    case Method::Kdop:
-      return std::make_unique<KdopDetector>(options, KdopParams::from_spec(spec));
-    case Method::Hash:
-      return std::make_unique<HashDetector>(options, HashParams::from_spec(spec));
-    case Method::Sap:
-      return std::make_unique<SapDetector>(options, SapParams::from_spec(spec));
-    case Method::Stochastic:
-      return std::make_unique<StochasticDetector>(options, StochasticParams::from_spec(spec));
-  }
-  throw InputError("no factory for method " + std::string(to_string(spec.method())));
 }
 
 }  // namespace crumple

@@ -12,6 +12,7 @@
 
 #include <crumple/core/types.hpp>
 #include <crumple/detect/contact.hpp>
+#include <crumple/detect/hierarchy.hpp>
 #include <crumple/detect/method.hpp>
 #include <crumple/mesh/mesh.hpp>
 
@@ -69,6 +70,10 @@ class Detector {
   /// Counters of the last update (pairs tested, candidates, ...), method-specific.
   const DetectorStats& stats() const { return stats_; }
 
+  /// The bounding-volume hierarchy the method keeps (levels, node boxes, leaves; `kdop`), or
+  /// null for methods without one. Valid until the detector's next `set_topology`.
+  virtual const BoundingHierarchy* hierarchy() const { return nullptr; }
+
   /// The state carried across frames that changes later results, as one line of text — the
   /// state *before* the last update, so that replaying that update on the same positions gives
   /// the same contacts and ends in the current state (what a resumed simulation needs). Empty
@@ -88,9 +93,8 @@ class Detector {
   /// `previous` is empty when no motion is given.
   virtual void detect(PositionsView previous, PositionsView positions, ContactSet& out) = 0;
   /// Whether `detect` itself leaves `out` in canonical order. `update` sorts the output of the
-  /// detectors that do not; for those that do, it skips even the check (one pass over every
-  /// contact: about 2 ms a frame for cloth-ball's 0.55 M, on one thread), and the tests check
-  /// the order of their output instead.
+  /// detectors that do not; for those that do, it skips even the check (a pass over every
+  /// contact), and the tests check the order of their output instead.
   virtual bool sorted_output() const { return false; }
 
   DetectorStats stats_;
@@ -100,8 +104,8 @@ class Detector {
   std::shared_ptr<const Topology> topology_;
 };
 
-/// Creates the detector for a method spec (the one factory). Throws `InputError` on bad
-/// parameters. The detector has no topology yet.
+/// Creates the detector for a method spec (the one factory, make_detector.cpp). Throws
+/// `InputError` on bad parameters. The detector has no topology yet.
 std::unique_ptr<Detector> make_detector(const MethodSpec& spec, const DetectorOptions& options);
 
 }  // namespace crumple

@@ -65,23 +65,15 @@ struct KeyedList {
 /// criterion's places (each thread counting then scattering its own slice of the keys), then
 /// `threads` threads, claiming ranges of first criteria that hold about the same number of
 /// records (four ranges per thread), copy each record to its place, once, reading them ahead.
-/// Among a criterion's items (up to 200 for one edge on cloth-ball, half of its edge-edge
-/// contacts in groups of more than 16), an item's place is the number of them with smaller
-/// second criteria, counted four items at a time in vector lanes over the group's 32-bit
-/// criteria, which lie side by side (measured on cloth-ball's edge-edge contacts, one thread,
-/// against one item at a time over 16-byte (key, address) items and a sort of groups over 16:
-/// the copy 11.5-12.6 → 10.3-11.2 ms; a copy that ignored the order took 7-8 ms); groups over
-/// 128 are sorted.
+/// Among a criterion's items (a dense mesh may have hundreds for one edge), an item's place is
+/// the number of them with smaller second criteria, counted four items at a time in vector
+/// lanes over the group's 32-bit criteria, which lie side by side; groups over 128 are sorted.
 ///
-/// The gather is bound by memory traffic (cloth-ball's 550 k contacts are 38 MB): the keys come
-/// with the records, so that the records are read once here, by the copy (reading them for
-/// their keys was 4.1 ms of 14 on cloth-ball, on one thread or two alike), and the counting
-/// reads the keys where they are instead of a list of (key, address) items made first.
-/// (Copying each record as its item is scattered, so that the records are read in the order
-/// they lie, was measured slower on cloth-ball: 25 against 18 ms on one thread. The writes are
-/// then the scattered accesses, and fetching them ahead did not help; non-temporal stores for
-/// the copy changed nothing.) Fewer records than keys / 8 are sorted by key instead of counted:
-/// counting would cost more, over every key.
+/// The gather is bound by memory traffic (a frame's contacts can be tens of MB): the keys come
+/// with the records, so that the records are read once here, by the copy, and the counting
+/// reads the keys where they are instead of a list of (key, address) items made first. Fewer
+/// records than keys / 8 are sorted by key instead of counted: counting would cost more, over
+/// every key.
 template <class T>
 void gather_place(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, Index keys, int threads,
                   GatherScratch& scratch) {
@@ -133,10 +125,8 @@ void gather_place(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, 
   const auto slice = [&](std::size_t s) { return std::pair{total * s / slices, total * (s + 1) / slices}; };
   // The counts start at 0 and only the first criteria that had items are put back to 0 after
   // the scatter, rather than every row cleared before the count: most criteria may have no
-  // items (4.8 k of armadillo's 36.4 k edges are the first edge of one of its 19.9 k edge-edge
-  // contacts). Their bits in `held` list them, and the places are summed over those only.
-  // (Over every criterion, the clearing and the sum were 0.05 of armadillo's 0.14 ms to place
-  // its edge-edge contacts, on one thread.)
+  // items (most edges are the first edge of no edge-edge contact). Their bits in `held` list
+  // them, and the places are summed over those only.
   if (!scratch.clean || next.size() != slices * nk) next.assign(slices * nk, 0);
   scratch.clean = false;  // until the counts are back to 0
   held.assign(slices * words, 0);
@@ -186,8 +176,7 @@ void gather_place(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, 
   scratch.clean = true;
   // Ranges of first criteria holding about total / ranges records each, four per thread: the
   // threads claim them as they go, so that one whose records come slower (from the other core's
-  // cache) does fewer (with one range per thread, one of two threads waited a quarter of the
-  // copy's time on armadillo, a tenth on cloth-ball).
+  // cache) does fewer instead of leaving the others waiting.
   const std::size_t ranges = workers == 1 ? 1 : 4 * workers;
   bound.assign(1, 0);
   for (std::size_t r = 1; r < ranges; ++r) {

@@ -1,5 +1,6 @@
 #include <crumple/core/parallel.hpp>
-#include <crumple/detect/hash_grid.hpp>
+#include <crumple/core/timing.hpp>
+#include <crumple/detect/broad_phase/hash_grid.hpp>
 
 #include <algorithm>
 #include <atomic>
@@ -10,10 +11,6 @@
 namespace crumple {
 
 namespace {
-
-double ms_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-}
 
 std::uint64_t next_prime(std::uint64_t n) {
   if (n <= 2) return 2;
@@ -54,20 +51,24 @@ HashParams HashParams::from_spec(const MethodSpec& spec) {
   return p;
 }
 
-HashDetector::HashDetector(DetectorOptions options, HashParams params)
-    : ExactDetector(options, params.exact), params_(params) {}
+HashGrid::HashGrid(HashParams params) : params_(params) {}
 
-void HashDetector::on_exact_topology() {
+void HashGrid::build(const Topology& topology) {
+  topo_ = &topology;
   cell_size_ = 0;
   table_size_ = 0;
+  bucket_start_.assign(1, 0);
+  sorted_.clear();
 }
 
-void HashDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
-  const Topology& topo = topology();
+void HashGrid::update(const FrameInput& in, DetectorStats& stats) {
+  CRUMPLE_CHECK(topo_ != nullptr, "hash: update before build");
+  const Topology& topo = *topo_;
+  threads_ = in.threads;
   const std::size_t nf = static_cast<std::size_t>(topo.num_faces());
   if (nf == 0) return;
   const auto t0 = std::chrono::steady_clock::now();
-  face_boxes(in, false, boxes_);
+  face_boxes(topo, in, false, boxes_);
   if (cell_size_ == 0) {
     // Of the finite edges: one NaN vertex made the mean NaN, and the cells size 1 whatever the
     // mesh's scale.
@@ -141,14 +142,19 @@ void HashDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
           }
     }
   }
-  stats_.set("refit_ms", ms_since(t0));
-  stats_.set("cell_size", cell_size_);
-  stats_.set("table_size", static_cast<double>(n));
-  stats_.set("entries", static_cast<double>(entries));
+  stats.set("refit_ms", ms_since(t0));
+  stats.set("cell_size", cell_size_);
+  stats.set("table_size", static_cast<double>(n));
+  stats.set("entries", static_cast<double>(entries));
+}
 
+void HashGrid::self_pairs(CandidateBuffer& out, DetectorStats& stats) {
+  const Topology& topo = *topo_;
+  if (topo.num_faces() == 0) return;
+  const std::uint64_t n = table_size_;
   const auto t1 = std::chrono::steady_clock::now();
   // Bucket-major: pairs of entries of one bucket that are the same cell (sequential access).
-  parallel_for_chunks(n, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
+  parallel_for_chunks(n, threads_, 4096, [&](std::size_t begin, std::size_t end) {
     std::vector<FacePair> local = out.take();
     for (std::size_t b = begin; b < end; ++b) {
       const std::uint32_t s0 = bucket_start_[b], s1 = bucket_start_[b + 1];
@@ -174,7 +180,7 @@ void HashDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
     }
     out.add(std::move(local));
   });
-  stats_.set("traversal_ms", ms_since(t1));
+  stats.set("traversal_ms", ms_since(t1));
 }
 
 }  // namespace crumple

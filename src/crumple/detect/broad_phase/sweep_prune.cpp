@@ -1,5 +1,6 @@
 #include <crumple/core/parallel.hpp>
-#include <crumple/detect/sweep_prune.hpp>
+#include <crumple/core/timing.hpp>
+#include <crumple/detect/broad_phase/sweep_prune.hpp>
 
 #include <algorithm>
 #include <array>
@@ -8,14 +9,6 @@
 #include <string>
 
 namespace crumple {
-
-namespace {
-
-double ms_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-}
-
-}  // namespace
 
 SapParams SapParams::from_spec(const MethodSpec& spec) {
   SapParams p;
@@ -26,20 +19,25 @@ SapParams SapParams::from_spec(const MethodSpec& spec) {
   return p;
 }
 
-SapDetector::SapDetector(DetectorOptions options, SapParams params)
-    : ExactDetector(options, params.exact), params_(params) {}
+SweepPrune::SweepPrune(SapParams params) : params_(params) {}
 
-void SapDetector::on_exact_topology() {
+void SweepPrune::build(const Topology& topology) {
+  topo_ = &topology;
   axis_ = -1;
   order_.clear();
+  keys_.clear();
+  sorted_boxes_.clear();
+  sorted_faces_.clear();
 }
 
-void SapDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
-  const Topology& topo = topology();
+void SweepPrune::update(const FrameInput& in, DetectorStats& stats) {
+  CRUMPLE_CHECK(topo_ != nullptr, "sap: update before build");
+  const Topology& topo = *topo_;
+  threads_ = in.threads;
   const std::size_t nf = static_cast<std::size_t>(topo.num_faces());
   if (nf == 0) return;
   const auto t0 = std::chrono::steady_clock::now();
-  face_boxes(in, false, boxes_);
+  face_boxes(topo, in, false, boxes_);
   if (axis_ < 0) {
     axis_ = params_.axis;
     if (axis_ < 0) {  // axis of largest variance of the box centres
@@ -96,14 +94,19 @@ void SapDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
       sorted_faces_[i] = topo.face(order_[i]);
     }
   });
-  stats_.set("refit_ms", ms_since(t0));
-  stats_.set("swaps", static_cast<double>(swaps));
-  stats_.set("full_sort", full_sort ? 1 : 0);
-  stats_.set("axis", ax);
+  stats.set("refit_ms", ms_since(t0));
+  stats.set("swaps", static_cast<double>(swaps));
+  stats.set("full_sort", full_sort ? 1 : 0);
+  stats.set("axis", ax);
+}
 
+void SweepPrune::self_pairs(CandidateBuffer& out, DetectorStats& stats) {
+  const std::size_t nf = sorted_boxes_.size();
+  if (nf == 0) return;
+  const int ax = axis_;
   const auto t1 = std::chrono::steady_clock::now();
   const std::size_t a1 = static_cast<std::size_t>((ax + 1) % 3), a2 = static_cast<std::size_t>((ax + 2) % 3);
-  parallel_for_chunks(nf, in.threads, 1024, [&](std::size_t begin, std::size_t end) {
+  parallel_for_chunks(nf, threads_, 1024, [&](std::size_t begin, std::size_t end) {
     std::vector<FacePair> local = out.take();
     for (std::size_t i = begin; i < end; ++i) {
       const Box& bi = sorted_boxes_[i];
@@ -119,7 +122,7 @@ void SapDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
     }
     out.add(std::move(local));
   });
-  stats_.set("traversal_ms", ms_since(t1));
+  stats.set("traversal_ms", ms_since(t1));
 }
 
 }  // namespace crumple

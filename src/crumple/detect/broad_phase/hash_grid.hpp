@@ -1,8 +1,8 @@
 #pragma once
 /// \file
 /// `hash`: optimised spatial hashing (Teschner, Heidelberger, Müller, Pomeranets & Gross,
-/// VMV 2003; ALGORITHMS.md §4) adapted to vertex–face and edge–edge proximity, exact through
-/// the shared pipeline of broad_phase.hpp.
+/// VMV 2003; ALGORITHMS.md §4) adapted to vertex–face and edge–edge proximity, a broad phase
+/// (broad_phase.hpp) of the exact detector.
 ///
 /// Every frame, each face's box (current positions, inflated by half the padded thickness) is
 /// entered into every grid cell it overlaps; cell (i, j, k) goes to bucket
@@ -16,7 +16,8 @@
 /// the first frame (0 = automatic: max(mean edge, 2 h)); N the bucket count (0 = the smallest
 /// prime >= 2 x the entries of the first frame); plus `max_contacts`, `overflow`.
 
-#include <crumple/detect/broad_phase.hpp>
+#include <crumple/detect/broad_phase/broad_phase.hpp>
+#include <crumple/detect/exact_detector.hpp>
 
 #include <cstdint>
 #include <vector>
@@ -31,14 +32,13 @@ struct HashParams {
   bool operator==(const HashParams&) const = default;
 };
 
-class HashDetector final : public ExactDetector {
+class HashGrid final : public BroadPhase {
  public:
-  HashDetector(DetectorOptions options, HashParams params);
+  explicit HashGrid(HashParams params);
   Method method() const override { return Method::Hash; }
-
- protected:
-  void on_exact_topology() override;
-  void broad_phase(const FrameInput& in, CandidateBuffer& out) override;
+  void build(const Topology& topology) override;
+  void update(const FrameInput& in, DetectorStats& stats) override;
+  void self_pairs(CandidateBuffer& out, DetectorStats& stats) override;
 
  private:
   struct Entry {
@@ -46,6 +46,8 @@ class HashDetector final : public ExactDetector {
     std::int32_t cell[3];
   };
   HashParams params_;
+  const Topology* topo_ = nullptr;
+  int threads_ = 0;       ///< of the last update
   Scalar cell_size_ = 0;  ///< fixed at the first frame
   std::uint64_t table_size_ = 0;
   std::vector<Box> boxes_;

@@ -1,5 +1,6 @@
 #include <crumple/core/parallel.hpp>
-#include <crumple/detect/kdop_tree.hpp>
+#include <crumple/core/timing.hpp>
+#include <crumple/detect/broad_phase/kdop_tree.hpp>
 #include <crumple/detect/narrow_phase.hpp>
 #include <crumple/geometry/kdop.hpp>
 
@@ -20,14 +21,6 @@
 #include <vector>
 
 namespace crumple {
-
-namespace {
-
-double ms_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-}
-
-}  // namespace
 
 KdopParams KdopParams::from_spec(const MethodSpec& spec) {
   // Keys left out keep the struct's defaults (one place says what they are).
@@ -61,11 +54,11 @@ void KdopParams::validate(const std::string& who) const {
 }
 
 /// Type-erased hierarchy: one implementation per k.
-class KdopDetector::Tree {
+class KdopTree::Impl {
  public:
-  virtual ~Tree() = default;
-  virtual void frame(const Topology& topo, const FrameInput& in, CandidateBuffer& out,
-                     DetectorStats& stats) = 0;
+  virtual ~Impl() = default;
+  virtual void update(const Topology& topo, const FrameInput& in, DetectorStats& stats) = 0;
+  virtual void self_pairs(CandidateBuffer& out, DetectorStats& stats) = 0;
   virtual int levels() const = 0;
   virtual std::vector<Bounds> boxes(int depth) const = 0;
   virtual std::vector<std::vector<Index>> leaf_faces() const = 0;
@@ -101,9 +94,8 @@ __attribute__((always_inline)) inline std::uint64_t zero_lanes(const I8& v) {
 }
 
 /// The traversal's recursive functions and the refit's loop are compiled three times, for
-/// x86-64-v4 (AVX-512: the lane comparisons into mask registers; armadillo's traversal 7% and
-/// refit 4% faster than the AVX2 clone on an AVX-512 Zen 4), with AVX2 (a lane group in one
-/// register) and without, and the CPU picks at load time (GCC's function multiversioning). The
+/// x86-64-v4 (AVX-512: the lane comparisons into mask registers), with AVX2 (a lane group in
+/// one register) and without, and the CPU picks at load time (GCC's function multiversioning). The
 /// library is built with -ffp-contract=off (src/CMakeLists.txt), so that the v4 clone, whose
 /// target has FMA, rounds as the others do.
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
@@ -124,7 +116,7 @@ float to_float(double d) {
 }
 
 template <int K>
-class KdopTree final : public KdopDetector::Tree {
+class DopTree final : public KdopTree::Impl {
   using Dop = geometry::Kdop<K>;
   static constexpr int kAxes = Dop::kAxes;
   /// Up to eight k-DOPs of a node's members (an internal node's children, a leaf's faces) side
@@ -177,10 +169,10 @@ class KdopTree final : public KdopDetector::Tree {
   };
 
  public:
-  explicit KdopTree(const KdopParams& params) : params_(params) {}
+  explicit DopTree(const KdopParams& params) : params_(params) {}
 
-  void frame(const Topology& topo, const FrameInput& in, CandidateBuffer& out,
-             DetectorStats& stats) override {
+  void update(const Topology& topo, const FrameInput& in, DetectorStats& stats) override {
+    threads_ = in.threads;
     if (topo.num_faces() == 0) return;
     const auto t0 = std::chrono::steady_clock::now();
     if (nodes_.empty()) build(topo, in.positions, in.owns, stats);
@@ -207,9 +199,13 @@ class KdopTree final : public KdopDetector::Tree {
       positions_ = in.positions;
       stats.set("cones_ms", ms_since(tc));
     }
+  }
+
+  void self_pairs(CandidateBuffer& out, DetectorStats& stats) override {
+    if (nodes_.empty()) return;
     culled_ = 0;
     const auto t1 = std::chrono::steady_clock::now();
-    traverse(in.threads, out, stats);
+    traverse(threads_, out, stats);
     stats.set("traversal_ms", ms_since(t1));
     stats.set("coherence", mode_ == Mode::off ? 0 : mode_ == Mode::record ? 1 : 2);
     if (culling_) stats.set("culled_nodes", static_cast<double>(culled_.load()));
@@ -278,8 +274,8 @@ class KdopTree final : public KdopDetector::Tree {
       component_faces_.assign(root.size(), 0);
     }
     // The patches are grown at the first build only: they are connected pieces of the surface
-    // whatever the positions, and growing them takes a third of a build (cloth-ball 23 of 76 ms,
-    // n-body 25 of 107, one thread), which a rebuild need not pay again.
+    // whatever the positions, and growing them is a large part of a build, which a rebuild need
+    // not pay again.
     if (patch_.size() != static_cast<std::size_t>(nf)) grow_patches(topo, centroid);
     patch_centroids(centroid);
     nodes_.assign(1, Node{});
@@ -404,9 +400,8 @@ class KdopTree final : public KdopDetector::Tree {
   /// Morton order of the centroids, by adding the face nearest to the seed among those that
   /// share a vertex with the patch; then a patch of fewer than leaf / 4 faces joins the smallest
   /// patch it touches that has room. A leaf of one patch stays compact however its surface
-  /// moves; a leaf of the median cuts held pieces of surfaces that only passed near each other
-  /// (546 of armadillo's 640 leaves), and those pieces move apart (the refitted tree's leaves
-  /// grew by 54% in the benchmark's step, those of one piece by 3%). Sets `patch_` and
+  /// moves; a leaf of median cuts may hold pieces of surfaces that only pass near each other,
+  /// and those pieces move apart, loosening the refitted tree. Sets `patch_` and
   /// `patches_`; `patch_centroids` then gives the cuts their keys.
   void grow_patches(const Topology& topo, const std::vector<Vec3>& centroid) {
     const std::size_t nf = centroid.size();
@@ -599,9 +594,8 @@ class KdopTree final : public KdopDetector::Tree {
   }
 
   /// Where the faces of slots [begin, end) belong to several connected components, a cut
-  /// between components, so that a node does not mix small bodies that move apart (n-body's 305
-  /// balls of 480 faces: a leaf of the median cut held faces of two balls in about half the
-  /// cases, and no coherence unit with it could be reused). Only where every component in the
+  /// between components, so that a node does not mix small bodies that move apart (a unit of
+  /// the frame-to-frame cache that mixes them cannot be reused). Only where every component in the
   /// node fits in a unit (a larger one is cut across units anyway). Along each
   /// axis (the longest first), the components are ordered by their centroids and the boundary
   /// nearest `mid` that leaves each side at least a quarter of the faces is compared with the
@@ -817,10 +811,8 @@ class KdopTree final : public KdopDetector::Tree {
     for (std::size_t l = levels_.size(); l-- > 0;) {
       const auto [lb, le] = levels_[l];
       const auto count = static_cast<std::size_t>(le - lb);
-      // Chunks of about 2048 leaf faces (chunks of 1024 leaves held the whole of a 20k-face mesh,
-      // refitted on one thread), and of at most 64 nodes: a level that holds few leaves is
-      // mostly inner nodes (armadillo's 256 nodes above its leaves, with a few leaves among them,
-      // were one chunk, 30 us on one thread while the other waited).
+      // Chunks of about 2048 leaf faces, and of at most 64 nodes: a level that holds few leaves
+      // is mostly inner nodes, which would otherwise be one chunk while the other threads wait.
       const auto leaf_faces = static_cast<std::size_t>(level_leaf_faces_[l]);
       const std::size_t grain = std::clamp<std::size_t>(leaf_faces > 0 ? 2048 * count / leaf_faces : 64, 1, 64);
       parallel_for_chunks(count, in.threads, grain, [&](std::size_t begin, std::size_t end) {
@@ -912,7 +904,7 @@ class KdopTree final : public KdopDetector::Tree {
   /// slabs as the generic path, bit for bit (the projections by the same operations as
   /// `Kdop::along`, x - y as x + (-y), which IEEE defines it to be; minima and maxima that skip
   /// a NaN corner like `extend`; then `inflate`, `merge`, `to_float`). The generic path's scalar
-  /// slabs were most of the refit's time (armadillo, one thread: 1.4 ms for k = 18, 0.4 for k = 6).
+  /// slabs were most of the refit's time.
   __attribute__((always_inline)) Dop refit_leaf18(const Node& node, std::span<const Vec3> x, Scalar radius)
     requires(K == 18)
   {
@@ -1048,8 +1040,7 @@ class KdopTree final : public KdopDetector::Tree {
   /// both an edge): left out of a proximity query (`slot_owns_` empty otherwise).
   std::uint64_t idle_with(Index n, Index i) const {
     if (slot_owns_.empty()) return 0;
-    // Without a branch: which faces own what is unpredictable (the conditional loads were a
-    // fifth of the traversal's branch mispredictions on armadillo, 0.2 ms of its one-thread frame).
+    // Without a branch: which faces own what is unpredictable.
     const std::uint8_t o = slot_owns_[static_cast<std::size_t>(i)];
     const std::uint64_t owns_vertex = (o & 1u), owns_edge = (o & 2u) >> 1;
     return leaf_no_vertex_[static_cast<std::size_t>(n)] & (owns_vertex - 1) &
@@ -1119,9 +1110,7 @@ class KdopTree final : public KdopDetector::Tree {
   /// flat loop without a branch per pair: a loop over each face's members in turn ended at an
   /// unpredictable count for each face, and whether a pair is kept (shares no vertex) is
   /// unpredictable too (three in five pairs of adjacent leaves share one), so every pair is
-  /// written and the next one goes after it or over it. (Armadillo, one thread: traversal
-  /// 1.83-1.85 -> 1.63-1.64 ms from the leaf pairs; the self-tests' use changed nothing
-  /// measurable.)
+  /// written and the next one goes after it or over it.
   template <class Keep>
   __attribute__((always_inline)) void emit_hits(Hits& hits, Index first, const Keep& keep,
                                                 std::vector<FacePair>& out) const {
@@ -1151,8 +1140,8 @@ class KdopTree final : public KdopDetector::Tree {
                                                                    std::uint64_t tested = ~std::uint64_t{0}) const {
     // The empty lanes past `count` overlap nothing but a NaN k-DOP: masked.
     if (node.count < 64) tested &= (std::uint64_t{1} << node.count) - 1;
-    // Bit g: group g has a member in `tested`; the loop visits those only (a test per group of
-    // whether it had was a third of the traversal's branch mispredictions on armadillo).
+    // Bit g: group g has a member in `tested`; the loop visits those only, without a
+    // mispredicted test per empty group.
     std::uint64_t groups = tested | tested >> 4;
     groups |= groups >> 2;
     groups |= groups >> 1;
@@ -1281,10 +1270,8 @@ class KdopTree final : public KdopDetector::Tree {
   void traverse(int threads, CandidateBuffer& out, DetectorStats& stats) {
     std::vector<std::array<Index, 2>> tasks{{0, 0}};
     const bool coherent = mode_ != Mode::off;
-    // At least 64 tasks a thread, which the threads claim as they go. The splitting is serial,
-    // and the last round before 256 a thread was 45 of the 60 us that it took on armadillo
-    // (288 -> 1,087 tasks; the traversal is 1.2 ms on two threads), while the other thread
-    // waited. The node pairs are split as the recursion descends (`each_child_pair`,
+    // At least 64 tasks a thread, which the threads claim as they go. The splitting is serial
+    // (the other threads wait meanwhile), so it stops there. The node pairs are split as the recursion descends (`each_child_pair`,
     // `each_descent`), by float lane tests, cheaper than the nodes' double k-DOPs pair by pair.
     const std::size_t target = resolve_threads(threads) > 1 ? 64 * static_cast<std::size_t>(resolve_threads(threads)) : 1;
     for (int round = 0; round < 16 && tasks.size() < target; ++round) {
@@ -1503,47 +1490,51 @@ class KdopTree final : public KdopDetector::Tree {
   std::vector<char> cullable_;                     ///< per node: consistently oriented, manifold
   std::vector<std::uint32_t> face_masks_, node_masks_;
   PositionsView positions_;
+  int threads_ = 0;  ///< of the last update
   mutable std::atomic<long long> culled_{0};
 };
 
 }  // namespace
 
-KdopDetector::KdopDetector(DetectorOptions options, KdopParams params)
-    : ExactDetector(options, params.exact), params_(params) {
+KdopTree::KdopTree(KdopParams params) : params_(params) {
   params_.validate("kdop");  // also for parameters built in code, not through a spec
 }
 
-KdopDetector::~KdopDetector() = default;
+KdopTree::~KdopTree() = default;
 
-void KdopDetector::on_exact_topology() {
+void KdopTree::build(const Topology& topology) {
+  topo_ = &topology;
   switch (params_.k) {
     case 6:
-      tree_ = std::make_unique<KdopTree<6>>(params_);
+      tree_ = std::make_unique<DopTree<6>>(params_);
       break;
     case 14:
-      tree_ = std::make_unique<KdopTree<14>>(params_);
+      tree_ = std::make_unique<DopTree<14>>(params_);
       break;
     case 18:
-      tree_ = std::make_unique<KdopTree<18>>(params_);
+      tree_ = std::make_unique<DopTree<18>>(params_);
       break;
     default:
-      tree_ = std::make_unique<KdopTree<26>>(params_);
+      tree_ = std::make_unique<DopTree<26>>(params_);
       break;
   }
 }
 
-int KdopDetector::levels() const { return tree_ ? tree_->levels() : 0; }
+int KdopTree::levels() const { return tree_ ? tree_->levels() : 0; }
 
-std::vector<Bounds> KdopDetector::node_boxes(int depth) const {
+std::vector<Bounds> KdopTree::node_boxes(int depth) const {
   return tree_ ? tree_->boxes(depth) : std::vector<Bounds>{};
 }
 
-std::vector<std::vector<Index>> KdopDetector::leaf_faces() const {
+std::vector<std::vector<Index>> KdopTree::leaf_faces() const {
   return tree_ ? tree_->leaf_faces() : std::vector<std::vector<Index>>{};
 }
 
-void KdopDetector::broad_phase(const FrameInput& in, CandidateBuffer& out) {
-  tree_->frame(topology(), in, out, stats_);
+void KdopTree::update(const FrameInput& in, DetectorStats& stats) {
+  CRUMPLE_CHECK(tree_ != nullptr, "kdop: update before build");
+  tree_->update(*topo_, in, stats);
 }
+
+void KdopTree::self_pairs(CandidateBuffer& out, DetectorStats& stats) { tree_->self_pairs(out, stats); }
 
 }  // namespace crumple

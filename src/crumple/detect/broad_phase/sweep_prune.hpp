@@ -1,8 +1,8 @@
 #pragma once
 /// \file
 /// `sap`: sweep and prune with insertion sort across frames (Cohen, Lin, Manocha & Ponamgi,
-/// I-COLLIDE, I3D 1995; ALGORITHMS.md §7), exact through the shared pipeline of
-/// broad_phase.hpp.
+/// I-COLLIDE, I3D 1995; ALGORITHMS.md §7), a broad phase
+/// (broad_phase.hpp) of the exact detector.
 ///
 /// The face boxes (current positions, inflated by half the padded thickness) are kept sorted
 /// by their lower end along one axis — the axis of largest centroid spread, chosen at the
@@ -15,7 +15,8 @@
 /// parallel over boxes; the insertion sort is serial.
 /// Spec: `sap:axis=auto|x|y|z` plus `max_contacts`, `overflow`.
 
-#include <crumple/detect/broad_phase.hpp>
+#include <crumple/detect/broad_phase/broad_phase.hpp>
+#include <crumple/detect/exact_detector.hpp>
 
 #include <vector>
 
@@ -28,17 +29,18 @@ struct SapParams {
   bool operator==(const SapParams&) const = default;
 };
 
-class SapDetector final : public ExactDetector {
+class SweepPrune final : public BroadPhase {
  public:
-  SapDetector(DetectorOptions options, SapParams params);
+  explicit SweepPrune(SapParams params);
   Method method() const override { return Method::Sap; }
-
- protected:
-  void on_exact_topology() override;
-  void broad_phase(const FrameInput& in, CandidateBuffer& out) override;
+  void build(const Topology& topology) override;
+  void update(const FrameInput& in, DetectorStats& stats) override;
+  void self_pairs(CandidateBuffer& out, DetectorStats& stats) override;
 
  private:
   SapParams params_;
+  const Topology* topo_ = nullptr;
+  int threads_ = 0;  ///< of the last update
   int axis_ = -1;
   std::vector<Box> boxes_;
   std::vector<Index> order_;        ///< faces sorted by (lower end on axis_, id)

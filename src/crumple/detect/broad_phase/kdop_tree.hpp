@@ -1,8 +1,8 @@
 #pragma once
 /// \file
 /// `kdop`: an inflated, motion-oriented k-DOP hierarchy over the faces (ALGORITHMS.md §2;
-/// Klosowski et al. 1998; Mezger, Kimmerle & Etzmuss 2003; Blender's kdop.c), exact through
-/// the shared pipeline of broad_phase.hpp.
+/// Klosowski et al. 1998; Mezger, Kimmerle & Etzmuss 2003; Blender's kdop.c), a broad phase
+/// (broad_phase.hpp) of the exact detector.
 ///
 ///  - Build (first frame, and again when the quality metric degrades): first the faces are
 ///    cut into connected patches of at most `leaf` faces (grown from seeds in Morton order, the
@@ -52,7 +52,8 @@
 ///    when that happens right after a refresh it waits 1, 2, 4, ... 64 frames (deforming cloth
 ///    pays only the sample).
 
-#include <crumple/detect/broad_phase.hpp>
+#include <crumple/detect/broad_phase/broad_phase.hpp>
+#include <crumple/detect/exact_detector.hpp>
 
 #include <memory>
 #include <vector>
@@ -88,32 +89,31 @@ struct KdopParams {
   void validate(const std::string& who) const;
 };
 
-class KdopDetector final : public ExactDetector {
+/// The k-DOP hierarchy as a broad phase; also the detector's `hierarchy()` view.
+class KdopTree final : public BroadPhase, public BoundingHierarchy {
  public:
-  KdopDetector(DetectorOptions options, KdopParams params);
-  ~KdopDetector() override;
+  /// Throws `InputError` when a parameter is out of range (`KdopParams::validate`).
+  explicit KdopTree(KdopParams params);
+  ~KdopTree() override;
   Method method() const override { return Method::Kdop; }
   const KdopParams& params() const { return params_; }
+  void build(const Topology& topology) override;
+  void update(const FrameInput& in, DetectorStats& stats) override;
+  void self_pairs(CandidateBuffer& out, DetectorStats& stats) override;
+  const BoundingHierarchy* hierarchy() const override { return this; }
 
-  /// Number of levels of the current tree (0 before the first update).
-  int levels() const;
-  /// The axis-aligned boxes (x, y, z slabs of the k-DOPs, inflated and swept as refitted) of
-  /// the nodes at `depth` (0 = root) after the last update; empty past the deepest level. For
-  /// drawing a level of the hierarchy (the viewer).
-  std::vector<Bounds> node_boxes(int depth) const;
-  /// The faces of each leaf of the current tree (empty before the first update).
-  std::vector<std::vector<Index>> leaf_faces() const;
+  int levels() const override;
+  /// The x, y, z slabs of the nodes' k-DOPs.
+  std::vector<Bounds> node_boxes(int depth) const override;
+  std::vector<std::vector<Index>> leaf_faces() const override;
 
   /// Type-erased tree (one implementation per k).
-  class Tree;
-
- protected:
-  void on_exact_topology() override;
-  void broad_phase(const FrameInput& in, CandidateBuffer& out) override;
+  class Impl;
 
  private:
   KdopParams params_;
-  std::unique_ptr<Tree> tree_;
+  const Topology* topo_ = nullptr;
+  std::unique_ptr<Impl> tree_;
 };
 
 }  // namespace crumple

@@ -1,0 +1,276 @@
+#pragma once
+/// \file
+/// Internal to the exact detector: what the narrow-phase stages share during one frame
+/// (`NarrowFrame`), and their entry points. Every sub-pair reaches the exact kernels of
+/// detect/narrow_phase.hpp (the ones `naive` calls, with the same argument order, so the
+/// distances are the same bits) only past cheap rejections that never drop a pair within the
+/// padded thickness: a box test in float lanes (float_lanes.hpp), then a plane or line
+/// separation test (geometry/separation.hpp).
+
+#include <crumple/detect/broad_phase/broad_phase.hpp>
+#include <crumple/detect/contact.hpp>
+#include <crumple/detect/exact/float_lanes.hpp>
+#include <crumple/detect/exact/orphans.hpp>
+#include <crumple/detect/gather.hpp>
+#include <crumple/detect/narrow_phase.hpp>
+#include <crumple/geometry/separation.hpp>
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <mutex>
+#include <type_traits>
+#include <vector>
+
+namespace crumple::exact {
+
+/// What the narrow phase reads of one face's topology, in one 32-byte record, so that a
+/// candidate pair touches two cache lines. The corners' positions are read from the frame's
+/// positions and their float roundings from `NarrowFrame::coarse_x`.
+struct alignas(32) PackedFace {
+  Face v;                        ///< corner ids
+  std::array<Index, 3> e;        ///< side ids (side k joins corners k and k+1)
+  std::uint8_t vertex_mask = 0;  ///< bit k: this face owns corner k
+  std::uint8_t edge_mask = 0;    ///< bit k: this face owns side k
+};
+static_assert(sizeof(PackedFace) == 32);
+
+using crumple::storage_bytes;
+inline std::size_t storage_bytes(const ContactSet& s) {
+  return storage_bytes(s.vf) + storage_bytes(s.ee) + storage_bytes(s.tt);
+}
+
+/// Contacts found by one chunk of the narrow phase, each list with its records' keys (their
+/// places in canonical order, for `detail::gather_sorted`).
+struct KeyedContacts {
+  ContactSet set;
+  std::vector<std::uint64_t> vf_keys, ee_keys, tt_keys;
+  void clear() {
+    set.clear();
+    vf_keys.clear();
+    ee_keys.clear();
+    tt_keys.clear();
+  }
+};
+inline std::size_t storage_bytes(const KeyedContacts& c) {
+  return storage_bytes(c.set) + storage_bytes(c.vf_keys) + storage_bytes(c.ee_keys) + storage_bytes(c.tt_keys);
+}
+
+/// Contacts found by one chunk of work, kept until the frame's set is gathered.
+struct LocalContacts {
+  explicit LocalContacts(KeyedContacts&& spare) : keyed(std::move(spare)) {}
+  KeyedContacts keyed;
+  ContactSet& set = keyed.set;
+  std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
+  narrow::VertexFaceBatch vf_batch;        ///< vertex-face pairs queued for the kernel, four at a time
+  narrow::EdgeEdgeBatch ee_batch;          ///< edge pairs queued for the kernel, four at a time
+  narrow::TriangleTriangleBatch tt_batch;  ///< face pairs queued for the intersection test
+};
+
+/// Sub-pairs are taken in blocks: the block's sub-pairs are listed (as 16-bit codes), the
+/// rejections sift the list, and the exact kernels run over what is left.
+inline constexpr std::size_t kBlock = 64;
+using CodeList = std::array<std::uint16_t, kBlock>;
+
+/// Lists the codes 0 .. n-1 (a sub-pair's place in its block).
+inline void iota(CodeList& list, std::size_t n) {
+  for (std::size_t k = 0; k < n; ++k) list[k] = static_cast<std::uint16_t>(k);
+}
+
+/// Keeps, in order, the codes of list[0, n) for which keep(code) holds; returns their number.
+/// Branch-free: which sub-pairs pass a rejection test is unpredictable.
+template <class Keep>
+std::size_t sift(std::uint16_t* list, std::size_t n, const Keep& keep) {
+  std::size_t kept = 0;
+  for (std::size_t s = 0; s < n; ++s) {
+    const std::uint16_t code = list[s];
+    list[kept] = code;
+    kept += keep(code) ? 1u : 0u;
+  }
+  return kept;
+}
+
+#if CRUMPLE_SEPARATION_LANES
+/// Keeps, in order, the codes of list[0, n) that the plane (kLine false) or line (kLine true)
+/// test of their points(code) (`geometry::SeparationPoints`) leaves within pad, four at a time
+/// (`geometry::beyond_x4`); returns their number. Compiled for AVX2: only where the CPU has it.
+template <bool kLine, class Points>
+__attribute__((target("avx2"))) std::size_t sift_separated_x4(std::uint16_t* list, std::size_t n, Scalar pad,
+                                                              const Points& points) {
+  std::size_t kept = 0;
+  for (std::size_t s = 0; s < n; s += 4) {
+    std::array<std::uint16_t, 4> code;
+    std::array<geometry::SeparationPoints, 4> at;
+    for (std::size_t l = 0; l < 4; ++l) {
+      code[l] = list[std::min(s + l, n - 1)];  // past the end, the last code again (not kept)
+      at[l] = points(code[l]);
+    }
+    const unsigned beyond = geometry::beyond_x4<kLine>(at, pad);
+    for (std::size_t l = 0; l < std::min<std::size_t>(4, n - s); ++l) {
+      list[kept] = code[l];
+      kept += (beyond >> l & 1u) ^ 1u;
+    }
+  }
+  return kept;
+}
+#endif
+
+/// The gap between the boxes of edges (p0, p1) and (q0, q1) (negative if they overlap), as a
+/// lower bound of their distance (rounded down by 1e-12 of itself).
+inline Scalar edge_box_gap(const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1) {
+  Scalar gap = -std::numeric_limits<Scalar>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    const auto [lo0, hi0] = std::minmax(p0[a], p1[a]);
+    const auto [lo1, hi1] = std::minmax(q0[a], q1[a]);
+    gap = std::max({gap, lo1 - hi0, lo0 - hi1});
+  }
+  return gap * (1 - 1e-12);
+}
+
+/// One frame of the narrow phase: its inputs, the tests shared by its stages, and the
+/// contacts the stages' chunks hand in (`collect`).
+///
+/// One padding quantity: `pad`, the padded thickness (exact_detector.hpp): no rejection drops
+/// a sub-pair within `pad`, and the broad phase inflates each face by `pad / 2`. Its float
+/// versions `float_pad` and `float_half_pad` (`coarse_pad`) cover the rounding of the float
+/// lanes, or are infinite (no box rejects) when the coordinates are beyond floats.
+struct NarrowFrame {
+  NarrowFrame(const Topology& topo, PositionsView x, ContactKinds kinds, int threads, Scalar thickness, Scalar pad,
+              Scalar magnitude, const std::vector<PackedFace>& packed,
+              const std::vector<std::array<Vec3, 3>>& face_corners, const std::vector<std::array<float, 4>>& coarse_x,
+              const std::vector<Index>& edge_rank, Spares<KeyedContacts>& spares);
+
+  const Topology& topo;
+  PositionsView x;
+  ContactKinds kinds;
+  bool proximity;  ///< VF or EE asked
+  int threads;
+  Scalar thickness;      ///< h: a contact is closer than h
+  Scalar sqr_thickness;  ///< h^2, what the kernels compare squared distances with
+  Scalar pad;            ///< the padded thickness
+  float float_half_pad, float_pad;
+#if CRUMPLE_SEPARATION_LANES
+  bool avx2;  ///< the separation tests run four at a time
+#endif
+  const std::vector<PackedFace>& packed;
+  /// Per face, its corners side by side (filled on the frames that ask for intersections,
+  /// whose test reads all six corners of every candidate).
+  const std::vector<std::array<Vec3, 3>>& face_corners;
+  /// Per vertex, this frame's position rounded to float (then 0); filled when proximity is
+  /// asked.
+  const std::vector<std::array<float, 4>>& coarse_x;
+  const std::vector<Index>& edge_rank;  ///< each edge's rank in (first, second vertex) order
+  Spares<KeyedContacts>& spares;
+
+  std::mutex mutex;  ///< guards the members below
+  std::vector<KeyedContacts> parts;  ///< each chunk's contacts, gathered in order at the end
+  std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
+
+  /// Flushes a chunk's queued tests, lists its contacts' keys and hands them in.
+  void collect(LocalContacts& local);
+
+  /// Corner k of face t, at x.
+  const Vec3& corner(const PackedFace& t, std::size_t k) const { return narrow::at(x, t.v[k]); }
+  F4 coarse_point(Index v) const { return load4(coarse_x[static_cast<std::size_t>(v)]); }
+
+  /// Vertex v at p against face g, past the cheap rejections: the shared kernel, queued four
+  /// at a time (the contacts reach local.set.vf at the latest in `collect`), unless the squared
+  /// distance is wanted.
+  void vf_kernel(const Vec3& p, Index v, const Vec3& a, const Vec3& b, const Vec3& c, Index g, LocalContacts& local,
+                 Scalar* sqr_distance = nullptr) const {
+    ++local.vf_tests;
+    if (sqr_distance == nullptr) {
+      local.vf_batch.push(v, p, g, a, b, c, sqr_thickness, local.set.vf);
+    } else if (auto contact = narrow::vertex_face(v, p, g, a, b, c, sqr_thickness, sqr_distance)) {
+      local.set.vf.push_back(*contact);
+    }
+  }
+  /// Edge e0 = (p0, p1) of vertices (u0, u1) and edge e1 = (q0, q1) of vertices (w0, w1), each
+  /// in any order, past the cheap rejections: the shared kernel, which sees the edges as the
+  /// mesh stores them (lower id first, each from its lower vertex), as for every other
+  /// detector. Queued four at a time, unless the squared distance is wanted.
+  void ee_kernel(const Vec3& p0, const Vec3& p1, Index u0, Index u1, Index e0, const Vec3& q0, const Vec3& q1,
+                 Index w0, Index w1, Index e1, LocalContacts& local, Scalar* sqr_distance = nullptr) const {
+    ++local.ee_tests;
+    if (sqr_distance == nullptr) {
+      local.ee_batch.push(e0, u0, u1, p0, p1, e1, w0, w1, q0, q1, sqr_thickness, local.set.ee);
+    } else if (auto c = narrow::EdgePair::ordered(e0, u0, u1, p0, p1, e1, w0, w1, q0, q1).test(sqr_thickness, sqr_distance)) {
+      local.set.ee.push_back(*c);
+    }
+  }
+
+  /// The box of face t padded by `pad` holds p (branch-free; NaN: it does not).
+  bool in_box(const Vec3& p, const PackedFace& t) const {
+    const Vec3 &a = corner(t, 0), &b = corner(t, 1), &c = corner(t, 2);
+    bool outside = false;
+    for (int i = 0; i < 3; ++i) {
+      outside |= !(std::min({a[i], b[i], c[i]}) - pad <= p[i]) | !(p[i] <= std::max({a[i], b[i], c[i]}) + pad);
+    }
+    return !outside;
+  }
+  /// The gap between p and the box of face t (negative inside), as a lower bound of their
+  /// distance (rounded down by 1e-12 of itself).
+  Scalar vertex_box_gap(const Vec3& p, const PackedFace& t) const {
+    const Vec3 &c0 = corner(t, 0), &c1 = corner(t, 1), &c2 = corner(t, 2);
+    Scalar gap = -std::numeric_limits<Scalar>::infinity();
+    for (int a = 0; a < 3; ++a) {
+      gap = std::max({gap, std::min({c0[a], c1[a], c2[a]}) - p[a], p[a] - std::max({c0[a], c1[a], c2[a]})});
+    }
+    return gap * (1 - 1e-12);
+  }
+
+  /// Sifts list[0, n) by the plane (kLine false) or line (kLine true) separation test of
+  /// points(code) (`geometry::SeparationPoints`) against `pad`: four codes at a time in AVX2
+  /// lanes where the CPU has them (the same verdicts).
+  template <bool kLine, class Points>
+  std::size_t sift_separated(std::uint16_t* list, std::size_t n, const Points& points) const {
+#if CRUMPLE_SEPARATION_LANES
+    if (avx2) return sift_separated_x4<kLine>(list, n, pad, points);
+#endif
+    return sift(list, n, [&](std::uint16_t code) {
+      const geometry::SeparationPoints q = points(code);
+      return !geometry::beyond(kLine ? geometry::line_separation(*q[0], *q[1], *q[2], *q[3])
+                                     : geometry::plane_separation(*q[0], *q[1], *q[2], *q[3]),
+                               pad);
+    });
+  }
+  /// The cheap rejections of a list of vertex-face sub-pairs, in order, leaving those the
+  /// kernel must test: point(code) gives the vertex's position and face(code) the face.
+  template <class Point, class FaceOf>
+  std::size_t sift_vertex_face(std::uint16_t* list, std::size_t n, const Point& point, const FaceOf& face) const {
+    n = sift(list, n, [&](std::uint16_t code) { return in_box(point(code), face(code)); });
+    return sift_separated<false>(list, n, [&](std::uint16_t code) {
+      const PackedFace& t = face(code);
+      return geometry::SeparationPoints{&point(code), &corner(t, 0), &corner(t, 1), &corner(t, 2)};
+    });
+  }
+};
+
+/// Stage: the sub-pairs of the broad phase's candidates (faces sharing no vertex), each tested
+/// in the one pair of its owners (ownership.hpp), by kind: VF, EE, TT.
+void narrow_candidates(NarrowFrame& frame, const CandidateBuffer& candidates);
+
+/// Stage: the orphan sub-pairs (orphans.hpp) of the awake blocks; on a `refresh`, every block,
+/// whose distance bound is then set from what its tests compute anyway. Returns the number of
+/// blocks tested.
+std::size_t narrow_orphans(NarrowFrame& frame, Orphans& orphans, bool refresh);
+
+/// Stage: vertices used by no face against every face.
+void narrow_isolated(NarrowFrame& frame, const std::vector<Index>& isolated);
+
+/// Scratch buffers of `gather_contacts`, kept across frames.
+struct GatherBuffers {
+  detail::GatherScratch main;   ///< of the edge-edge contacts (or every kind, one after the other)
+  detail::GatherScratch other;  ///< of the vertex-face and triangle contacts', placed beside them
+};
+
+/// Stage: the frame's contacts, from the chunks' `parts`, into `out` in canonical order; the
+/// parts' storage goes back to `spares`.
+void gather_contacts(std::vector<KeyedContacts>& parts, const Topology& topo, int threads, GatherBuffers& buffers,
+                     Spares<KeyedContacts>& spares, ContactSet& out);
+
+/// Each edge's rank in (first vertex, second vertex) order: the key of the edge-edge gather.
+std::vector<Index> edge_ranks(const Topology& topo);
+
+}  // namespace crumple::exact

@@ -1,0 +1,189 @@
+#include <crumple/core/parallel.hpp>
+#include <crumple/core/timing.hpp>
+#include <crumple/detect/exact/narrow_frame.hpp>
+#include <crumple/detect/exact/orphans.hpp>
+#include <crumple/detect/exact/ownership.hpp>
+#include <crumple/detect/exact_detector.hpp>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace crumple {
+
+/// What the pipeline keeps per topology and across frames.
+struct ExactDetector::State {
+  CandidateBuffer candidates;
+  exact::Orphans orphans;
+  exact::OrphanSleep sleep;
+  std::vector<Index> isolated;         ///< vertices used by no face
+  std::vector<std::uint8_t> face_owns;  ///< per face: bit 0 owns a vertex, bit 1 an edge
+  std::vector<Index> edge_rank;         ///< each edge's rank in (first, second vertex) order
+  std::vector<exact::PackedFace> packed;
+  std::vector<std::array<Vec3, 3>> face_corners;  ///< per face, its corners (frames asking for TT)
+  std::vector<std::array<float, 4>> coarse_x;     ///< per vertex, rounded to float (frames asking for VF or EE)
+  Spares<exact::KeyedContacts> spare_sets;        ///< per-chunk contacts and their keys, for reuse
+  exact::GatherBuffers gather;
+};
+
+ExactParams ExactParams::from_spec(const MethodSpec& spec) {
+  ExactParams p;
+  const long long cap = spec.get_int("max_contacts", 0);
+  if (cap < 0) throw InputError("method " + spec.to_string() + ": max_contacts must be >= 0");
+  p.max_contacts = static_cast<std::size_t>(cap);
+  static constexpr std::array<std::string_view, 2> kOverflow{"error", "truncate"};
+  p.overflow_error = spec.get_choice("overflow", "error", kOverflow) == "error";
+  return p;
+}
+
+ExactDetector::ExactDetector(DetectorOptions options, ExactParams params, std::unique_ptr<BroadPhase> broad_phase)
+    : Detector(options), params_(params), broad_phase_(std::move(broad_phase)), state_(std::make_unique<State>()) {
+  CRUMPLE_CHECK(broad_phase_ != nullptr, "ExactDetector: null broad phase");
+}
+
+ExactDetector::~ExactDetector() = default;
+
+void ExactDetector::on_topology() {
+  const Topology& topo = topology();
+  State& s = *state_;
+  const exact::FeatureOwnership own = exact::own_features(topo);
+  s.orphans = exact::list_orphans(topo, own);
+  s.sleep = {};
+  s.isolated = own.isolated;
+  s.face_owns = own.face_owns();
+  s.edge_rank = exact::edge_ranks(topo);
+  s.packed.assign(static_cast<std::size_t>(topo.num_faces()), exact::PackedFace{});
+  for (Index f = 0; f < topo.num_faces(); ++f) {
+    exact::PackedFace& pf = s.packed[static_cast<std::size_t>(f)];
+    pf.v = topo.face(f);
+    pf.e = topo.face_edges(f);
+    pf.vertex_mask = own.vertex_mask[static_cast<std::size_t>(f)];
+    pf.edge_mask = own.edge_mask[static_cast<std::size_t>(f)];
+  }
+  broad_phase_->build(topo);
+}
+
+Scalar ExactDetector::prepare_frame(PositionsView previous, PositionsView x) {
+  // One parallel pass over the positions finds the frame's largest coordinate magnitude and,
+  // when proximity is asked, rounds the positions to float for the narrow phase's box tests.
+  const bool proximity = options().kinds.vf || options().kinds.ee;
+  std::vector<std::array<float, 4>>& coarse_x = state_->coarse_x;
+  if (proximity) coarse_x.resize(x.size());
+  Scalar magnitude = 0;
+  std::mutex mutex;
+  parallel_for_chunks(x.size(), options().threads, 4096, [&](std::size_t begin, std::size_t end) {
+    Scalar m = 0;  // std::max keeps m for a NaN
+    for (std::size_t v = begin; v < end; ++v) {
+      m = std::max(m, x[v].cwiseAbs().maxCoeff());
+      if (!previous.empty()) m = std::max(m, previous[v].cwiseAbs().maxCoeff());
+      if (proximity) {
+        for (std::size_t a = 0; a < 3; ++a) coarse_x[v][a] = exact::coarse_coordinate(x[v][a]);
+        coarse_x[v][3] = 0;
+      }
+    }
+    const std::lock_guard lock(mutex);
+    magnitude = std::max(magnitude, m);
+  });
+  return magnitude;
+}
+
+void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& out) {
+  State& s = *state_;
+  const int threads = options().threads;
+  const ContactKinds kinds = options().kinds;
+  overflowed_ = false;
+  s.candidates.clear();
+
+  // Broad phase, with each face inflated by half the padded thickness (file comment).
+  const auto t0 = std::chrono::steady_clock::now();
+  const Scalar magnitude = prepare_frame(previous, x);
+  const bool proximity = kinds.vf || kinds.ee;
+  const Scalar h = options().thickness;
+  const Scalar pad = (proximity ? h * (1 + 1e-6) : 0) + 1e-9 * magnitude;
+  FrameInput in{previous, x, pad / 2, threads, !proximity, {}};
+  if (!kinds.tt) in.owns = s.face_owns;
+  broad_phase_->update(in, stats_);
+  broad_phase_->self_pairs(s.candidates, stats_);
+  stats_.set("candidates", static_cast<double>(s.candidates.total()));
+  stats_.set("broad_ms", ms_since(t0));
+
+  narrow_phase(x, pad, magnitude, out);
+  s.candidates.clear();
+  cap_contacts(out);
+}
+
+void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, ContactSet& out) {
+  State& s = *state_;
+  const Topology& topo = topology();
+  const int threads = options().threads;
+  const ContactKinds kinds = options().kinds;
+  const auto narrow_start = std::chrono::steady_clock::now();
+  if (kinds.tt) {
+    const std::size_t nf = s.packed.size();
+    s.face_corners.resize(nf);
+    parallel_for_chunks(nf, threads, balanced_grain(nf, threads, 512, 4096), [&](std::size_t begin, std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f) {
+        for (std::size_t k = 0; k < 3; ++k) s.face_corners[f][k] = narrow::at(x, s.packed[f].v[k]);
+      }
+    });
+  }
+  exact::NarrowFrame frame(topo, x, kinds, threads, options().thickness, pad, magnitude, s.packed, s.face_corners,
+                           s.coarse_x, s.edge_rank, s.spare_sets);
+  exact::narrow_candidates(frame, s.candidates);
+
+  const auto orphans_start = std::chrono::steady_clock::now();
+  const bool refresh = frame.proximity && exact::wake_orphan_blocks(s.orphans, s.sleep, x, pad, threads, stats_);
+  stats_.set("orphan_wake_ms", ms_since(orphans_start));
+  const std::size_t tested_blocks = exact::narrow_orphans(frame, s.orphans, refresh);
+  exact::narrow_isolated(frame, s.isolated);
+  if (refresh) s.sleep.ref.assign(x.begin(), x.end());
+  stats_.set("orphan_ms", ms_since(orphans_start));
+  stats_.set("orphan_blocks", static_cast<double>(s.orphans.vf_blocks.size() + s.orphans.ee_blocks.size()));
+  stats_.set("orphan_blocks_tested", static_cast<double>(tested_blocks));
+  stats_.set("orphan_refresh", refresh ? 1 : 0);
+  stats_.set("narrow_ms", ms_since(narrow_start));
+
+  // The frame's set in canonical order (`sorted_output`: the base class does not sort it again).
+  const auto gather_start = std::chrono::steady_clock::now();
+  exact::gather_contacts(frame.parts, topo, threads, s.gather, s.spare_sets, out);
+  stats_.set("sort_ms", ms_since(gather_start));
+  stats_.set("orphan_vf", static_cast<double>(s.orphans.vf.size()));
+  stats_.set("orphan_ee", static_cast<double>(s.orphans.ee.size()));
+  stats_.set("isolated_vertices", static_cast<double>(s.isolated.size()));
+  stats_.set("vf_tests", static_cast<double>(frame.vf_tests));
+  stats_.set("ee_tests", static_cast<double>(frame.ee_tests));
+  if (kinds.tt) stats_.set("tt_tests", static_cast<double>(frame.tt_tests));
+}
+
+void ExactDetector::cap_contacts(ContactSet& out) {
+  const std::size_t total = out.size();
+  stats_.set("contacts", static_cast<double>(total));
+  if (params_.max_contacts == 0 || total <= params_.max_contacts) {
+    stats_.set("overflow", 0);
+    return;
+  }
+  overflowed_ = true;
+  stats_.set("overflow", 1);
+  stats_.set("contacts_dropped", static_cast<double>(total - params_.max_contacts));
+  if (params_.overflow_error) {
+    throw ContactOverflowError("exact detector: " + std::to_string(total) + " contacts exceed max_contacts=" +
+                               std::to_string(params_.max_contacts));
+  }
+  // Keep the first max_contacts in canonical order (VF, then EE, then TT; the gather's):
+  // deterministic.
+  std::size_t keep = params_.max_contacts;
+  const auto cut = [&keep](auto& v) {
+    if (v.size() > keep) v.resize(keep);
+    keep -= v.size();
+  };
+  cut(out.vf);
+  cut(out.ee);
+  cut(out.tt);
+}
+
+}  // namespace crumple

@@ -1,0 +1,90 @@
+#pragma once
+/// \file
+/// The exact detector (`kdop`, `hash`, `sap`): a broad phase it is given (broad_phase/), then
+/// the same pipeline for every broad phase, in stages (detect/exact/, docs/exact-detectors.md):
+///
+///  1. feature ownership (exact/ownership.hpp), once per topology: every vertex and every edge
+///     is owned by one of its faces ("representative triangles", Curtis, Tamstorf & Manocha
+///     2008), chosen so that many faces own no vertex and many no edge;
+///  2. broad phase, every frame: the pairs of faces sharing no vertex that lie within the
+///     padded thickness (each face inflated by half of it), each once (broad_phase.hpp); in a
+///     proximity query it may leave out pairs that own no sub-pair (`FrameInput::owns`);
+///  3. narrow phase per pair kind (exact/narrow_candidates.cpp): in each candidate pair, the
+///     sub-pairs its faces own, VF (v, g) only in {owner(v), g}, EE (e1, e2) only in
+///     {owner(e1), owner(e2)}, so each is tested in exactly one place; TT on every candidate;
+///  4. orphans (exact/orphans.hpp): the VF and EE sub-pairs of faces that share a vertex, which
+///     no broad phase emits, listed once per topology, tested in blocks that sleep while they
+///     provably hold no contact; and isolated vertices (used by no face) against every face;
+///  5. gather (exact/gather_contacts.cpp): the contacts of every chunk, in canonical order.
+///
+/// Exactness: two features closer than h lie in faces closer than h, so in a candidate pair
+/// or an adjacent pair, and the pair of their owners is that pair. Every rejection before the
+/// exact kernels (boxes, separating planes and lines) keeps anything within the padded
+/// thickness, and the kernels are those `naive` calls, with the same argument order, so the
+/// contacts and their distances are the same bits as the oracle's.
+///
+/// Rounding: every box and rejection test uses the padded thickness `pad = h (1 + 1e-6) + 1e-9
+/// M` (M = largest coordinate magnitude of the frame) rather than h, so a pair the kernels
+/// place just under h is never rejected by a test evaluated in different arithmetic. When only
+/// TT is asked, the thickness plays no part and `pad` is the rounding margin alone.
+
+#include <crumple/core/error.hpp>
+#include <crumple/detect/broad_phase/broad_phase.hpp>
+#include <crumple/detect/detector.hpp>
+
+#include <cstddef>
+#include <memory>
+
+namespace crumple {
+
+/// Thrown by an exact detector when the contacts of a frame exceed `max_contacts` and
+/// `overflow=error` (the default).
+class ContactOverflowError : public Error {
+ public:
+  using Error::Error;
+};
+
+/// Keys common to the exact detectors (`max_contacts`, `overflow`).
+struct ExactParams {
+  std::size_t max_contacts = 0;  ///< cap on the contacts of one frame; 0 = no cap
+  bool overflow_error = true;    ///< over the cap: throw (true) or keep the first contacts
+  static ExactParams from_spec(const MethodSpec& spec);
+  bool operator==(const ExactParams&) const = default;
+};
+
+/// The exact detector over the broad phase it owns (`KdopTree`, `HashGrid`, `SweepPrune`;
+/// make_detector.cpp picks one from the spec). Its method is the broad phase's.
+class ExactDetector final : public Detector {
+ public:
+  ExactDetector(DetectorOptions options, ExactParams params, std::unique_ptr<BroadPhase> broad_phase);
+  ~ExactDetector() override;
+  Method method() const override { return broad_phase_->method(); }
+  const BroadPhase& broad_phase() const { return *broad_phase_; }
+  const BoundingHierarchy* hierarchy() const override { return broad_phase_->hierarchy(); }
+  /// True when the last frame had more contacts than `max_contacts` (also in stats:
+  /// `overflow` = 1, `contacts_dropped`).
+  bool overflowed() const { return overflowed_; }
+
+ protected:
+  /// The contacts are gathered in canonical order (`exact::gather_contacts`).
+  bool sorted_output() const override { return true; }
+
+ private:
+  struct State;  // exact_detector.cpp
+
+  void on_topology() final;
+  void detect(PositionsView previous, PositionsView positions, ContactSet& out) final;
+  /// The frame's largest coordinate magnitude (of `previous` too), and the float positions.
+  Scalar prepare_frame(PositionsView previous, PositionsView x);
+  /// Stages 3 to 5 over the broad phase's candidates; `magnitude` as `prepare_frame` gives it.
+  void narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, ContactSet& out);
+  /// Applies `max_contacts` (throws or truncates) and sets the contact stats.
+  void cap_contacts(ContactSet& out);
+
+  ExactParams params_;
+  std::unique_ptr<BroadPhase> broad_phase_;
+  std::unique_ptr<State> state_;
+  bool overflowed_ = false;
+};
+
+}  // namespace crumple
