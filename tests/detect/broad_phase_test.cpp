@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <functional>
 #include <limits>
 #include <map>
@@ -199,6 +200,20 @@ std::vector<Positions> seeded_frames(const TriMesh& mesh, Scalar scale, std::uin
   return frames;
 }
 
+/// `mesh` plus one triangle `size` units across, slanted through it (issue 45: its box spans
+/// far more grid cells than the mesh has faces).
+TriMesh with_huge_triangle(const TriMesh& mesh, Scalar size) {
+  Positions positions = mesh.positions();
+  const auto faces = mesh.topology().faces();
+  std::vector<Face> all(faces.begin(), faces.end());
+  const Index v = static_cast<Index>(positions.size());
+  positions.push_back(Vec3(-size / 2, -size / 2, -0.3));
+  positions.push_back(Vec3(size / 2, -size / 3, 0.2));
+  positions.push_back(Vec3(0.1, size / 2, 0.05));
+  all.push_back({v, v + 1, v + 2});
+  return TriMesh::create(std::move(positions), std::move(all));
+}
+
 std::vector<Scene> small_scenes() {
   std::vector<Scene> out;
   std::uint64_t seed = 11;
@@ -212,6 +227,8 @@ std::vector<Scene> small_scenes() {
   const auto faces = lattice.topology().faces();
   const TriMesh crumpled = TriMesh::create(testing::crumple_lattice(lattice, 0.3, 5), {faces.begin(), faces.end()});
   out.push_back({"crumpled16", crumpled, seeded_frames(crumpled, 1, 31), 0.01});
+  const TriMesh huge = with_huge_triangle(shapes::lattice(16, 16, 1, 1), 20);
+  out.push_back({"lattice16+huge", huge, seeded_frames(huge, 1, 41), 0.01});
   return out;
 }
 
@@ -308,6 +325,58 @@ TEST(BroadPhase, RealMeshesHoldEveryOverlappingPair) {
       }
     }
   }
+}
+
+// Issue 45: one large triangle made `hash` enter every grid cell its box spans (bad_alloc on a
+// 200 x 200 lattice with a 2,000-unit triangle). The grid's entries are bounded by the faces,
+// and the pairs with the large triangle are still all there.
+TEST(BroadPhase, HashCellsAreBoundedByTheFacesWhateverTheirSize) {
+  for (const auto& [n, size] : {std::pair<Index, Scalar>{40, 20}, {200, 2000}}) {
+    const TriMesh mesh = with_huge_triangle(shapes::lattice(n, n, 1, 1), size);
+    const Topology& topo = mesh.topology();
+    const FrameInput in{{}, mesh.positions(), 0.001, 2, false, {}};
+    HashGrid grid{HashParams{}};
+    grid.build(topo);
+    DetectorStats stats;
+    grid.update(in, stats);
+    CandidateBuffer buffer;
+    grid.self_pairs(buffer, stats);
+    EXPECT_LE(stats.get("hash_cells"), 16.0 * topo.num_faces()) << n << " x " << n << " + " << size;
+    EXPECT_EQ(stats.get("hash_oversized"), 1.0);
+    if (n == 40) {
+      const auto why = contract_broken(topo, flatten(buffer), brute_force(topo, in, true));
+      EXPECT_FALSE(why.has_value()) << *why;
+    }
+  }
+}
+
+// Issue 45: the kdop tree grew its patches over `face_faces`, whose size is the square of a
+// vertex's valence (a fan of n faces around one vertex has n^2 pairs). Building and querying
+// the tree on a fan twice as large takes at most about twice the topology's memory.
+TEST(BroadPhase, KdopTreeOnAFanNeedsNoQuadraticAdjacency) {
+  const auto fan = [](Index n) {
+    Positions positions{Vec3::Zero()};
+    std::vector<Face> faces;
+    for (Index i = 0; i < n; ++i) {
+      const Scalar a = 2 * 3.14159265358979 * static_cast<Scalar>(i) / static_cast<Scalar>(n);
+      positions.push_back(Vec3(std::cos(a), std::sin(a), 0.01 * static_cast<Scalar>(i % 2)));
+      faces.push_back({0, 1 + i, 1 + (i + 1) % n});
+    }
+    return TriMesh::create(std::move(positions), std::move(faces));
+  };
+  std::vector<double> bytes;
+  for (const Index n : {2000, 4000}) {
+    const TriMesh mesh = fan(n);
+    const Topology& topo = mesh.topology();
+    KdopTree tree{KdopParams{}};
+    tree.build(topo);
+    DetectorStats stats;
+    tree.update(FrameInput{{}, mesh.positions(), 1e-4, 1, false, {}}, stats);
+    CandidateBuffer buffer;
+    tree.self_pairs(buffer, stats);
+    bytes.push_back(static_cast<double>(topo.memory_bytes()));
+  }
+  EXPECT_LE(bytes[1], 2.2 * bytes[0]) << bytes[0] << " then " << bytes[1] << " bytes";
 }
 
 // The check itself can fail: a broad phase's output with one required pair dropped, or one

@@ -79,18 +79,29 @@ void HashGrid::update(const FrameInput& in, DetectorStats& stats) {
   const Scalar inv = 1 / cell_size_;
   ranges_.resize(nf);
   entry_offset_.resize(nf + 1);
+  oversized_flag_.assign(nf, 0);
   std::atomic<bool> too_fine{false};
   parallel_for_chunks(nf, in.threads, 4096, [&](std::size_t begin, std::size_t end) {
     bool bad = false;
     for (std::size_t f = begin; f < end; ++f) {
       std::array<std::int32_t, 6> r{0, 0, 0, -1, -1, -1};  // no cell
+      double span = 1;  // cells of the box, in floating point (no overflow)
+      bool out_of_range = false;
       // An empty box (every corner NaN) is in no cell.
       for (int a = 0; a < 3 && boxes_[f].lo[0] <= boxes_[f].hi[0]; ++a) {
         const Scalar lo = std::floor(boxes_[f].lo[a] * inv);
         const Scalar hi = std::floor(boxes_[f].hi[a] * inv);
-        bad |= !(std::fabs(lo) < 1e9 && std::fabs(hi) < 1e9 && hi - lo < 1e6);
+        out_of_range |= !(std::fabs(lo) < 1e9 && std::fabs(hi) < 1e9);
+        span *= hi - lo + 1;
         r[static_cast<std::size_t>(a)] = static_cast<std::int32_t>(std::clamp(lo, -1e9, 1e9));
         r[static_cast<std::size_t>(a) + 3] = static_cast<std::int32_t>(std::clamp(hi, -1e9, 1e9));
+      }
+      if (boxes_[f].lo[0] <= boxes_[f].hi[0] && !(span <= kMaxCellsPerFace)) {
+        // Oversized: in no cell, tested against every face by box (self_pairs).
+        oversized_flag_[f] = 1;
+        r = {0, 0, 0, -1, -1, -1};
+      } else {
+        bad |= out_of_range;
       }
       ranges_[f] = r;
       std::size_t cells = 1;
@@ -103,7 +114,11 @@ void HashGrid::update(const FrameInput& in, DetectorStats& stats) {
   });
   if (too_fine) {
     throw InputError("hash: cell size " + std::to_string(cell_size_) +
-                     " is too small for the coordinates or the face boxes of this mesh");
+                     " is too small for the coordinates of this mesh");
+  }
+  oversized_.clear();
+  for (std::size_t f = 0; f < nf; ++f) {
+    if (oversized_flag_[f]) oversized_.push_back(static_cast<Index>(f));
   }
   entry_offset_[0] = 0;
   for (std::size_t f = 0; f < nf; ++f) entry_offset_[f + 1] += entry_offset_[f];
@@ -146,6 +161,8 @@ void HashGrid::update(const FrameInput& in, DetectorStats& stats) {
   stats.set("cell_size", cell_size_);
   stats.set("table_size", static_cast<double>(n));
   stats.set("entries", static_cast<double>(entries));
+  stats.set("hash_cells", static_cast<double>(entries));
+  stats.set("hash_oversized", static_cast<double>(oversized_.size()));
 }
 
 void HashGrid::self_pairs(CandidateBuffer& out, DetectorStats& stats) {
@@ -180,6 +197,23 @@ void HashGrid::self_pairs(CandidateBuffer& out, DetectorStats& stats) {
     }
     out.add(std::move(local));
   });
+  if (!oversized_.empty()) {
+    // Each oversized face against every face by box; a pair of two oversized faces from the
+    // larger one only, so every pair is reported once.
+    parallel_for_chunks(topo.num_faces(), threads_, 1024, [&](std::size_t begin, std::size_t end) {
+      std::vector<FacePair> local = out.take();
+      for (std::size_t g = begin; g < end; ++g) {
+        const Index gi = static_cast<Index>(g);
+        for (const Index o : oversized_) {
+          if (oversized_flag_[g] && o >= gi) break;  // oversized_ is ascending
+          if (o == gi || !boxes_[static_cast<std::size_t>(o)].overlaps(boxes_[g])) continue;
+          if (faces_share_vertex(topo.face(o), topo.face(gi))) continue;
+          local.push_back({std::min(o, gi), std::max(o, gi)});
+        }
+      }
+      out.add(std::move(local));
+    });
+  }
   stats.set("traversal_ms", ms_since(t1));
 }
 

@@ -11,7 +11,10 @@
 /// Then, bucket by bucket (sequential memory access, in parallel over buckets), two entries
 /// give a candidate when they are the same cell c (hash collisions only cost time), c is the
 /// cell of the lower corner of the two boxes' intersection (so every pair is reported from
-/// exactly one cell), the boxes overlap and the faces share no vertex. The result never depends on the cell size or table size.
+/// exactly one cell), the boxes overlap and the faces share no vertex. A face whose box spans
+/// more than `kMaxCellsPerFace` cells enters no cell and is tested against every face by box,
+/// so the entries are at most that many per face. The result never depends on the cell size
+/// or table size.
 /// Spec: `hash:cell=C,table=N` — C is the cell size as a multiple of the mean edge length of
 /// the first frame (0 = automatic: max(mean edge, 2 h)); N the bucket count (0 = the smallest
 /// prime >= 2 x the entries of the first frame); plus `max_contacts`, `overflow`.
@@ -45,6 +48,10 @@ class HashGrid final : public BroadPhase {
     Index face;
     std::int32_t cell[3];
   };
+  /// A face whose box spans more cells than this is "oversized": it enters no cell and is
+  /// tested against every face by box instead, so the grid holds at most this many entries
+  /// per face whatever the faces' sizes.
+  static constexpr double kMaxCellsPerFace = 64;
   HashParams params_;
   const Topology* topo_ = nullptr;
   int threads_ = 0;       ///< of the last update
@@ -56,6 +63,8 @@ class HashGrid final : public BroadPhase {
   std::vector<std::uint32_t> entry_bucket_;          ///< per entry (face-major order)
   std::vector<std::uint32_t> bucket_start_;          ///< table_size_ + 1
   std::vector<Entry> sorted_;                        ///< entries grouped by bucket
+  std::vector<std::uint8_t> oversized_flag_;         ///< per face: 1 when oversized
+  std::vector<Index> oversized_;                     ///< the oversized faces, ascending
 };
 
 }  // namespace crumple

@@ -398,7 +398,7 @@ class DopTree final : public KdopTree::Impl {
   /// Cuts the faces into connected patches of at most `leaf` faces (faces sharing a vertex are
   /// connected), the leaves to be: each grown from a seed, the first face not yet in a patch in
   /// Morton order of the centroids, by adding the face nearest to the seed among those that
-  /// share a vertex with the patch; then a patch of fewer than leaf / 4 faces joins the smallest
+  /// share a vertex with the patch (of a vertex's first 256 faces); then a patch of fewer than leaf / 4 faces joins the smallest
   /// patch it touches that has room. A leaf of one patch stays compact however its surface
   /// moves; a leaf of median cuts may hold pieces of surfaces that only pass near each other,
   /// and those pieces move apart, loosening the refitted tree. Sets `patch_` and
@@ -442,7 +442,21 @@ class DopTree final : public KdopTree::Impl {
     std::vector<Frontier> heap;
     std::vector<Index> offered;  // faces pushed for this patch, to forget after it
     std::vector<char> seen(nf, 0);
-    const Adjacency& near = topo.face_faces();
+    // The faces sharing a vertex with f, from each corner's first kNearScan faces: the same
+    // set as `face_faces` at ordinary valences (the heap's order and the merge's choice do not
+    // depend on the order of offers), without its memory quadratic in a valence (issue 45: a
+    // fan of n faces has n^2 face pairs); past the cap a patch is only less compact.
+    constexpr std::size_t kNearScan = 256;
+    const Adjacency& vertex_faces = topo.vertex_faces();
+    const auto for_near = [&](Index f, const auto& visit) {
+      for (const Index v : topo.face(f)) {
+        const auto around = vertex_faces[v];
+        const std::size_t n = std::min(around.size(), kNearScan);
+        for (std::size_t i = 0; i < n; ++i) {
+          if (around[i] != f) visit(around[i]);
+        }
+      }
+    };
     for (const auto& [code, seed] : seeds) {
       if (patch_[static_cast<std::size_t>(seed)] != kNone) continue;
       const auto id = static_cast<Index>(size.size());
@@ -461,13 +475,13 @@ class DopTree final : public KdopTree::Impl {
         heap.pop_back();
         patch_[static_cast<std::size_t>(f)] = id;
         ++size.back();
-        for (const Index g : near[f]) {
-          if (patch_[static_cast<std::size_t>(g)] != kNone || seen[static_cast<std::size_t>(g)] != 0) continue;
+        for_near(f, [&](Index g) {
+          if (patch_[static_cast<std::size_t>(g)] != kNone || seen[static_cast<std::size_t>(g)] != 0) return;
           seen[static_cast<std::size_t>(g)] = 1;
           offered.push_back(g);
           heap.push_back({d2(g), g});
           std::push_heap(heap.begin(), heap.end());
-        }
+        });
       }
       for (const Index f : offered) seen[static_cast<std::size_t>(f)] = 0;
     }
@@ -480,14 +494,14 @@ class DopTree final : public KdopTree::Impl {
       if (n == 0 || 4 * n >= params_.leaf) continue;
       Index best = kNone;
       for (const Index f : members[p]) {
-        for (const Index g : near[f]) {
+        for_near(f, [&](Index g) {
           const Index q = patch_[static_cast<std::size_t>(g)];
-          if (static_cast<std::size_t>(q) == p || size[static_cast<std::size_t>(q)] + n > params_.leaf) continue;
+          if (static_cast<std::size_t>(q) == p || size[static_cast<std::size_t>(q)] + n > params_.leaf) return;
           if (best == kNone || size[static_cast<std::size_t>(q)] < size[static_cast<std::size_t>(best)] ||
               (size[static_cast<std::size_t>(q)] == size[static_cast<std::size_t>(best)] && q < best)) {
             best = q;
           }
-        }
+        });
       }
       if (best == kNone) continue;
       for (const Index f : members[p]) patch_[static_cast<std::size_t>(f)] = best;
