@@ -50,6 +50,14 @@ void on_glfw_error(int code, const char* text) {
   std::fprintf(stderr, "crumple-view: GLFW error %d: %s\n", code, text);
 }
 
+/// A diverged simulation (back at its last good state): paused, with the message in the UI
+/// and on stderr, so that the settings can be changed and the run resumed.
+void on_divergence(App& app, const sim::DivergenceError& e) {
+  app.paused = true;
+  app.set_message(e.what());
+  std::fprintf(stderr, "crumple-view: %s\n", e.what());
+}
+
 /// Advances, or steps once when paused and asked to; an error pauses and shows its message.
 void simulate(App& app, float& accumulated) {
   try {
@@ -63,6 +71,9 @@ void simulate(App& app, float& accumulated) {
       app.advance();
     }
     app.step_request = false;
+  } catch (const sim::DivergenceError& e) {
+    app.step_request = false;
+    on_divergence(app, e);
   } catch (const Error& e) {
     app.paused = true;
     app.set_message(e.what());
@@ -109,11 +120,19 @@ int run(const Options& options) {
   {
     GlDraw gl;
     Progress progress("frame", options.frames);
-    for (long long k = 0; k < options.frames; ++k) {
-      app.advance();
-      progress.update(k + 1);
+    bool diverged = false;
+    try {
+      for (long long k = 0; k < options.frames; ++k) {
+        app.advance();
+        progress.update(k + 1);
+      }
+    } catch (const sim::DivergenceError& e) {
+      progress.finish();
+      on_divergence(app, e);
+      diverged = true;
     }
-    progress.finish();
+    if (!diverged) progress.finish();
+    if (diverged && automated) status = 1;  // a scripted run that diverged is a failure
     {
       int fw = 0, fh = 0;
       glfwGetFramebufferSize(window, &fw, &fh);

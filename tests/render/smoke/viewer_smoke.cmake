@@ -35,3 +35,18 @@ execute_process(COMMAND "${CHECKER}" "${OUT}" RESULT_VARIABLE rc)
 if(NOT rc EQUAL 0)
   message(FATAL_ERROR "viewer.smoke: the screenshot failed the check")
 endif()
+# A diverging simulation (sim::DivergenceError) pauses the viewer with the message instead of
+# ending it: the picture of the last good state is still taken; a scripted run exits 1.
+set(DIVERGED "${OUT}.diverged.png")
+file(REMOVE "${DIVERGED}")
+execute_process(
+  COMMAND ${XVFB_RUN} -a -s "-screen 0 1024x768x24" "${VIEWER}" hanging-cloth -p gravity=1e12 --frames 5
+          --screenshot "${DIVERGED}" --exit
+  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err TIMEOUT 240)
+message(STATUS "crumple-view (diverging): ${out}${err}")
+if(NOT rc EQUAL 1 OR NOT err MATCHES "diverged at frame 1")
+  message(FATAL_ERROR "viewer.smoke: a diverging run exited with '${rc}' without the divergence message")
+endif()
+if(NOT EXISTS "${DIVERGED}")
+  message(FATAL_ERROR "viewer.smoke: a diverging run ended before its screenshot")
+endif()
