@@ -1016,5 +1016,21 @@ TEST(ExactDetectors, ClothBallIntersectionCount) {
   }
 }
 
+// Issue 45: listing the orphan sub-pairs went through `face_faces`, whose size is the square of
+// the faces around a vertex: n repeated faces (no orphan at all) cost n^2 entries. The
+// topology holds no more after a detection than before, and the contacts are naive's.
+TEST(ExactDetectors, RepeatedFacesNeedNoQuadraticAdjacency) {
+  Positions positions{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)};
+  std::vector<Face> faces(2000, Face{0, 1, 2});
+  const TriMesh mesh = TriMesh::create(std::move(positions), std::move(faces));
+  const std::size_t before = mesh.topology().memory_bytes();
+  const ContactSet want = run("naive", mesh, {}, mesh.positions(), 0.01);
+  for (const std::string spec : {"kdop", "hash", "sap"}) {
+    const ContactSet got = run(spec, mesh, {}, mesh.positions(), 0.01);
+    expect_same(want, got, spec);
+    EXPECT_EQ(mesh.topology().memory_bytes(), before) << spec;
+  }
+}
+
 }  // namespace
 }  // namespace crumple
