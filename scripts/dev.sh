@@ -3,7 +3,8 @@
 #   bash scripts/dev.sh demo   install what is missing, build Release, run `crumple simulate` on the
 #                              thesis' hanging-cloth scene and print a summary table
 #   bash scripts/dev.sh test   install what is missing, build Release and the asan preset, run
-#                              every test of both, then the Python tests (pytest's summary last)
+#                              every test of both, then the Python tests, then each libFuzzer
+#                              target for 15 s (docs/fuzzing.md)
 #   bash scripts/dev.sh deps   only install the Debian packages
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -12,7 +13,7 @@ JOBS=${JOBS:-$(nproc)}
 PACKAGES=(g++ cmake make libeigen3-dev libtbb-dev libpugixml-dev libcli11-dev libgtest-dev
           libgmock-dev libbenchmark-dev libglfw3-dev libimgui-dev libstb-dev xvfb xauth
           libgl1-mesa-dri libgl-dev libgmp-dev pybind11-dev python3-dev python3-numpy
-          python3-pytest python3-matplotlib)
+          python3-pytest python3-matplotlib clang libclang-rt-14-dev)
 
 install_deps() {
   local missing=()
@@ -66,6 +67,9 @@ EOF
     [ -d build/release/python/crumple ] || { echo "no Python module: reconfigure build/release with -DCRUMPLE_BUILD_PYTHON=ON" >&2; exit 1; }
     PYTHONPATH="$PWD/build/release/python" PYTHONDONTWRITEBYTECODE=1 \
       /usr/bin/python3 -m pytest tests/python -q -p no:cacheprovider
+    echo "== libFuzzer targets, 15 s each over a copy of the seed corpus (docs/fuzzing.md)"
+    build fuzz
+    bash scripts/fuzz.sh ci 15
     ;;
   *)
     echo "usage: bash scripts/dev.sh demo|test|deps" >&2

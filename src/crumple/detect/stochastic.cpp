@@ -592,7 +592,9 @@ void StochasticDetector::load_state(std::string_view text) {
     if (!(in >> word) || word != to_string(kPairTypes[i])) {
       fail("expected the '" + std::string(to_string(kPairTypes[i])) + "' pair lists");
     }
-    const auto [na, nb] = pair_counts(topo, kPairTypes[i]);
+    const auto counts = pair_counts(topo, kPairTypes[i]);  // no binding: clang 14 cannot capture one
+    const auto na = std::get<0>(counts);
+    const auto nb = std::get<1>(counts);
     const auto read = [&](std::vector<PrimitivePair>& pairs) {
       std::size_t n = 0;
       if (!(in >> n)) fail("expected a pair count");

@@ -830,7 +830,8 @@ class DopTree final : public KdopTree::Impl {
       const auto leaf_faces = static_cast<std::size_t>(level_leaf_faces_[l]);
       const std::size_t grain = std::clamp<std::size_t>(leaf_faces > 0 ? 2048 * count / leaf_faces : 64, 1, 64);
       parallel_for_chunks(count, in.threads, grain, [&](std::size_t begin, std::size_t end) {
-        refit_nodes(static_cast<std::size_t>(lb) + begin, static_cast<std::size_t>(lb) + end, in, swept, radius, moves);
+        const auto first = static_cast<std::size_t>(levels_[l][0]);  // clang 14 cannot capture `lb`
+        refit_nodes(first + begin, first + end, in, swept, radius, moves);
       });
     }
     if (built_quality_ == 0) built_quality_ = std::max(quality(), 1e-300);
