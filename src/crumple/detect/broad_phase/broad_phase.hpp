@@ -167,9 +167,9 @@ struct Box {
 
 /// True when the faces share a vertex (9 comparisons).
 inline bool faces_share_vertex(const Face& a, const Face& b) {
-  bool s = false;
-  for (Index v : a) s |= (v == b[0]) | (v == b[1]) | (v == b[2]);
-  return s;
+  int s = 0;  // branch-free: bitwise ors of the nine comparisons
+  for (Index v : a) s |= int(v == b[0]) | int(v == b[1]) | int(v == b[2]);
+  return s != 0;
 }
 
 /// Every face's box (current positions, and previous ones too when `sweep` and given),
