@@ -1,7 +1,7 @@
 #pragma once
 /// \file
 /// The reference detector: the thesis' plain O(n^2) double loop over every vertex–face and
-/// edge–edge pair (and face–face for TT on request), no culling of any kind (SPEC.md §1, §4).
+/// edge–edge pair (and face–face for TT on request), no culling of any kind (the thesis' reference loop; docs/design.md).
 /// It is both the baseline of the thesis' tables and the oracle every other method is measured
 /// against. The loops may run on several threads; the result does not depend on it.
 

@@ -1,6 +1,6 @@
 #pragma once
 /// \file
-/// The thesis' X3D `MassSpring` node (SPEC.md §7), with crumple's `Face` extension.
+/// The thesis' X3D `MassSpring` node (docs/simulation.md), with crumple's `Face` extension.
 ///
 /// ```xml
 /// <X3D><Scene><Shape>

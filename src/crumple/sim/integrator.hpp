@@ -1,6 +1,6 @@
 #pragma once
 /// \file
-/// Time integrators behind one interface (SPEC.md §6, thesis Annex A.2). Each advances
+/// Time integrators behind one interface (thesis Annex A.2; docs/simulation.md). Each advances
 /// q = (x, v) by one step h with the forces of `forces.hpp`; a = M⁻¹ f, zero for pinned
 /// particles, whose velocity is therefore kept (a kinematic pin with velocity u moves by h u).
 ///

@@ -1,6 +1,6 @@
 #pragma once
 /// \file
-/// Mass–spring model (SPEC.md §6, thesis Annex A): particles with mass, position and velocity
+/// Mass–spring model (thesis Annex A; docs/simulation.md): particles with mass, position and velocity
 /// linked by springs with stiffness, damping ratio and rest length. A mass of 0 pins the
 /// particle (infinite mass: forces and collision response never move it; the scene may still
 /// drive it kinematically). The triangles of the surface are kept for collision detection.

@@ -75,7 +75,7 @@ constexpr std::array<SceneParamInfo, 8> kFile{{
 
 constexpr std::array<SceneInfo, 5> kScenes{{
     {"hanging-cloth",
-     "the thesis scene (SPEC.md §4): a square cloth lattice, initially horizontal, hanging from one "
+     "the thesis scene: a square cloth lattice, initially horizontal, hanging from one "
      "corner under gravity, no collision response: it falls through itself and collapses into a "
      "hanging bundle",
      kHanging},

@@ -1,7 +1,7 @@
 #pragma once
 /// \file
 /// The simulation loop: integrate → kinematic pins → obstacles → self-collision response, with
-/// a detector from `detect/` (SPEC.md §1: display → input → deform → handle collisions).
+/// a detector from `detect/` (the thesis' loop, docs/simulation.md: display → input → deform → handle collisions).
 ///
 /// One step of length h, contacts C detected at the step's start positions x₀ (thickness h_c):
 ///  1. integrate (x₀, v₀) → (x₁, v₁) with the chosen integrator;

@@ -1,7 +1,7 @@
 #pragma once
 /// \file
 /// `hash`: optimised spatial hashing (Teschner, Heidelberger, Müller, Pomeranets & Gross,
-/// VMV 2003; ALGORITHMS.md §4) adapted to vertex–face and edge–edge proximity, a broad phase
+/// VMV 2003) adapted to vertex–face and edge–edge proximity, a broad phase
 /// (broad_phase.hpp) of the exact detector.
 ///
 /// Every frame, each face's box (current positions, inflated by half the padded thickness) is

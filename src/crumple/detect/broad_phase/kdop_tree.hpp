@@ -1,6 +1,6 @@
 #pragma once
 /// \file
-/// `kdop`: an inflated, motion-oriented k-DOP hierarchy over the faces (ALGORITHMS.md §2;
+/// `kdop`: an inflated, motion-oriented k-DOP hierarchy over the faces (docs/exact-detectors.md;
 /// Klosowski et al. 1998; Mezger, Kimmerle & Etzmuss 2003; Blender's kdop.c), a broad phase
 /// (broad_phase.hpp) of the exact detector.
 ///
@@ -35,14 +35,14 @@
 ///    own no sub-pair (`FrameInput::owns`), by two masks per leaf.
 /// Spec: `kdop:k=6|14|18|26,arity=2|4|8,leaf=N,rebuild=R,sweep=on|off,cones=on|off,coherence=on|off`
 /// plus `max_contacts`, `overflow`.
-///  - Normal-cone culling (ALGORITHMS.md §3; Volino & Magnenat-Thalmann), for intersection-only
+///  - Normal-cone culling (Volino & Magnenat-Thalmann), for intersection-only
 ///    queries (`kinds` = tt): a node whose faces all face one of 26 fixed directions V (a
 ///    per-face bit mask ANDed up the tree) and whose boundary, projected along V, is one
 ///    star-shaped loop traversed once, projects one-to-one onto the plane, so no two of its
 ///    points coincide: its self-test is skipped. Proximity (vf, ee) is never culled: a patch that
-///    is a height field can still hold features closer than the thickness (ALGORITHMS.md §3
-///    pitfalls). Needs consistently oriented faces; any doubt (degenerate face, an edge used
-///    twice in one direction, a loop winding more than once) keeps the self-test.
+///    is a height field can still hold features closer than the thickness. Needs consistently
+///    oriented faces; any doubt (degenerate face, an edge used twice in one direction, a loop
+///    winding more than once) keeps the self-test.
 ///  - Temporal coherence (`coherence=on`, proximity queries): a refresh frame inflates the
 ///    k-DOPs by a slack s more and records the candidates of each unit (the first self-test of a
 ///    node of at most 512 faces, or pair test of two such nodes, that the traversal reaches); on

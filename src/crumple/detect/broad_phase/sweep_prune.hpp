@@ -1,7 +1,7 @@
 #pragma once
 /// \file
 /// `sap`: sweep and prune with insertion sort across frames (Cohen, Lin, Manocha & Ponamgi,
-/// I-COLLIDE, I3D 1995; ALGORITHMS.md §7), a broad phase
+/// I-COLLIDE, I3D 1995), a broad phase
 /// (broad_phase.hpp) of the exact detector.
 ///
 /// The face boxes (current positions, inflated by half the padded thickness) are kept sorted
