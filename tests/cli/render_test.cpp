@@ -150,9 +150,7 @@ TEST(Render, VideoFolderNameIsNeverRunAsACommand) {
   EXPECT_FALSE(std::filesystem::exists(dir / "PWNED")) << "a shell ran the folder's name";
   EXPECT_FALSE(std::filesystem::exists(dir / "PWNED2")) << "a shell ran the folder's name";
   EXPECT_TRUE(std::filesystem::exists(dir / video / "000001.png"));
-  std::ifstream in(record);
-  std::vector<std::string> lines;
-  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  const std::vector<std::string> lines = testing::read_lines(record);
   ASSERT_FALSE(lines.empty()) << "the fake ffmpeg did not run\n" << r.out;
   EXPECT_EQ(std::filesystem::path(lines[0]), std::filesystem::canonical(dir / video));
   EXPECT_EQ(lines.back(), "video.mp4");

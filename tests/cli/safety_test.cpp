@@ -27,14 +27,9 @@
 namespace crumple {
 namespace {
 
+using testing::read_lines;
 using testing::run_cli;
 
-std::vector<std::string> read_lines(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  std::vector<std::string> lines;
-  for (std::string line; std::getline(in, line);) lines.push_back(line);
-  return lines;
-}
 
 std::vector<std::string> fields(const std::string& line) {
   std::vector<std::string> out;

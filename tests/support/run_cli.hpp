@@ -4,7 +4,10 @@
 
 #include <array>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <string>
+#include <vector>
 #include <sys/wait.h>
 
 namespace crumple::testing {
@@ -28,5 +31,13 @@ inline CliResult run_program(const std::string& program, const std::string& args
 
 /// Runs `crumple ARGS` through the shell and collects its output.
 inline CliResult run_cli(const std::string& args) { return run_program(CRUMPLE_CLI, args); }
+
+/// The lines of a text file a command wrote (empty when it cannot be read).
+inline std::vector<std::string> read_lines(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  return lines;
+}
 
 }  // namespace crumple::testing
