@@ -19,9 +19,9 @@ namespace crumple {
 /// What the pipeline keeps per topology and across frames.
 struct ExactDetector::State {
   CandidateBuffer candidates;
+  exact::FeatureOwnership own;
   exact::Orphans orphans;
   exact::OrphanSleep sleep;
-  std::vector<Index> isolated;         ///< vertices used by no face
   std::vector<std::uint8_t> face_owns;  ///< per face: bit 0 owns a vertex, bit 1 an edge
   std::vector<Index> edge_rank;         ///< each edge's rank in (first, second vertex) order
   std::vector<exact::PackedFace> packed;
@@ -51,10 +51,10 @@ ExactDetector::~ExactDetector() = default;
 void ExactDetector::on_topology() {
   const Topology& topo = topology();
   State& s = *state_;
-  const exact::FeatureOwnership own = exact::own_features(topo);
+  s.own = exact::own_features(topo);
+  const exact::FeatureOwnership& own = s.own;
   s.orphans = exact::list_orphans(topo, own);
   s.sleep = {};
-  s.isolated = own.isolated;
   s.face_owns = own.face_owns();
   s.edge_rank = exact::edge_ranks(topo);
   s.packed.assign(static_cast<std::size_t>(topo.num_faces()), exact::PackedFace{});
@@ -140,12 +140,15 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   const bool refresh = frame.proximity && exact::wake_orphan_blocks(s.orphans, s.sleep, x, pad, threads, stats_);
   stats_.set("orphan_wake_ms", ms_since(orphans_start));
   const std::size_t tested_blocks = exact::narrow_orphans(frame, s.orphans, refresh);
-  exact::narrow_isolated(frame, s.isolated);
+  const std::size_t star_pairs = exact::narrow_stars(frame, s.orphans.stars, s.own);
+  exact::narrow_isolated(frame, s.own.isolated);
   if (refresh) s.sleep.ref.assign(x.begin(), x.end());
   stats_.set("orphan_ms", ms_since(orphans_start));
   stats_.set("orphan_blocks", static_cast<double>(s.orphans.vf_blocks.size() + s.orphans.ee_blocks.size()));
   stats_.set("orphan_blocks_tested", static_cast<double>(tested_blocks));
   stats_.set("orphan_refresh", refresh ? 1 : 0);
+  stats_.set("orphan_stars", static_cast<double>(s.orphans.stars.size()));
+  stats_.set("orphan_star_pairs", static_cast<double>(star_pairs));
   stats_.set("narrow_ms", ms_since(narrow_start));
 
   // The frame's set in canonical order (`sorted_output`: the base class does not sort it again).
@@ -154,7 +157,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   stats_.set("sort_ms", ms_since(gather_start));
   stats_.set("orphan_vf", static_cast<double>(s.orphans.vf.size()));
   stats_.set("orphan_ee", static_cast<double>(s.orphans.ee.size()));
-  stats_.set("isolated_vertices", static_cast<double>(s.isolated.size()));
+  stats_.set("isolated_vertices", static_cast<double>(s.own.isolated.size()));
   stats_.set("vf_tests", static_cast<double>(frame.vf_tests));
   stats_.set("ee_tests", static_cast<double>(frame.ee_tests));
   if (kinds.tt) stats_.set("tt_tests", static_cast<double>(frame.tt_tests));

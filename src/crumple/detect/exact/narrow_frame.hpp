@@ -256,7 +256,12 @@ void narrow_candidates(NarrowFrame& frame, const CandidateBuffer& candidates);
 /// blocks tested.
 std::size_t narrow_orphans(NarrowFrame& frame, Orphans& orphans, bool refresh);
 
-/// Stage: vertices used by no face against every face.
+/// Stage: the orphan sub-pairs whose source is a star (orphans.hpp), found among the pairs of
+/// its faces whose boxes meet, inflated by pad / 2 (narrow_stars.cpp). Returns the number of
+/// face pairs examined.
+std::size_t narrow_stars(NarrowFrame& frame, const std::vector<Index>& stars, const FeatureOwnership& own);
+
+/// Stage: vertices used by no face against the faces whose boxes come within pad.
 void narrow_isolated(NarrowFrame& frame, const std::vector<Index>& isolated);
 
 /// Scratch buffers of `gather_contacts`, kept across frames.

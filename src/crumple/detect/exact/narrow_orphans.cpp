@@ -206,31 +206,4 @@ std::size_t narrow_orphans(NarrowFrame& frame, Orphans& orphans, bool refresh) {
   return tested;
 }
 
-void narrow_isolated(NarrowFrame& frame, const std::vector<Index>& isolated) {
-  if (!frame.kinds.vf) return;
-  const std::size_t nf = frame.packed.size();
-  parallel_for_chunks(isolated.size(), frame.threads, 1, [&](std::size_t begin, std::size_t end) {
-    LocalContacts local{frame.spares.take()};
-    CodeList list;
-    for (std::size_t i = begin; i < end; ++i) {
-      const Index v = isolated[i];
-      const Vec3& p = narrow::at(frame.x, v);
-      for (std::size_t g0 = 0; g0 < nf; g0 += kBlock) {
-        std::size_t n = std::min(kBlock, nf - g0);
-        iota(list, n);
-        n = frame.sift_vertex_face(
-            list.data(), n, [&](std::uint16_t) -> const Vec3& { return p; },
-            [&](std::uint16_t k) -> const PackedFace& { return frame.packed[g0 + k]; });
-        for (std::size_t s = 0; s < n; ++s) {
-          const std::size_t g = g0 + list[s];
-          const PackedFace& t = frame.packed[g];
-          frame.vf_kernel(p, v, frame.corner(t, 0), frame.corner(t, 1), frame.corner(t, 2), static_cast<Index>(g),
-                          local);
-        }
-      }
-    }
-    frame.collect(local);
-  });
-}
-
 }  // namespace crumple::exact

@@ -51,38 +51,22 @@ Orphans list_orphans(const Topology& topo, const FeatureOwnership& own) {
   Orphans out;
   // Orphan sub-pairs: owned features of face pairs that share a vertex, not excluded. Each pair
   // is visited from the faces around its smallest shared vertex (not through `face_faces`, whose
-  // memory is quadratic in a valence even where the pairs have no orphan, as repeated faces).
+  // memory is quadratic in a valence even where the pairs have no orphan, as repeated faces);
+  // around a star, not here but each frame (`narrow_stars`).
   const Adjacency& vertex_faces = topo.vertex_faces();
   for (Index v = 0; v < nv; ++v) {
     const auto around = vertex_faces[v];
+    if (around.size() > kStarValence) {
+      out.stars.push_back(v);
+      continue;
+    }
     for (std::size_t p = 0; p < around.size(); ++p) {
       for (std::size_t q = p + 1; q < around.size(); ++q) {
         const Index f = std::min(around[p], around[q]), g = std::max(around[p], around[q]);
-        if (f == g) continue;
-        const Face& a = topo.face(f);
-        Index smallest = v;
-        for (const Index u : a) {
-          if (u < smallest && topo.face_has_vertex(g, u)) smallest = u;
-        }
-        if (smallest != v) continue;
-        const auto& fa = topo.face_edges(f);
-        const Face& b = topo.face(g);
-        const auto& fb = topo.face_edges(g);
-        for (int k = 0; k < 3; ++k) {
-          if ((own.vertex_mask[static_cast<std::size_t>(f)] >> k & 1u) && !topo.face_has_vertex(g, a[k]))
-            out.vf.push_back({a[k], g});
-          if ((own.vertex_mask[static_cast<std::size_t>(g)] >> k & 1u) && !topo.face_has_vertex(f, b[k]))
-            out.vf.push_back({b[k], f});
-        }
-        for (int i = 0; i < 3; ++i) {
-          if (!(own.edge_mask[static_cast<std::size_t>(f)] >> i & 1u)) continue;
-          for (int j = 0; j < 3; ++j) {
-            if (!(own.edge_mask[static_cast<std::size_t>(g)] >> j & 1u)) continue;
-            if (topo.edges_adjacent(fa[i], fb[j])) continue;
-            const Index e0 = std::min(fa[i], fb[j]), e1 = std::max(fa[i], fb[j]);
-            out.ee.push_back({{e0, e1}, topo.edge(e0), topo.edge(e1)});
-          }
-        }
+        if (f == g || smallest_shared_vertex(topo, f, g) != v) continue;
+        for_each_orphan(
+            topo, own, f, g, [&](Index u, Index face) { out.vf.push_back({u, face}); },
+            [&](Index e0, Index e1) { out.ee.push_back({{e0, e1}, topo.edge(e0), topo.edge(e1)}); });
       }
     }
   }

@@ -11,6 +11,7 @@
 #include <crumple/detect/exact/ownership.hpp>
 #include <crumple/mesh/mesh.hpp>
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -41,6 +42,11 @@ struct OrphanBlocks {
   std::size_t size() const { return bound.size(); }
 };
 
+/// Vertices with more faces than this are *stars*: the pairs of faces around them are quadratic
+/// in number, so their orphan sub-pairs are not listed but found each frame among the faces
+/// that come close (`narrow_stars`), in time and memory near-linear in the valence.
+inline constexpr std::size_t kStarValence = 64;
+
 struct Orphans {
   /// (vertex, face) sub-pairs, by face (then vertex). No two the same (a feature has one owner,
   /// so a sub-pair comes from one pair of faces).
@@ -48,10 +54,50 @@ struct Orphans {
   /// Edge pairs, by first edge (then second).
   std::vector<OrphanEdges> ee;
   OrphanBlocks vf_blocks, ee_blocks;
+  /// The stars, ascending. A pair of faces is the orphan source of its smallest shared vertex:
+  /// listed above when that vertex is not a star, found by `narrow_stars` when it is.
+  std::vector<Index> stars;
 };
 
-/// The orphan sub-pairs of `topo` under `own`, sorted and cut into blocks (every block awake,
-/// with bound 0).
+/// The smallest vertex that faces f and g share (-1 if none).
+inline Index smallest_shared_vertex(const Topology& topo, Index f, Index g) {
+  Index smallest = -1;
+  for (const Index u : topo.face(f)) {
+    if (topo.face_has_vertex(g, u) && (smallest < 0 || u < smallest)) smallest = u;
+  }
+  return smallest;
+}
+
+/// Calls vf(vertex, face) and ee(first edge, second edge) for each orphan sub-pair of the
+/// distinct faces f and g, which share a vertex: the owned vertices of one that the other does
+/// not use against the other, and the owned edges of both that share no vertex (first <
+/// second).
+template <class VertexFace, class EdgeEdge>
+void for_each_orphan(const Topology& topo, const FeatureOwnership& own, Index f, Index g, const VertexFace& vf,
+                     const EdgeEdge& ee) {
+  const Face& a = topo.face(f);
+  const Face& b = topo.face(g);
+  const auto& fa = topo.face_edges(f);
+  const auto& fb = topo.face_edges(g);
+  const unsigned vertex_f = own.vertex_mask[static_cast<std::size_t>(f)];
+  const unsigned vertex_g = own.vertex_mask[static_cast<std::size_t>(g)];
+  for (int k = 0; k < 3; ++k) {
+    if ((vertex_f >> k & 1u) && !topo.face_has_vertex(g, a[k])) vf(a[k], g);
+    if ((vertex_g >> k & 1u) && !topo.face_has_vertex(f, b[k])) vf(b[k], f);
+  }
+  const unsigned edge_f = own.edge_mask[static_cast<std::size_t>(f)];
+  const unsigned edge_g = own.edge_mask[static_cast<std::size_t>(g)];
+  for (int i = 0; i < 3; ++i) {
+    if (!(edge_f >> i & 1u)) continue;
+    for (int j = 0; j < 3; ++j) {
+      if (!(edge_g >> j & 1u) || topo.edges_adjacent(fa[i], fb[j])) continue;
+      ee(std::min(fa[i], fb[j]), std::max(fa[i], fb[j]));
+    }
+  }
+}
+
+/// The orphan sub-pairs of `topo` under `own` whose source is not a star, sorted and cut into
+/// blocks (every block awake, with bound 0), and the stars.
 Orphans list_orphans(const Topology& topo, const FeatureOwnership& own);
 
 /// Temporal coherence of the orphans across frames.
