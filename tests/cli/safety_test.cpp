@@ -9,7 +9,6 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <csignal>
 #include <filesystem>
@@ -17,12 +16,7 @@
 #include <regex>
 #include <sstream>
 #include <string>
-#include <thread>
 #include <vector>
-
-#include <fcntl.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 namespace crumple {
 namespace {
@@ -199,26 +193,7 @@ TEST(Safety, ContactFilesOfTwoFramesNeverShareAName) {
 // resumes.
 TEST(Safety, SigtermLeavesCompleteFilesAndAResumableState) {
   const testing::TempDir dir;
-  const pid_t pid = ::fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const int null = ::open("/dev/null", O_WRONLY);
-    ::dup2(null, 1);
-    ::dup2(null, 2);
-    const std::string out = dir.path().string();
-    ::execl(CRUMPLE_CLI, CRUMPLE_CLI, "simulate", "hanging-cloth:nx=6,ny=6", "--frames", "1000000",
-            "-o", out.c_str(), static_cast<char*>(nullptr));
-    ::_exit(127);
-  }
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (read_lines(dir / "stats.csv").size() < 10 && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  ::kill(pid, SIGTERM);
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  ASSERT_TRUE(WIFEXITED(status)) << "killed by the signal";
-  EXPECT_EQ(WEXITSTATUS(status), 128 + SIGTERM);
+  EXPECT_EQ(testing::interrupt_simulation(dir.path(), SIGTERM), 128 + SIGTERM);
   const auto lines = read_lines(dir / "stats.csv");
   ASSERT_GE(lines.size(), 10u);
   for (const auto& line : lines) EXPECT_EQ(fields(line).size(), fields(lines[0]).size()) << line;

@@ -7,18 +7,12 @@
 
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
-#include <thread>
 #include <vector>
-
-#include <fcntl.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 namespace crumple {
 namespace {
@@ -117,27 +111,7 @@ TEST(Simulate, ResumesTheStochasticDetectorsStateBitForBit) {
 
 TEST(Simulate, InterruptLeavesCompleteFiles) {
   const testing::TempDir dir;
-  const pid_t pid = ::fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const int null = ::open("/dev/null", O_WRONLY);
-    ::dup2(null, 1);
-    ::dup2(null, 2);
-    const std::string out = dir.path().string();
-    ::execl(CRUMPLE_CLI, CRUMPLE_CLI, "simulate", "hanging-cloth:nx=6,ny=6", "--frames", "1000000", "--every",
-            "7", "-o", out.c_str(), static_cast<char*>(nullptr));
-    ::_exit(127);
-  }
-  // Wait until a few frames are written, then interrupt.
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (read_lines(dir / "stats.csv").size() < 10 && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  ::kill(pid, SIGINT);
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 130);
+  EXPECT_EQ(testing::interrupt_simulation(dir.path(), SIGINT, {"--every", "7"}), 130);
   const auto lines = read_lines(dir / "stats.csv");
   ASSERT_GE(lines.size(), 10u);
   for (const auto& line : lines) EXPECT_EQ(count_fields(line), count_fields(lines[0])) << line;
