@@ -14,7 +14,9 @@
 ///     {owner(e1), owner(e2)}, so each is tested in exactly one place; TT on every candidate;
 ///  4. orphans (exact/orphans.hpp): the VF and EE sub-pairs of faces that share a vertex, which
 ///     no broad phase emits, listed once per topology, tested in blocks that sleep while they
-///     provably hold no contact; and isolated vertices (used by no face) against every face;
+///     provably hold no contact; around vertices of high valence (stars), found per frame from
+///     a box tree instead (a list is quadratic there); isolated vertices (used by no face)
+///     against the faces whose boxes come within reach;
 ///  5. gather (exact/gather_contacts.cpp): the contacts of every chunk, in canonical order.
 ///
 /// Exactness: two features closer than h lie in faces closer than h, so in a candidate pair
