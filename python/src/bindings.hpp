@@ -4,11 +4,13 @@
 /// the conversion of user arrays into positions and faces.
 
 #include <crumple/core/types.hpp>
+#include <crumple/detect/contact.hpp>
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
 #include <cstddef>
+#include <memory>
 #include <vector>
 
 namespace crumple::python {
@@ -41,8 +43,14 @@ PositionsArg positions_arg(py::handle value, const char* what);
 /// id outside int32 (range and repeats are the library's checks, `TriMesh::create`).
 std::vector<Face> faces_arg(py::handle value);
 
+/// The contacts of one result (`crumple.Contacts`); every array made from it keeps `set` alive.
+struct PyContacts {
+  std::shared_ptr<const ContactSet> set;
+};
+
 void bind_errors(py::module_& m);
 void bind_mesh(py::module_& m);
 void bind_detect(py::module_& m);
+void bind_sim(py::module_& m);
 
 }  // namespace crumple::python

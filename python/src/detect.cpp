@@ -51,9 +51,6 @@ struct EeView {
 struct TtView {
   SetPtr set;
 };
-struct PyContacts {
-  SetPtr set;
-};
 
 /// The Python detector: the library detector, the reusable contact buffer and a guard against
 /// two threads using one detector while the GIL is released.

@@ -3,6 +3,7 @@
 #include "bindings.hpp"
 
 #include <crumple/core/error.hpp>
+#include <crumple/sim/simulation.hpp>
 
 #include <cstdint>
 #include <exception>
@@ -18,6 +19,7 @@ PyObject* g_error = nullptr;
 PyObject* g_parse_error = nullptr;
 PyObject* g_input_error = nullptr;
 PyObject* g_precondition_error = nullptr;
+PyObject* g_divergence_error = nullptr;
 
 py::object optional_int(const std::optional<std::int64_t>& v) {
   return v ? py::object(py::int_(*v)) : py::object(py::none());
@@ -53,7 +55,14 @@ void bind_errors(py::module_& m) {
       "A violated API precondition of the library (a wrong positions count, a face id out of "
       "range in a writer); the message names the library's source file and line.",
       g_error, nullptr);
+  g_divergence_error = PyErr_NewExceptionWithDoc(
+      "crumple.DivergenceError",
+      "A simulation step left non-finite or exploding positions; the simulation is back at the "
+      "start of that frame. Attributes: frame (int, the frame being computed), step (int, "
+      "1-based step of that frame), message (str).",
+      g_error, nullptr);
   m.add_object("Error", py::handle(g_error));
+  m.add_object("DivergenceError", py::handle(g_divergence_error));
   m.add_object("ParseError", py::handle(g_parse_error));
   m.add_object("InputError", py::handle(g_input_error));
   m.add_object("PreconditionError", py::handle(g_precondition_error));
@@ -68,6 +77,12 @@ void bind_errors(py::module_& m) {
       attributes["byte_offset"] = optional_int(e.byte_offset());
       attributes["message"] = py::str(e.message());
       raise_with(g_parse_error, e.what(), attributes);
+    } catch (const sim::DivergenceError& e) {
+      py::dict attributes;
+      attributes["frame"] = py::int_(e.frame());
+      attributes["step"] = py::int_(e.step());
+      attributes["message"] = py::str(e.what());
+      raise_with(g_divergence_error, e.what(), attributes);
     } catch (const InputError& e) {
       PyErr_SetString(g_input_error, e.what());
     } catch (const PreconditionError& e) {
@@ -149,4 +164,5 @@ PYBIND11_MODULE(_crumple, m) {
   crumple::python::bind_errors(m);
   crumple::python::bind_mesh(m);
   crumple::python::bind_detect(m);
+  crumple::python::bind_sim(m);
 }
