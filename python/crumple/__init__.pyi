@@ -148,13 +148,20 @@ class Detector:
     def update(self, positions: _Positions) -> Contacts: ...
     @overload
     def update(self, previous: _Positions, positions: _Positions) -> Contacts:
-        """update(positions) or update(previous, positions); (n, 3) real arrays. GIL released
-        while detecting. ValueError (shape, count), InputError (non-finite), RuntimeError
-        (no topology)."""
+        """update(positions) or update(previous, positions); (n, 3) real arrays. float64
+        C-contiguous: read in place; float32 or rows at a byte stride (buf[:, 0:3] of an
+        interleaved vertex buffer): read in place, converted once inside the detector; other
+        dtypes/layouts: copied once. GIL released while detecting. ValueError (shape, count),
+        InputError (non-finite), RuntimeError (no topology, or in use by another thread)."""
     @property
     def stats(self) -> dict[str, float]: ...
     @property
-    def last_positions_copied(self) -> bool: ...
+    def last_positions_copied(self) -> bool:
+        """Whether the last update's positions were converted rather than read in place."""
+    @property
+    def last_positions_conversion(self) -> str:
+        """'none' (read in place), 'detector' (converted once inside the detector, no copy
+        by the binding) or 'binding' (copied first)."""
     @property
     def method(self) -> str: ...
     @property

@@ -107,23 +107,41 @@ PositionsArg positions_arg(py::handle value, const char* what) {
     throw py::value_error(std::string(what) + ": expected a real dtype (float64, float32, ...), got " +
                           std::string(py::str(array.dtype())));
   }
-  static_assert(sizeof(Vec3) == 3 * sizeof(double), "Vec3 must be three packed doubles");
-  using Dense = py::array_t<double, py::array::c_style>;
   const auto n = static_cast<std::size_t>(array.shape(0));
-  if (Dense::check_(array) && array.dtype().is(py::dtype::of<double>())) {
+  // float64 or float32 in native byte order, each row's x, y, z consecutive, rows at a positive
+  // stride of at least a row: a view over the caller's memory (VertexView reads any address).
+  const auto rows_of = [&](auto component) -> bool {
+    using T = decltype(component);
+    if (!py::array_t<T>::check_(array)) return false;
+    const py::ssize_t row = array.strides(0), col = array.strides(1);
+    if (n > 0 && (col != static_cast<py::ssize_t>(sizeof(T)) || row < static_cast<py::ssize_t>(3 * sizeof(T)))) {
+      return false;
+    }
+    out.view = VertexView(static_cast<const T*>(array.data()), n, n > 0 ? static_cast<std::size_t>(row) : 0);
+    return true;
+  };
+  if (rows_of(double{}) || rows_of(float{})) {
     out.keep = array;
-    out.view = PositionsView(static_cast<const Vec3*>(array.data()), n);
     out.copied = !given_array;  // a list or other sequence was converted by NumPy
     return out;
   }
+  using Dense = py::array_t<double, py::array::c_style | py::array::forcecast>;
   Dense dense = Dense::ensure(array);  // one converted copy (dtype and/or layout)
   if (!dense) throw py::error_already_set();
   out.storage.resize(n);
   const double* src = dense.data();
   for (std::size_t i = 0; i < n; ++i) out.storage[i] = Vec3(src[3 * i], src[3 * i + 1], src[3 * i + 2]);
-  out.view = out.storage;
+  out.view = VertexView(PositionsView(out.storage));
   out.copied = true;
   return out;
+}
+
+PositionsView PositionsArg::doubles() {
+  if (view.is_native()) return view.native();
+  view.convert(storage);
+  view = VertexView(PositionsView(storage));
+  copied = true;
+  return storage;
 }
 
 std::vector<Face> faces_arg(py::handle value) {

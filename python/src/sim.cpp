@@ -472,22 +472,22 @@ The GIL is released while drawing. crumple.InputError on a bad size or camera.
         const PictureArgs args = picture_args(width, height, yaw, pitch, distance, wireframe, false, true,
                                               supersample);
         args.check();
-        PositionsArg x;
+        PositionsArg arg;
+        PositionsView x = mesh.positions();
         if (!positions.is_none()) {
-          x = positions_arg(positions, "positions");
-          if (x.view.size() != static_cast<std::size_t>(mesh.num_vertices())) {
-            throw py::value_error("render: positions have " + std::to_string(x.view.size()) +
+          arg = positions_arg(positions, "positions");
+          x = arg.doubles();
+          if (x.size() != static_cast<std::size_t>(mesh.num_vertices())) {
+            throw py::value_error("render: positions have " + std::to_string(x.size()) +
                                   " rows, the mesh " + std::to_string(mesh.num_vertices()) + " vertices");
           }
-        } else {
-          x.view = mesh.positions();
         }
         render::Picture picture;
         {
           py::gil_scoped_release release;
-          check_finite(x.view);
-          const render::Frame frame{&mesh.topology(), x.view, contacts ? contacts->set.get() : nullptr, {}, {}, {}};
-          picture = render::render_frame(frame, args.camera(x.view), width, height, args.options(), supersample);
+          check_finite(x);
+          const render::Frame frame{&mesh.topology(), x, contacts ? contacts->set.get() : nullptr, {}, {}, {}};
+          picture = render::render_frame(frame, args.camera(x), width, height, args.options(), supersample);
         }
         return picture_array(std::move(picture));
       },
