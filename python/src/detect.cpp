@@ -91,10 +91,10 @@ class PyDetector {
                                                 : " (previous " + std::to_string(before.view.size()) + ")") +
                             " rows, the topology " + std::to_string(n) + " vertices");
     }
-    // Where the positions were converted to float64, if anywhere (`previous` only matters to
-    // methods that use motion).
+    // Where the positions were converted to float64, if anywhere (the detector converts
+    // `previous` only for methods that use motion).
     const bool motion = detector_->capabilities().uses_motion && !previous.is_none();
-    last_conversion_ = current.copied || (motion && before.copied) ? "binding"
+    last_conversion_ = current.copied || before.copied ? "binding"
                        : !current.view.is_native() || (motion && !before.view.is_native()) ? "detector"
                                                                                           : "none";
     // Reuse the last result's records when Python no longer holds them (the library rewrites
