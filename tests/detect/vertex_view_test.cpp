@@ -1,4 +1,4 @@
-// Positions from a host application's buffers (`VertexView`): float and double, packed and
+// Detection from a host application's buffers (`VertexView`): float and double, packed and
 // strided (interleaved), aligned or not. Every view gives exactly the contacts of the `double`
 // path on the same values (the float input converted to double), for every method.
 #include <crumple/core/error.hpp>
@@ -6,16 +6,17 @@
 #include <crumple/detect/detector.hpp>
 #include <crumple/mesh/shapes.hpp>
 #include <support/meshes.hpp>
+#include <support/vertex_buffers.hpp>
 
 #include <gtest/gtest.h>
 
-#include <cstring>
-#include <limits>
 #include <string>
 #include <vector>
 
 namespace crumple {
 namespace {
+
+using testing::Buffers;
 
 /// Bit-exact equality of two contact sets (every field of every record).
 void expect_same(const ContactSet& a, const ContactSet& b, const std::string& what) {
@@ -43,89 +44,7 @@ void expect_same(const ContactSet& a, const ContactSet& b, const std::string& wh
   }
 }
 
-/// An engine's vertex buffers holding the same positions: packed floats, an interleaved float
-/// buffer (position, normal, uv: 8 floats, 32 bytes a vertex), an interleaved double buffer
-/// (position + 3 doubles, 48 bytes), and packed doubles starting 4 bytes off alignment.
-struct Buffers {
-  std::vector<float> packed;
-  std::vector<float> interleaved;
-  std::vector<double> wide;
-  std::vector<unsigned char> misaligned;
-  Positions reference;  ///< the float values as doubles: the `double` path's input
-
-  explicit Buffers(PositionsView x) {
-    const std::size_t n = x.size();
-    packed.resize(3 * n);
-    interleaved.assign(8 * n, -7.0f);
-    wide.assign(6 * n, 1e300);
-    misaligned.resize(3 * n * sizeof(double) + 4);
-    reference.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      for (int k = 0; k < 3; ++k) {
-        const float f = static_cast<float>(x[i][k]);
-        packed[3 * i + static_cast<std::size_t>(k)] = f;
-        interleaved[8 * i + static_cast<std::size_t>(k)] = f;
-        reference[i][k] = static_cast<double>(f);
-        wide[6 * i + static_cast<std::size_t>(k)] = reference[i][k];
-      }
-    }
-    std::memcpy(misaligned.data() + 4, reference.data(), 3 * n * sizeof(double));
-  }
-
-  std::vector<std::pair<std::string, VertexView>> views() const {
-    const std::size_t n = reference.size();
-    return {
-        {"packed float", VertexView(packed.data(), n)},
-        {"interleaved float", VertexView(interleaved.data(), n, 8 * sizeof(float))},
-        {"interleaved double", VertexView(wide.data(), n, 6 * sizeof(double))},
-        {"misaligned double",
-         VertexView(reinterpret_cast<const double*>(misaligned.data() + 4), n)},  // read by memcpy
-        {"native double", VertexView(PositionsView(reference))},
-    };
-  }
-};
-
-TEST(VertexView, ConvertsExactlyAndReadsNativeInPlace) {
-  const TriMesh mesh = shapes::lattice(3, 2);
-  const Positions x = testing::jitter(mesh.positions(), 0.01, 5);
-  const Buffers b(x);
-  for (const auto& [name, view] : b.views()) {
-    ASSERT_EQ(view.size(), x.size()) << name;
-    Positions converted;
-    view.convert(converted);
-    EXPECT_EQ(converted, b.reference) << name;
-    for (std::size_t i = 0; i < x.size(); ++i) EXPECT_EQ(view[i], b.reference[i]) << name;
-  }
-  const VertexView native(PositionsView(b.reference));
-  EXPECT_TRUE(native.is_native());
-  EXPECT_EQ(native.native().data(), b.reference.data());  // no copy
-  EXPECT_TRUE(VertexView(reinterpret_cast<const double*>(b.reference.data()), x.size()).is_native());
-  EXPECT_FALSE(VertexView(b.packed.data(), x.size()).is_native());
-  EXPECT_FALSE(VertexView(b.wide.data(), x.size(), 48).is_native());
-  EXPECT_FALSE(VertexView(reinterpret_cast<const double*>(b.misaligned.data() + 4), x.size()).is_native());
-  EXPECT_THROW((void)VertexView(b.packed.data(), x.size()).native(), PreconditionError);
-  EXPECT_TRUE(VertexView().empty() && VertexView().is_native() && VertexView().native().empty());
-}
-
-TEST(VertexView, PreconditionsAndNonFiniteValues) {
-  const std::vector<float> xyz{0, 1, 2, 3, 4, 5};
-  EXPECT_THROW(VertexView(xyz.data(), 2, 8), PreconditionError);  // less than 3 floats
-  EXPECT_THROW(VertexView(static_cast<const double*>(nullptr), 1), PreconditionError);
-  EXPECT_NO_THROW(VertexView(static_cast<const float*>(nullptr), 0));
-  EXPECT_EQ(VertexView(xyz.data(), 2, 12).stride(), 12u);
-  EXPECT_EQ(VertexView(xyz.data(), 1, 0).stride(), 12u);  // 0 = packed
-  EXPECT_NO_THROW(check_finite(VertexView(xyz.data(), 2)));
-  std::vector<float> bad = xyz;
-  bad[4] = std::numeric_limits<float>::quiet_NaN();
-  try {
-    check_finite(VertexView(bad.data(), 2));
-    FAIL() << "no error";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("vertex 1 has a non-finite coordinate"), std::string::npos) << e.what();
-  }
-}
-
-TEST(VertexView, EveryViewGivesTheContactsOfTheDoublePath) {
+TEST(DetectFromVertexView, EveryViewGivesTheContactsOfTheDoublePath) {
   const TriMesh mesh = shapes::lattice(10, 10);
   const Positions x0 = testing::crumple_lattice(mesh, 0.2, 11);
   const Positions x1 = testing::jitter(x0, 0.004, 12);
@@ -155,7 +74,7 @@ TEST(VertexView, EveryViewGivesTheContactsOfTheDoublePath) {
   }
 }
 
-TEST(VertexView, WrongCountIsAPreconditionError) {
+TEST(DetectFromVertexView, WrongCountIsAPreconditionError) {
   const TriMesh mesh = shapes::lattice(2, 2);
   const Buffers b(mesh.positions());
   auto detector = make_detector(MethodSpec::parse("kdop"), DetectorOptions{});
