@@ -58,13 +58,19 @@ def test_arrays_and_settings():
     np.testing.assert_array_equal(a.positions, crumple.Simulation(SPHERE, seed=3).positions)
 
 
-def test_cloth_from_arrays_hangs_from_its_pins():
-    n = 5
+def grid(n):
+    """An n x n vertex square of side 0.1 (n-1) in the y = 0 plane: (vertices, faces)."""
     ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    vertices = np.stack([ii.ravel() * 0.1, np.zeros(n * n), jj.ravel() * 0.1], axis=1).astype(np.float32)
+    vertices = np.stack([ii.ravel() * 0.1, np.zeros(n * n), jj.ravel() * 0.1], axis=1)
     quads = [(i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1)
              for i in range(n - 1) for j in range(n - 1)]
-    faces = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    return vertices, np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+
+
+def test_cloth_from_arrays_hangs_from_its_pins():
+    n = 5
+    vertices, faces = grid(n)
+    vertices = vertices.astype(np.float32)
     s = crumple.Simulation.from_mesh(crumple.TriMesh(vertices, faces), "pins=0;4")
     pinned = s.pinned
     assert pinned.sum() == 2 and pinned[0] and pinned[4]
@@ -74,6 +80,17 @@ def test_cloth_from_arrays_hangs_from_its_pins():
     np.testing.assert_array_equal(after[pinned], before[pinned])
     assert (after[~pinned, 1] < before[~pinned, 1]).all()  # the rest falls
     np.testing.assert_array_equal(s.faces, faces)
+
+
+def test_cloth_from_a_mesh_same_positions_as_cli_simulate_of_its_file(tmp_path, cli):
+    mesh = crumple.TriMesh(*grid(6))
+    crumple.write_mesh(tmp_path / "c.ply", mesh)
+    run_cli(cli, "simulate", tmp_path / "c.ply", "--param", "pins=0;5", "--param", "stiffness=300",
+            "--frames", 4, "--out", tmp_path / "run", "--format", "ply", "--threads", 2, "--quiet")
+    s = crumple.Simulation.from_mesh(mesh, "pins=0;5,stiffness=300", threads=2)
+    s.run(4)
+    np.testing.assert_array_equal(s.positions,
+                                  crumple.read_mesh(tmp_path / "run/frames/000004.ply").vertices)
 
 
 def test_contacts_match_a_detector_on_the_same_positions():
