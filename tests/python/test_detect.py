@@ -2,6 +2,7 @@
 zero-copy promises, errors, state and the GIL."""
 
 import threading
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -194,7 +195,6 @@ def test_positions_layouts(data):
 def test_float32_views_are_not_copied_by_the_binding(data):
     """A float32 interleaved buffer goes to the detector without a NumPy copy: the memory NumPy
     allocates during update (traced) stays far below one float64 copy of the positions."""
-    tracemalloc = pytest.importorskip("tracemalloc")
     m = crumple.read_mesh(data / FUNNEL[0])
     det = crumple.Detector("kdop", thickness=crumple.default_thickness(m.vertices), threads=2)
     det.set_topology(m)
