@@ -108,13 +108,19 @@ def test_contacts_match_a_detector_on_the_same_positions():
     assert s.current_stats()["vf"] == len(c.vf)
 
 
-def test_render_same_pixels_as_cli_render(tmp_path, cli):
-    image = pytest.importorskip("PIL.Image")
+@pytest.mark.parametrize("flags,kwargs", [
+    ((), {}),
+    (("--wireframe", "--camera", "60,10,4", "--aa", 1), {"wireframe": True, "yaw": 60.0, "pitch": 10.0,
+                                                         "distance": 4.0, "supersample": 1}),
+    (("--springs",), {"springs": True}),
+])
+def test_render_same_pixels_as_cli_render(tmp_path, cli, flags, kwargs):
+    image = pytest.importorskip("PIL.Image")  # a dependency of Debian's python3-matplotlib
     run_cli(cli, "render", SPHERE, "--frame", 2, "--out", tmp_path / "r.png", "--size", "80x60",
-            "--threads", 2, "--quiet")
+            "--threads", 2, "--quiet", *flags)
     s = crumple.Simulation(SPHERE, threads=2)
     s.run(2)
-    picture = s.render(80, 60)
+    picture = s.render(80, 60, **kwargs)
     assert picture.shape == (60, 80, 3) and picture.dtype == np.uint8
     assert picture.base is not None  # owns the rasteriser's pixels through a capsule
     np.testing.assert_array_equal(picture, np.asarray(image.open(tmp_path / "r.png").convert("RGB")))
