@@ -1,13 +1,16 @@
 """Python `Detector.update` against the C++ call's time, on cloth-ball 92 -> 93.
 
     PYTHONPATH=build/release/python /usr/bin/python3 bench/python/update_vs_cli.py \
-        [--cli build/release/apps/cli/crumple] [--method kdop] [--threads 2] [--repeat 5]
+        [--cli build/release/apps/cli/crumple] [--method kdop] [--threads 2] [--repeat 5] \
+        [--layout float64|float32|interleaved32]
 
 C++: `crumple detect 92.ply 93.ply --json`, the detector's wall time of frame 93 ("ms": one
 `update(previous, positions, contacts)` with the contact set of frame 92 reused). Python: a new
 detector, `update(x92)`, its result dropped (so the records are reused, as the CLI does), then
 the timed `update(x92, x93)` plus building every result array. Runs alternate (CLI, Python)
 so that the machine's drift hits both; prints each pair and the ratio of the medians.
+--layout float32 passes float32 arrays, interleaved32 the [:, 0:3] columns of an (n, 8) float32
+vertex buffer: both converted once inside the detector, the conversion timed with the update.
 """
 
 import argparse
@@ -16,6 +19,8 @@ import pathlib
 import statistics
 import subprocess
 import time
+
+import numpy as np
 
 import crumple
 
@@ -30,8 +35,18 @@ def cli_ms(cli, frames, method, threads):
     return json.loads(out.splitlines()[-1])["ms"]
 
 
-def python_ms(meshes, method, threads):
-    x0, x1 = meshes[0].vertices, meshes[1].vertices
+def positions(x, layout):
+    if layout == "float64":
+        return x
+    if layout == "float32":
+        return x.astype(np.float32)
+    buffer = np.zeros((len(x), 8), dtype=np.float32)  # position, normal, uv
+    buffer[:, 0:3] = x
+    return buffer[:, 0:3]
+
+
+def python_ms(meshes, method, threads, layout):
+    x0, x1 = (positions(m.vertices, layout) for m in meshes)
     det = crumple.Detector(method, thickness=crumple.default_thickness(x0), threads=threads)
     det.set_topology(meshes[0])
     det.update(x0)  # frame 92, result dropped at once
@@ -40,7 +55,7 @@ def python_ms(meshes, method, threads):
     arrays = [c.vf.vertex, c.vf.face, c.vf.distance, c.vf.barycentric, c.vf.normal, c.ee.edges,
               c.ee.vertices, c.ee.s, c.ee.t, c.ee.distance, c.ee.normal, c.tt.faces]
     ms = (time.perf_counter() - start) * 1e3
-    assert not det.last_positions_copied
+    assert det.last_positions_conversion == ("none" if layout == "float64" else "detector")
     return ms, len(c), len(arrays)
 
 
@@ -50,18 +65,19 @@ def main():
     p.add_argument("--method", default="kdop")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--layout", choices=["float64", "float32", "interleaved32"], default="float64")
     args = p.parse_args()
     frames = [FRAMES / "cloth_ball92.ply", FRAMES / "cloth_ball93.ply"]
     meshes = [crumple.read_mesh(f) for f in frames]
     cs, ps = [], []
     for i in range(args.repeat):
         cs.append(cli_ms(args.cli, frames, args.method, args.threads))
-        ms, contacts, _ = python_ms(meshes, args.method, args.threads)
+        ms, contacts, _ = python_ms(meshes, args.method, args.threads, args.layout)
         ps.append(ms)
         print(f"run {i}: C++ {cs[-1]:.1f} ms, Python {ps[-1]:.1f} ms ({contacts} contacts)")
     c, q = statistics.median(cs), statistics.median(ps)
     print(f"median: C++ {c:.1f} ms, Python {q:.1f} ms, ratio {q / c:.3f} "
-          f"({args.method}, {args.threads} threads, cloth-ball 93)")
+          f"({args.method}, {args.threads} threads, cloth-ball 93, {args.layout})")
 
 
 if __name__ == "__main__":

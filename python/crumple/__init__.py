@@ -8,41 +8,57 @@ Five lines, what ``crumple detect`` does::
     det.set_topology(mesh)
     contacts = det.update(mesh.vertices)                # contacts.vf.distance, contacts.ee.normal, ...
 
-Arrays going in are read in place when float64 and C-contiguous; arrays coming out are
-read-only views over the library's buffers. Errors: crumple.ParseError, crumple.InputError and
-crumple.PreconditionError, all subclasses of crumple.Error, a ValueError.
+Simulation and pictures (the CLI's ``simulate`` and ``render``)::
+
+    sim = crumple.Simulation("cloth-on-sphere:n=32")    # crumple.scenes() lists the scenes
+    stats = sim.run(100)                                # dict of (100,) arrays per figure
+    picture = sim.render(640, 480)                      # (480, 640, 3) uint8
+
+Positions going in are read in place when float64 and C-contiguous, and when float32 or
+row-strided converted once inside the detector (no copy by the binding); arrays coming out are
+read-only views over the library's buffers. Errors: crumple.ParseError, crumple.InputError,
+crumple.PreconditionError and crumple.DivergenceError, all subclasses of crumple.Error, a
+ValueError. The GIL is released while detecting, stepping and drawing. See docs/python.md.
 """
 
 from ._crumple import (  # noqa: F401
     Contacts,
     Detector,
+    DivergenceError,
     EdgeEdgeContacts,
     Error,
     InputError,
     ParseError,
     PreconditionError,
+    Simulation,
     TriangleTriangleContacts,
     TriMesh,
     VertexFaceContacts,
     default_thickness,
     methods,
     read_mesh,
+    render,
+    scenes,
     write_mesh,
 )
 
 __all__ = [
     "Contacts",
     "Detector",
+    "DivergenceError",
     "EdgeEdgeContacts",
     "Error",
     "InputError",
     "ParseError",
     "PreconditionError",
+    "Simulation",
     "TriangleTriangleContacts",
     "TriMesh",
     "VertexFaceContacts",
     "default_thickness",
     "methods",
     "read_mesh",
+    "render",
+    "scenes",
     "write_mesh",
 ]

@@ -27,6 +27,12 @@ class InputError(Error):
 class PreconditionError(Error):
     """A violated library precondition; the message names the library's file and line."""
 
+class DivergenceError(Error):
+    """A simulation step diverged; the simulation is back at the start of that frame."""
+    frame: int  # the frame being computed
+    step: int  # its 1-based step that went bad
+    message: str
+
 class TriMesh:
     """Validated, immutable triangle mesh; array properties are read-only views (no copy)."""
     def __init__(self, vertices: _Positions, faces: _Faces) -> None:
@@ -142,13 +148,20 @@ class Detector:
     def update(self, positions: _Positions) -> Contacts: ...
     @overload
     def update(self, previous: _Positions, positions: _Positions) -> Contacts:
-        """update(positions) or update(previous, positions); (n, 3) real arrays. GIL released
-        while detecting. ValueError (shape, count), InputError (non-finite), RuntimeError
-        (no topology)."""
+        """update(positions) or update(previous, positions); (n, 3) real arrays. float64
+        C-contiguous: read in place; float32 or rows at a byte stride (buf[:, 0:3] of an
+        interleaved vertex buffer): read in place, converted once inside the detector; other
+        dtypes/layouts: copied once. GIL released while detecting. ValueError (shape, count),
+        InputError (non-finite), RuntimeError (no topology, or in use by another thread)."""
     @property
     def stats(self) -> dict[str, float]: ...
     @property
-    def last_positions_copied(self) -> bool: ...
+    def last_positions_copied(self) -> bool:
+        """Whether the last update's positions were converted rather than read in place."""
+    @property
+    def last_positions_conversion(self) -> str:
+        """'none' (read in place), 'detector' (converted once inside the detector, no copy
+        by the binding) or 'binding' (copied first)."""
     @property
     def method(self) -> str: ...
     @property
@@ -161,5 +174,79 @@ class Detector:
     def capabilities(self) -> dict[str, bool]: ...
     def save_state(self) -> str: ...
     def load_state(self, text: str) -> None: ...
+
+def scenes() -> list[dict[str, Any]]:
+    """Every scene: name, summary, params {key: (default, description)}; the last, 'file',
+    lists the keys of Simulation.from_mesh."""
+
+def render(mesh: TriMesh, positions: _Positions | None = None, contacts: Contacts | None = None,
+           width: int = 640, height: int = 480, *, yaw: float = 30.0, pitch: float = 20.0,
+           distance: float | None = None, wireframe: bool = False,
+           supersample: int = 2) -> npt.NDArray[np.uint8]:
+    """(height, width, 3) uint8 RGB picture of the mesh at positions ((n, 3) real, default its
+    own), edges in contact in red, as the CLI's `render FILE`. GIL released while drawing."""
+
+class Simulation:
+    """Mass-spring cloth with obstacles and self-collision response (the CLI's `simulate`).
+    Settings keywords (None = the scene's): method, thickness, kinds, response, passes, dt,
+    substeps, integrator, threads."""
+    def __init__(self, scene: str = "cloth-on-sphere", *, seed: int = 1, method: str | None = ...,
+                 thickness: float | None = ..., kinds: str | None = ..., response: bool | None = ...,
+                 passes: int | None = ..., dt: float | None = ..., substeps: int | None = ...,
+                 integrator: str | None = ..., threads: int = 0) -> None:
+        """scene: NAME[:key=value,...] as the CLI's `simulate SPEC`; InputError on bad specs or
+        values, TypeError on unknown keywords."""
+    @staticmethod
+    def from_mesh(mesh: TriMesh, params: str = "", *, method: str | None = ...,
+                  thickness: float | None = ..., kinds: str | None = ...,
+                  response: bool | None = ..., passes: int | None = ..., dt: float | None = ...,
+                  substeps: int | None = ..., integrator: str | None = ...,
+                  threads: int = 0) -> Simulation:
+        """A cloth from a mesh; params: the 'file' scene's keys, e.g. "pins=0;7,stiffness=500"."""
+    def advance(self) -> dict[str, float]:
+        """One frame; its figures (see current_stats). DivergenceError if a step diverges."""
+    def run(self, frames: int) -> dict[str, npt.NDArray[Any]]:
+        """frames frames; each current_stats key -> (frames,) int64/float64 array, plus
+        bounds_min, bounds_max (frames, 3) float64. GIL released while stepping."""
+    def current_stats(self) -> dict[str, float]:
+        """frame, time, integrate_ms, detect_ms, response_ms, vf, ee, tt, collision_share,
+        min_distance, obstacle_penetration, cg_iterations, corrections, energy, max_speed."""
+    @property
+    def positions(self) -> npt.NDArray[np.float64]:
+        """(n, 3) copy."""
+    @property
+    def velocities(self) -> npt.NDArray[np.float64]:
+        """(n, 3) copy."""
+    @property
+    def faces(self) -> npt.NDArray[np.int32]:
+        """(m, 3) read-only view."""
+    @property
+    def pinned(self) -> npt.NDArray[np.bool_]:
+        """(n,) driven particles."""
+    def mesh(self) -> TriMesh:
+        """A TriMesh of the current positions."""
+    def contacts(self) -> Contacts:
+        """Self-contacts at the current positions (the simulation's detector)."""
+    def render(self, width: int = 640, height: int = 480, *, yaw: float = 30.0,
+               pitch: float = 20.0, distance: float | None = None, wireframe: bool = False,
+               springs: bool = False, contacts: bool = True,
+               supersample: int = 2) -> npt.NDArray[np.uint8]:
+        """(height, width, 3) uint8 RGB picture of the current frame (the CLI's `render`)."""
+    @property
+    def time(self) -> float: ...
+    @property
+    def frame(self) -> int: ...
+    @property
+    def num_vertices(self) -> int: ...
+    @property
+    def scene(self) -> str: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def edge_length(self) -> float: ...
+    @property
+    def settings(self) -> dict[str, Any]: ...
+    @property
+    def detector_stats(self) -> dict[str, float]: ...
 
 __all__: Sequence[str]

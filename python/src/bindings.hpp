@@ -4,11 +4,14 @@
 /// the conversion of user arrays into positions and faces.
 
 #include <crumple/core/types.hpp>
+#include <crumple/core/vertex_view.hpp>
+#include <crumple/detect/contact.hpp>
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
 #include <cstddef>
+#include <memory>
 #include <vector>
 
 namespace crumple::python {
@@ -25,14 +28,18 @@ py::array readonly_view(const T* data, std::vector<py::ssize_t> shape,
   return out;
 }
 
-/// Positions given from Python: a view over the caller's array when it is float64, C-contiguous
-/// and (n, 3) — `Vec3` is three packed doubles — otherwise one converted copy (float32, other
-/// real dtypes, strided arrays). `copied` says which.
+/// Positions given from Python: a view over the caller's array when it is float64 or float32
+/// with each row's x, y, z consecutive (C order, or rows of a wider or sliced buffer), otherwise
+/// one copy made here (other dtypes, Fortran order, sequences). `Detector.update` passes `view`
+/// on: the detector reads packed float64 in place and converts other views once itself.
 struct PositionsArg {
-  PositionsView view;
-  Positions storage;  // the converted copy, when one was needed
+  VertexView view;
+  Positions storage;  // the binding's copy, when one was needed
   py::object keep;    // the array viewed, kept alive while `view` is used
-  bool copied = false;
+  bool copied = false;  // `storage` made by the binding (or NumPy, from a sequence)
+  /// The positions as doubles: the array in place when native, else converted into `storage`
+  /// (once; `copied` becomes true).
+  PositionsView doubles();
 };
 /// Throws ValueError unless `value` is a real (n, 3) array (`what` names the argument).
 PositionsArg positions_arg(py::handle value, const char* what);
@@ -41,8 +48,14 @@ PositionsArg positions_arg(py::handle value, const char* what);
 /// id outside int32 (range and repeats are the library's checks, `TriMesh::create`).
 std::vector<Face> faces_arg(py::handle value);
 
+/// The contacts of one result (`crumple.Contacts`); every array made from it keeps `set` alive.
+struct PyContacts {
+  std::shared_ptr<const ContactSet> set;
+};
+
 void bind_errors(py::module_& m);
 void bind_mesh(py::module_& m);
 void bind_detect(py::module_& m);
+void bind_sim(py::module_& m);
 
 }  // namespace crumple::python

@@ -51,9 +51,6 @@ struct EeView {
 struct TtView {
   SetPtr set;
 };
-struct PyContacts {
-  SetPtr set;
-};
 
 /// The Python detector: the library detector, the reusable contact buffer and a guard against
 /// two threads using one detector while the GIL is released.
@@ -94,7 +91,12 @@ class PyDetector {
                                                 : " (previous " + std::to_string(before.view.size()) + ")") +
                             " rows, the topology " + std::to_string(n) + " vertices");
     }
-    last_copied_ = current.copied || before.copied;
+    // Where the positions were converted to float64, if anywhere (the detector converts
+    // `previous` only for methods that use motion).
+    const bool motion = detector_->capabilities().uses_motion && !previous.is_none();
+    last_conversion_ = current.copied || before.copied ? "binding"
+                       : !current.view.is_native() || (motion && !before.view.is_native()) ? "detector"
+                                                                                          : "none";
     // Reuse the last result's records when Python no longer holds them (the library rewrites
     // records in place), otherwise a fresh set: a live `Contacts` is never modified.
     std::shared_ptr<ContactSet> out =
@@ -113,7 +115,7 @@ class PyDetector {
   const Detector& detector() const { return *detector_; }
   Detector& detector() { return *detector_; }
   const MethodSpec& spec() const { return spec_; }
-  bool last_copied() const { return last_copied_; }
+  const char* last_conversion() const { return last_conversion_; }
   bool has_topology() const { return has_topology_; }
 
  private:
@@ -122,7 +124,7 @@ class PyDetector {
   std::shared_ptr<ContactSet> buffer_;
   std::mutex busy_;
   bool has_topology_ = false;
-  bool last_copied_ = false;
+  const char* last_conversion_ = "none";
 };
 
 py::dict capabilities_dict(const Capabilities& c) {
@@ -248,8 +250,10 @@ Raises crumple.InputError (a ValueError) on a bad spec, key, value, kinds or thi
       .def("update", &PyDetector::update, py::arg("previous"), py::arg("positions"), R"doc(
 Detects the contacts at positions, an (n, 3) real array with n = the topology's vertex count.
 previous: the last frame's positions, for methods that use motion (others ignore them).
-A float64 C-contiguous array is read in place; any other dtype or layout is converted once
-(see last_positions_copied). The GIL is released while detecting.
+A float64 C-contiguous array is read in place. float32 arrays and rows at a stride (e.g.
+buffer[:, 0:3] of an interleaved (n, 8) vertex buffer) are read in place too and converted
+to float64 once inside the detector; other dtypes and layouts are copied once first (see
+last_positions_conversion). The GIL is released while detecting.
 Raises ValueError on a wrong shape or count, crumple.InputError on non-finite coordinates,
 RuntimeError before set_topology. Returns a Contacts.
 )doc")
@@ -259,8 +263,17 @@ RuntimeError before set_topology. Returns a Contacts.
         for (const auto& [key, value] : d.detector().stats().items()) out[py::str(key)] = value;
         return out;
       }, "Counters of the last update (the CLI's --json 'stats'), dict str -> float.")
-      .def_property_readonly("last_positions_copied", &PyDetector::last_copied,
-                             "Whether the last update converted its positions (False: read in place).")
+      .def_property_readonly(
+          "last_positions_copied",
+          [](const PyDetector& d) { return std::string(d.last_conversion()) != "none"; },
+          "Whether the last update's positions were converted to float64 rather than read in place "
+          "(see last_positions_conversion).")
+      .def_property_readonly(
+          "last_positions_conversion", [](const PyDetector& d) { return std::string(d.last_conversion()); },
+          "Where the last update's positions became float64: 'none' (a packed float64 array read in "
+          "place), 'detector' (float32, or float64 rows at a stride: read in place and converted "
+          "once inside the detector, no copy made by the binding), 'binding' (other dtypes, "
+          "Fortran order, sequences: one copy made first).")
       .def_property_readonly("method", [](const PyDetector& d) { return d.spec().to_string(); },
                              "The canonical method spec.")
       .def_property_readonly("thickness", [](const PyDetector& d) { return d.detector().options().thickness; })

@@ -46,8 +46,8 @@ appearance over faces f = 0..m-1, sides (v0,v1), (v1,v2), (v2,v0), each as (min 
 )doc");
   mesh.def(py::init([](py::handle vertices, py::handle faces) {
              PositionsArg p = positions_arg(vertices, "vertices");
-             Positions positions = p.copied ? std::move(p.storage)
-                                            : Positions(p.view.begin(), p.view.end());
+             const PositionsView x = p.doubles();
+             Positions positions = p.copied ? std::move(p.storage) : Positions(x.begin(), x.end());
              return TriMesh::create(std::move(positions), faces_arg(faces));
            }),
            py::arg("vertices"), py::arg("faces"), R"doc(
@@ -161,7 +161,7 @@ positions round-trip bit for bit. Raises crumple.ParseError when the file cannot
 )doc");
   m.def(
       "default_thickness",
-      [](py::handle positions) { return default_thickness(positions_arg(positions, "positions").view); },
+      [](py::handle positions) { return default_thickness(positions_arg(positions, "positions").doubles()); },
       py::arg("positions"),
       "The thickness the CLI uses when none is given: 1e-3 of the bounding-box diagonal of "
       "(n, 3) positions.");

@@ -3,6 +3,7 @@
 #include "bindings.hpp"
 
 #include <crumple/core/error.hpp>
+#include <crumple/sim/simulation.hpp>
 
 #include <cstdint>
 #include <exception>
@@ -18,6 +19,7 @@ PyObject* g_error = nullptr;
 PyObject* g_parse_error = nullptr;
 PyObject* g_input_error = nullptr;
 PyObject* g_precondition_error = nullptr;
+PyObject* g_divergence_error = nullptr;
 
 py::object optional_int(const std::optional<std::int64_t>& v) {
   return v ? py::object(py::int_(*v)) : py::object(py::none());
@@ -53,7 +55,14 @@ void bind_errors(py::module_& m) {
       "A violated API precondition of the library (a wrong positions count, a face id out of "
       "range in a writer); the message names the library's source file and line.",
       g_error, nullptr);
+  g_divergence_error = PyErr_NewExceptionWithDoc(
+      "crumple.DivergenceError",
+      "A simulation step left non-finite or exploding positions; the simulation is back at the "
+      "start of that frame. Attributes: frame (int, the frame being computed), step (int, "
+      "1-based step of that frame), message (str).",
+      g_error, nullptr);
   m.add_object("Error", py::handle(g_error));
+  m.add_object("DivergenceError", py::handle(g_divergence_error));
   m.add_object("ParseError", py::handle(g_parse_error));
   m.add_object("InputError", py::handle(g_input_error));
   m.add_object("PreconditionError", py::handle(g_precondition_error));
@@ -68,6 +77,12 @@ void bind_errors(py::module_& m) {
       attributes["byte_offset"] = optional_int(e.byte_offset());
       attributes["message"] = py::str(e.message());
       raise_with(g_parse_error, e.what(), attributes);
+    } catch (const sim::DivergenceError& e) {
+      py::dict attributes;
+      attributes["frame"] = py::int_(e.frame());
+      attributes["step"] = py::int_(e.step());
+      attributes["message"] = py::str(e.what());
+      raise_with(g_divergence_error, e.what(), attributes);
     } catch (const InputError& e) {
       PyErr_SetString(g_input_error, e.what());
     } catch (const PreconditionError& e) {
@@ -92,23 +107,41 @@ PositionsArg positions_arg(py::handle value, const char* what) {
     throw py::value_error(std::string(what) + ": expected a real dtype (float64, float32, ...), got " +
                           std::string(py::str(array.dtype())));
   }
-  static_assert(sizeof(Vec3) == 3 * sizeof(double), "Vec3 must be three packed doubles");
-  using Dense = py::array_t<double, py::array::c_style>;
   const auto n = static_cast<std::size_t>(array.shape(0));
-  if (Dense::check_(array) && array.dtype().is(py::dtype::of<double>())) {
+  // float64 or float32 in native byte order, each row's x, y, z consecutive, rows at a positive
+  // stride of at least a row: a view over the caller's memory (VertexView reads any address).
+  const auto rows_of = [&](auto component) -> bool {
+    using T = decltype(component);
+    if (!py::array_t<T>::check_(array)) return false;
+    const py::ssize_t row = array.strides(0), col = array.strides(1);
+    if (n > 0 && (col != static_cast<py::ssize_t>(sizeof(T)) || row < static_cast<py::ssize_t>(3 * sizeof(T)))) {
+      return false;
+    }
+    out.view = VertexView(static_cast<const T*>(array.data()), n, n > 0 ? static_cast<std::size_t>(row) : 0);
+    return true;
+  };
+  if (rows_of(double{}) || rows_of(float{})) {
     out.keep = array;
-    out.view = PositionsView(static_cast<const Vec3*>(array.data()), n);
     out.copied = !given_array;  // a list or other sequence was converted by NumPy
     return out;
   }
+  using Dense = py::array_t<double, py::array::c_style | py::array::forcecast>;
   Dense dense = Dense::ensure(array);  // one converted copy (dtype and/or layout)
   if (!dense) throw py::error_already_set();
   out.storage.resize(n);
   const double* src = dense.data();
   for (std::size_t i = 0; i < n; ++i) out.storage[i] = Vec3(src[3 * i], src[3 * i + 1], src[3 * i + 2]);
-  out.view = out.storage;
+  out.view = VertexView(PositionsView(out.storage));
   out.copied = true;
   return out;
+}
+
+PositionsView PositionsArg::doubles() {
+  if (view.is_native()) return view.native();
+  view.convert(storage);
+  view = VertexView(PositionsView(storage));
+  copied = true;
+  return storage;
 }
 
 std::vector<Face> faces_arg(py::handle value) {
@@ -149,4 +182,5 @@ PYBIND11_MODULE(_crumple, m) {
   crumple::python::bind_errors(m);
   crumple::python::bind_mesh(m);
   crumple::python::bind_detect(m);
+  crumple::python::bind_sim(m);
 }

@@ -13,6 +13,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #if defined(__x86_64__) || defined(__i386__)
@@ -182,8 +183,41 @@ tbb::task_arena& arena(int threads) {
 }
 #endif
 
+/// The host's dispatcher (`set_task_dispatcher`); set and read only while no loop runs.
+TaskDispatcher& host_dispatcher() {
+  static auto* d = new TaskDispatcher;
+  return *d;
+}
+
+/// Set while this thread runs a task of a host loop: a loop started from inside one runs serially.
+thread_local bool t_in_host = false;
+
+/// One loop as tasks of the host's dispatcher, chunk i = [i * grain, min(n, (i + 1) * grain)).
+void run_on_host(std::size_t n, std::size_t grain, const Body& body) {
+  std::mutex error_mutex;
+  std::exception_ptr error;
+  std::atomic<bool> failed{false};
+  host_dispatcher()((n - 1) / grain + 1, [&](std::size_t i) {
+    if (failed.load(std::memory_order_relaxed)) return;  // abandoned after an error
+    const bool outer = t_in_host;
+    t_in_host = true;
+    try {
+      body(i * grain, std::min(n, (i + 1) * grain));
+    } catch (...) {
+      const std::lock_guard lock(error_mutex);
+      if (!error) error = std::current_exception();
+      failed = true;
+    }
+    t_in_host = outer;
+  });
+  if (error) std::rethrow_exception(error);
+}
+
 /// `backend`, after checking that this build has it (`who` names the request in the error).
 ParallelBackend available(ParallelBackend backend, const std::string& who) {
+  if (backend == ParallelBackend::host && !host_dispatcher()) {
+    throw InputError(who + ": no task dispatcher set (set_task_dispatcher)");
+  }
   if (!has_parallel_backend(backend)) throw InputError(who + ": this build of crumple has no TBB (CRUMPLE_WITH_TBB=OFF)");
   return backend;
 }
@@ -207,12 +241,21 @@ bool has_parallel_backend(ParallelBackend backend) {
   (void)backend;
   return true;
 #else
-  return backend == ParallelBackend::team;
+  return backend != ParallelBackend::tbb;
 #endif
 }
 
 void set_parallel_backend(ParallelBackend backend) {
-  chosen_backend().store(available(backend, "set_parallel_backend(tbb)"));
+  const char* who = backend == ParallelBackend::tbb    ? "set_parallel_backend(tbb)"
+                    : backend == ParallelBackend::host ? "set_parallel_backend(host)"
+                                                       : "set_parallel_backend(team)";
+  chosen_backend().store(available(backend, who));
+}
+
+void set_task_dispatcher(TaskDispatcher dispatcher) {
+  const bool set = static_cast<bool>(dispatcher);
+  host_dispatcher() = std::move(dispatcher);
+  chosen_backend().store(set ? ParallelBackend::host : ParallelBackend::team);
 }
 
 ParallelBackend parallel_backend() { return chosen_backend().load(); }
@@ -239,6 +282,10 @@ void parallel_for_chunks(std::size_t n, int threads, std::size_t grain, const Bo
   grain = std::max<std::size_t>(grain, 1);
   threads = resolve_threads(threads);
   if (threads != 1 && n > grain) {
+    if (backend == ParallelBackend::host && !t_in_host && !t_in_team) {
+      run_on_host(n, grain, body);
+      return;
+    }
     if (backend == ParallelBackend::tbb) {
 #ifdef CRUMPLE_HAVE_TBB
       arena(threads).execute([&] {
@@ -250,7 +297,10 @@ void parallel_for_chunks(std::size_t n, int threads, std::size_t grain, const Bo
     }
     // Units are counted in 32 bits, below the closed mark.
     const bool fits = (n - 1) / grain + 1 < std::numeric_limits<std::uint32_t>::max();
-    if (!t_in_team && fits && team().run(threads, n, grain, body)) return;
+    if (!t_in_team && !t_in_host && backend != ParallelBackend::host && fits &&
+        team().run(threads, n, grain, body)) {
+      return;
+    }
   }
   body(0, n);
 }

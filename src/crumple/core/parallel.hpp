@@ -39,7 +39,21 @@ std::size_t balanced_grain(std::size_t n, int threads, std::size_t smallest, std
 enum class ParallelBackend {
   team,  ///< crumple's team: workers spin for `kTeamSpin` after each loop, then sleep
   tbb,   ///< oneTBB's task arenas (only when crumple is built with TBB)
+  host,  ///< the host application's task system (`set_task_dispatcher`)
 };
+
+/// A host application's task system (an engine's job system): `dispatch(count, task)` must call
+/// `task(i)` exactly once for every i in [0, count), on any of its threads (the calling one
+/// included), and return only once every call has returned. `task` never throws: an exception
+/// of a loop's body is kept and rethrown by `parallel_for_chunks` after `dispatch` returns.
+using TaskDispatcher =
+    std::function<void(std::size_t count, const std::function<void(std::size_t index)>& task)>;
+
+/// Runs every later parallel loop as tasks of `dispatcher`, one task per chunk of `grain` items
+/// (backend `host`); the detectors' `threads` option then only sizes the work (1 still means
+/// serial, in the calling thread). An empty dispatcher goes back to the `team` backend. A loop
+/// started from inside a task runs serially in it. Not to be called while a loop runs.
+void set_task_dispatcher(TaskDispatcher dispatcher);
 
 /// How long a team worker keeps spinning for the next loop before it sleeps. Only while the
 /// loop's thread count fits the hardware threads; oversubscribed workers sleep at once.
@@ -48,7 +62,7 @@ inline constexpr std::chrono::microseconds kTeamSpin{500};
 /// Chooses the backend for the whole process (default: `team`, or what the environment
 /// variable CRUMPLE_PARALLEL says, `team` or `tbb`, read at the first loop; any other value
 /// makes every loop throw `InputError` naming it). Throws `InputError` for `tbb` in a build
-/// without TBB. Not to be called while a loop runs.
+/// without TBB, and for `host` before `set_task_dispatcher`. Not to be called while a loop runs.
 void set_parallel_backend(ParallelBackend backend);
 ParallelBackend parallel_backend();
 /// Whether this build can run `backend`.

@@ -73,6 +73,19 @@ void Detector::update(PositionsView previous, PositionsView positions, ContactSe
   if (!sorted_output()) out.sort();
 }
 
+void Detector::update(const VertexView& positions, ContactSet& out) { update(VertexView(), positions, out); }
+
+void Detector::update(const VertexView& previous, const VertexView& positions, ContactSet& out) {
+  const auto doubles = [](const VertexView& view, Positions& buffer) {
+    if (view.is_native()) return view.native();
+    view.convert(buffer);
+    return PositionsView(buffer);
+  };
+  const PositionsView x = doubles(positions, converted_);
+  const PositionsView x0 = capabilities().uses_motion ? doubles(previous, converted_previous_) : PositionsView();
+  update(x0, x, out);
+}
+
 void Detector::load_state(std::string_view text) {
   if (text.find_first_not_of(" \t\r\n") == std::string_view::npos) return;
   throw InputError("method " + std::string(to_string(method())) +

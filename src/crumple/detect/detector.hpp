@@ -11,6 +11,7 @@
 ///  - TT: faces sharing no vertex that intersect (closed triangles; touching counts).
 
 #include <crumple/core/types.hpp>
+#include <crumple/core/vertex_view.hpp>
 #include <crumple/detect/contact.hpp>
 #include <crumple/detect/hierarchy.hpp>
 #include <crumple/detect/method.hpp>
@@ -66,6 +67,12 @@ class Detector {
   void update(PositionsView positions, ContactSet& out);
   /// Same, with the previous frame's positions for methods that use motion (others ignore them).
   void update(PositionsView previous, PositionsView positions, ContactSet& out);
+  /// Same, from a host application's buffers (`float` or `double`, packed or strided, see
+  /// `VertexView`): a native view is read in place, any other is converted once into the
+  /// detector's own buffer (reused across frames), `previous` only for methods that use motion.
+  /// The contacts are those of `update` on the converted `double` positions, bit for bit.
+  void update(const VertexView& positions, ContactSet& out);
+  void update(const VertexView& previous, const VertexView& positions, ContactSet& out);
 
   /// Counters of the last update (pairs tested, candidates, ...), method-specific.
   const DetectorStats& stats() const { return stats_; }
@@ -102,6 +109,7 @@ class Detector {
  private:
   DetectorOptions options_;
   std::shared_ptr<const Topology> topology_;
+  Positions converted_, converted_previous_;  // non-native `VertexView`s as doubles
 };
 
 /// Creates the detector for a method spec (the one factory, make_detector.cpp). Throws

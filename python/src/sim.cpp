@@ -1,0 +1,503 @@
+/// `crumple.Simulation`, `crumple.scenes` and `crumple.render`: the simulator and the software
+/// rasteriser from Python. Thin on purpose: scene options travel in the scene spec text (the
+/// CLI's `simulate SPEC`), run settings as the CLI's option names.
+
+#include "bindings.hpp"
+
+#include <crumple/mesh/mesh.hpp>
+#include <crumple/render/camera.hpp>
+#include <crumple/render/colouring.hpp>
+#include <crumple/render/picture.hpp>
+#include <crumple/sim/scene.hpp>
+#include <crumple/sim/simulation.hpp>
+
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace crumple::python {
+
+namespace {
+
+/// Run settings given from Python; unset ones keep the scene's suggestion.
+struct SettingsArgs {
+  std::optional<std::string> method;
+  std::optional<double> thickness;
+  std::optional<std::string> kinds;
+  std::optional<bool> response;
+  std::optional<int> passes;
+  std::optional<double> dt;
+  std::optional<int> substeps;
+  std::optional<std::string> integrator;
+  int threads = 0;
+
+  void apply(sim::Settings& s) const {
+    if (method) s.method = MethodSpec::parse(*method);
+    if (thickness) s.detector.thickness = *thickness;
+    if (kinds) s.detector.kinds = ContactKinds::parse(*kinds);
+    if (response) s.response = *response;
+    if (passes) s.passes = *passes;
+    if (dt) s.dt = *dt;
+    if (substeps) s.substeps = *substeps;
+    if (integrator) s.integrator = sim::parse_integrator(*integrator);
+    s.detector.threads = threads;
+    if (!(s.dt > 0 && std::isfinite(s.dt))) throw InputError("Simulation: dt must be > 0");
+    if (s.substeps < 1) throw InputError("Simulation: substeps must be >= 1");
+    if (s.passes < 1) throw InputError("Simulation: passes must be >= 1");
+    if (!(s.detector.thickness >= 0 && std::isfinite(s.detector.thickness))) {
+      throw InputError("Simulation: thickness must be finite and >= 0");
+    }
+    if (threads < 0) throw InputError("Simulation: threads must be >= 0");
+  }
+};
+
+/// Camera and drawing options of a picture.
+struct PictureArgs {
+  int width = 640;
+  int height = 480;
+  double yaw = 30;
+  double pitch = 20;
+  std::optional<double> distance;
+  bool wireframe = false;
+  bool springs = false;
+  bool contacts = true;
+  int supersample = 2;
+
+  void check() const {
+    if (width < 1 || height < 1 || width > 16384 || height > 16384) {
+      throw InputError("render: width and height must be in 1..16384");
+    }
+    if (supersample < 1 || supersample > 4) throw InputError("render: supersample must be 1..4");
+    if (!(pitch >= -89 && pitch <= 89)) throw InputError("render: pitch must be in [-89, 89] degrees");
+    if (!std::isfinite(yaw)) throw InputError("render: yaw must be finite");
+    if (distance && !(*distance > 0 && std::isfinite(*distance))) {
+      throw InputError("render: distance must be > 0");
+    }
+  }
+  render::Camera camera(PositionsView x) const {
+    render::Camera cam;
+    cam.yaw_deg = yaw;
+    cam.pitch_deg = pitch;
+    cam.fit(compute_bounds(x), static_cast<double>(width) / height);
+    if (distance) cam.distance = *distance;
+    return cam;
+  }
+  render::DrawOptions options() const {
+    render::DrawOptions o;
+    o.wireframe = wireframe;
+    o.masses_springs = springs;
+    o.colliding_edges = contacts;
+    o.contact_segments = contacts;
+    return o;
+  }
+};
+
+/// The picture's pixels as a new (h, w, 3) uint8 array that owns them (moved, not copied).
+py::array picture_array(render::Picture&& picture) {
+  auto* bytes = new std::vector<std::uint8_t>(std::move(picture.data()));
+  py::capsule owner(bytes, [](void* p) { delete static_cast<std::vector<std::uint8_t>*>(p); });
+  const py::ssize_t h = picture.height(), w = picture.width();
+  return py::array(py::dtype::of<std::uint8_t>(), {h, w, py::ssize_t{3}}, {3 * w, py::ssize_t{3}, py::ssize_t{1}},
+                   bytes->data(), owner);
+}
+
+py::dict stats_dict(const sim::FrameStats& s) {
+  py::dict d;
+  d["frame"] = s.frame;
+  d["time"] = s.time;
+  d["integrate_ms"] = s.integrate_ms;
+  d["detect_ms"] = s.detect_ms;
+  d["response_ms"] = s.response_ms;
+  d["vf"] = s.vf;
+  d["ee"] = s.ee;
+  d["tt"] = s.tt;
+  d["collision_share"] = s.collision_share;
+  d["min_distance"] = s.min_distance;
+  d["obstacle_penetration"] = s.obstacle_penetration;
+  d["cg_iterations"] = s.cg_iterations;
+  d["corrections"] = s.corrections;
+  d["energy"] = s.energy;
+  d["max_speed"] = s.max_speed;
+  return d;
+}
+
+/// Per-frame figures as columns: every key of `stats_dict` → (frames,) array, plus
+/// bounds_min / bounds_max (frames, 3).
+py::dict stats_columns(const std::vector<sim::FrameStats>& frames) {
+  py::dict out;
+  // Column dtypes follow the values' types (int or float).
+  const py::dict first = stats_dict(frames.empty() ? sim::FrameStats{} : frames.front());
+  std::vector<py::list> columns(first.size());
+  for (const sim::FrameStats& f : frames) {
+    std::size_t k = 0;
+    for (auto item : stats_dict(f)) columns[k++].append(item.second);
+  }
+  const py::object asarray = py::module_::import("numpy").attr("asarray");
+  std::size_t k = 0;
+  for (auto item : first) {
+    out[item.first] = asarray(columns[k++], py::isinstance<py::float_>(item.second) ? "float64" : "int64");
+  }
+  py::array_t<double> lo({static_cast<py::ssize_t>(frames.size()), py::ssize_t{3}});
+  py::array_t<double> hi({static_cast<py::ssize_t>(frames.size()), py::ssize_t{3}});
+  auto l = lo.mutable_unchecked<2>();
+  auto h = hi.mutable_unchecked<2>();
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    for (int c = 0; c < 3; ++c) {
+      l(static_cast<py::ssize_t>(i), c) = frames[i].bounds.min[c];
+      h(static_cast<py::ssize_t>(i), c) = frames[i].bounds.max[c];
+    }
+  }
+  out["bounds_min"] = lo;
+  out["bounds_max"] = hi;
+  return out;
+}
+
+/// (n, 3) float64 array holding a copy of `x` (the simulation rewrites its own).
+py::array_t<double> positions_copy(PositionsView x) {
+  py::array_t<double> out({static_cast<py::ssize_t>(x.size()), py::ssize_t{3}});
+  double* dst = out.mutable_data();
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    for (int c = 0; c < 3; ++c) dst[3 * i + static_cast<std::size_t>(c)] = x[i][c];
+  }
+  return out;
+}
+
+/// The Python simulation: one `sim::Simulation` and a guard against concurrent use while the
+/// GIL is released.
+class PySimulation {
+ public:
+  PySimulation(sim::Scene scene, const SettingsArgs& args, std::uint64_t seed) : seed_(seed) {
+    spec_ = scene.spec;
+    edge_length_ = scene.edge_length;
+    sim::Settings settings = scene.settings;
+    args.apply(settings);
+    topology_ = scene.model.topology_ptr();
+    sim_ = std::make_unique<sim::Simulation>(std::move(scene.model), std::move(scene.state), scene.field,
+                                             std::move(scene.obstacles), std::move(scene.kinematics),
+                                             settings);
+  }
+
+  std::unique_lock<std::mutex> guard() {
+    std::unique_lock lock(busy_, std::try_to_lock);
+    if (!lock) throw std::runtime_error("Simulation is in use by another thread");
+    return lock;
+  }
+
+  std::vector<sim::FrameStats> run(std::int64_t frames) {
+    if (frames < 0) throw py::value_error("Simulation.run: frames must be >= 0");
+    const auto lock = guard();
+    std::vector<sim::FrameStats> out;
+    out.reserve(static_cast<std::size_t>(frames));
+    py::gil_scoped_release release;
+    for (std::int64_t f = 0; f < frames; ++f) out.push_back(sim_->advance_frame());
+    return out;
+  }
+
+  py::array render(const PictureArgs& args) {
+    args.check();
+    const auto lock = guard();
+    render::Picture picture;
+    {
+      py::gil_scoped_release release;
+      const PositionsView x = sim_->state().x;
+      std::vector<Edge> springs;
+      for (const sim::Spring& s : sim_->model().springs()) springs.push_back({s.a, s.b});
+      const auto n = static_cast<std::size_t>(sim_->model().num_particles());
+      std::unique_ptr<bool[]> pinned(new bool[n]);
+      for (std::size_t i = 0; i < n; ++i) pinned[i] = sim_->model().pinned(static_cast<Index>(i));
+      const std::vector<render::ShapeMesh> obstacles =
+          render::obstacle_meshes(sim_->obstacles(), sim_->state().time, x);
+      const render::Frame frame{topology_.get(), x, &sim_->contacts(), springs,
+                                std::span<const bool>(pinned.get(), n), obstacles};
+      picture = render::render_frame(frame, args.camera(x), args.width, args.height, args.options(),
+                                     args.supersample);
+    }
+    return picture_array(std::move(picture));
+  }
+
+  sim::Simulation& sim() { return *sim_; }
+  const std::shared_ptr<const Topology>& topology() const { return topology_; }
+  const std::string& spec() const { return spec_; }
+  std::uint64_t seed() const { return seed_; }
+  double edge_length() const { return edge_length_; }
+
+ private:
+  std::string spec_;
+  std::uint64_t seed_;
+  double edge_length_ = 0;
+  std::shared_ptr<const Topology> topology_;
+  std::unique_ptr<sim::Simulation> sim_;
+  std::mutex busy_;
+};
+
+SettingsArgs settings_args(const py::kwargs& kw) {
+  SettingsArgs a;
+  for (auto item : kw) {
+    const std::string key = py::str(item.first);
+    const py::handle v = item.second;
+    if (v.is_none()) continue;
+    if (key == "method") a.method = v.cast<std::string>();
+    else if (key == "thickness") a.thickness = v.cast<double>();
+    else if (key == "kinds") a.kinds = v.cast<std::string>();
+    else if (key == "response") a.response = v.cast<bool>();
+    else if (key == "passes") a.passes = v.cast<int>();
+    else if (key == "dt") a.dt = v.cast<double>();
+    else if (key == "substeps") a.substeps = v.cast<int>();
+    else if (key == "integrator") a.integrator = v.cast<std::string>();
+    else if (key == "threads") a.threads = v.cast<int>();
+    else {
+      throw py::type_error("Simulation: unexpected keyword '" + key +
+                           "' (method, thickness, kinds, response, passes, dt, substeps, "
+                           "integrator, threads; scene options go in the spec text)");
+    }
+  }
+  return a;
+}
+
+PictureArgs picture_args(int width, int height, double yaw, double pitch, std::optional<double> distance,
+                         bool wireframe, bool springs, bool contacts, int supersample) {
+  return PictureArgs{width, height, yaw, pitch, distance, wireframe, springs, contacts, supersample};
+}
+
+constexpr const char* kSettingsDoc = R"doc(
+Run settings (keyword-only; None or absent keeps the scene's suggestion, the CLI's options):
+method (detection spec, as Detector's), thickness (contact thickness, m), kinds ("vf,ee"),
+response (bool: self-collision response), passes (>= 1), dt (step, s), substeps (steps per
+frame), integrator ("implicit-euler", "explicit-euler", "symplectic-euler", "rk4"), threads
+(0 = all). A dt beyond an explicit integrator's stable range is kept as given (the CLI splits it).
+Raises crumple.InputError (a ValueError) on a bad spec, key or value, TypeError on an unknown
+keyword.
+)doc";
+
+}  // namespace
+
+void bind_sim(py::module_& m) {
+  py::class_<PySimulation> cls(m, "Simulation", R"doc(
+A cloth simulation (mass-spring cloth, obstacles, self-collision detection and response), as the
+CLI's `simulate`: `Simulation("cloth-on-sphere:n=32")` builds a built-in scene,
+`Simulation.from_mesh(mesh, "pins=0;1")` a cloth from a mesh (e.g. TriMesh(vertices, faces)).
+`advance()` runs one frame, `run(frames)` several; the GIL is released while stepping.
+Deterministic: the same spec, seed and settings give the same positions, bit for bit.
+)doc");
+  cls.def(py::init([](const std::string& scene, std::uint64_t seed, const py::kwargs& kw) {
+            const SettingsArgs args = settings_args(kw);
+            return std::make_unique<PySimulation>(sim::make_scene(sim::SceneSpec::parse(scene), seed), args,
+                                                  seed);
+          }),
+          py::arg("scene") = "cloth-on-sphere", py::kw_only(), py::arg("seed") = 1,
+          (std::string(R"doc(
+scene: a built-in scene spec NAME[:key=value,...] exactly as the CLI's `simulate SPEC` (see
+crumple.scenes()). seed: the scene's random perturbation.
+)doc") + kSettingsDoc).c_str())
+      .def_static(
+          "from_mesh",
+          [](const TriMesh& mesh, const std::string& params, const py::kwargs& kw) {
+            const SettingsArgs args = settings_args(kw);
+            const std::string spec = params.empty() ? std::string("file") : "file:" + params;
+            return std::make_unique<PySimulation>(sim::make_scene_from_mesh(mesh, sim::SceneSpec::parse(spec)),
+                                                  args, 0);
+          },
+          py::arg("mesh"), py::arg("params") = "",
+          (std::string(R"doc(
+A cloth made of a mesh (its positions are the rest and initial state). params: the `file`
+scene's keys as "key=value,...", e.g. "pins=0;7,stiffness=500" (see crumple.scenes()).
+)doc") + kSettingsDoc).c_str())
+      .def(
+          "advance",
+          [](PySimulation& s) { return stats_dict(s.run(1).front()); },
+          "Runs one frame (substeps steps, then detection); returns its figures (dict, see "
+          "current_stats). crumple.DivergenceError if a step diverges (the simulation is then "
+          "back at the frame's start).")
+      .def(
+          "run", [](PySimulation& s, std::int64_t frames) { return stats_columns(s.run(frames)); },
+          py::arg("frames"), R"doc(
+Runs `frames` frames; returns their figures as columns: each key of current_stats -> (frames,)
+array (int64 counts, float64 figures), plus bounds_min and bounds_max (frames, 3) float64.
+On divergence raises crumple.DivergenceError; the frames before it stay done.
+)doc")
+      .def(
+          "current_stats",
+          [](PySimulation& s) {
+            const auto lock = s.guard();
+            return stats_dict(s.sim().current_stats());
+          },
+          "Figures of the current frame: frame, time (s), integrate_ms, detect_ms, response_ms, "
+          "vf, ee, tt (contacts), collision_share (edges in contact, 0..1), min_distance, "
+          "obstacle_penetration (m), cg_iterations, corrections, energy (J), max_speed (m/s).")
+      .def_property_readonly(
+          "positions",
+          [](PySimulation& s) {
+            const auto lock = s.guard();
+            return positions_copy(s.sim().state().x);
+          },
+          "(n, 3) float64 copy of the current positions (the simulation rewrites its own).")
+      .def_property_readonly(
+          "velocities",
+          [](PySimulation& s) {
+            const auto lock = s.guard();
+            return positions_copy(s.sim().state().v);
+          },
+          "(n, 3) float64 copy of the current velocities.")
+      .def_property_readonly(
+          "faces",
+          [](py::object self) {
+            const Topology& t = *self.cast<PySimulation&>().topology();
+            static const Face kEmpty{};
+            const auto m = static_cast<py::ssize_t>(t.num_faces());
+            return readonly_view<Index>(m > 0 ? t.faces().front().data() : kEmpty.data(), {m, 3},
+                                        {static_cast<py::ssize_t>(sizeof(Face)), sizeof(Index)}, self);
+          },
+          "(m, 3) int32 read-only view of the cloth's faces.")
+      .def_property_readonly(
+          "pinned",
+          [](PySimulation& s) {
+            const sim::Model& model = s.sim().model();
+            py::array_t<bool> out(model.num_particles());
+            auto o = out.mutable_unchecked<1>();
+            for (Index i = 0; i < model.num_particles(); ++i) o(i) = model.pinned(i);
+            return out;
+          },
+          "(n,) bool: particles driven by the scene (pinned), not integrated.")
+      .def(
+          "mesh",
+          [](PySimulation& s) {
+            const auto lock = s.guard();
+            const Topology& t = *s.topology();
+            return TriMesh::create(s.sim().state().x, std::vector<Face>(t.faces().begin(), t.faces().end()));
+          },
+          "A TriMesh of the current positions (e.g. for Detector.set_topology or write_mesh).")
+      .def(
+          "contacts",
+          [](PySimulation& s) {
+            const auto lock = s.guard();
+            py::gil_scoped_release release;
+            return PyContacts{std::make_shared<const ContactSet>(s.sim().contacts())};
+          },
+          "The self-contacts at the current positions (a Contacts, with the simulation's detector "
+          "and thickness).")
+      .def(
+          "render",
+          [](PySimulation& s, int width, int height, double yaw, double pitch, std::optional<double> distance,
+             bool wireframe, bool springs, bool contacts, int supersample) {
+            return s.render(picture_args(width, height, yaw, pitch, distance, wireframe, springs, contacts,
+                                         supersample));
+          },
+          py::arg("width") = 640, py::arg("height") = 480, py::kw_only(), py::arg("yaw") = 30.0,
+          py::arg("pitch") = 20.0, py::arg("distance") = py::none(), py::arg("wireframe") = false,
+          py::arg("springs") = false, py::arg("contacts") = true, py::arg("supersample") = 2, R"doc(
+The current frame as the CLI's `render` draws it: an (height, width, 3) uint8 RGB array, rows
+top to bottom. Camera: yaw and pitch in degrees (pitch within [-89, 89]), distance None = fit
+the cloth. wireframe draws the edges; springs the masses and springs instead of the surface;
+contacts the edges in collision in red and the VF contacts as segments. supersample 1..4.
+The GIL is released while drawing. crumple.InputError on a bad size or camera.
+)doc")
+      .def_property_readonly(
+          "time",
+          [](PySimulation& s) {
+            const auto lock = s.guard();
+            return s.sim().state().time;
+          },
+          "Simulated time (s).")
+      .def_property_readonly(
+          "frame",
+          [](PySimulation& s) {
+            const auto lock = s.guard();
+            return s.sim().frame();
+          },
+          "Current frame number (0 = the initial state).")
+      .def_property_readonly("num_vertices", [](PySimulation& s) { return s.sim().model().num_particles(); })
+      .def_property_readonly("scene", &PySimulation::spec, "The canonical scene spec.")
+      .def_property_readonly("seed", &PySimulation::seed)
+      .def_property_readonly("edge_length", &PySimulation::edge_length, "Mean rest length of the edges (m).")
+      .def_property_readonly(
+          "settings",
+          [](PySimulation& s) {
+            const sim::Settings& st = s.sim().settings();
+            py::dict d;
+            d["dt"] = st.dt;
+            d["substeps"] = st.substeps;
+            d["integrator"] = std::string(sim::to_string(st.integrator));
+            d["method"] = st.method.to_string();
+            d["thickness"] = st.detector.thickness;
+            d["kinds"] = st.detector.kinds.to_string();
+            d["response"] = st.response;
+            d["passes"] = st.passes;
+            d["threads"] = st.detector.threads;
+            return d;
+          },
+          "The run settings in use (dict with the constructor's keyword names).")
+      .def_property_readonly(
+          "detector_stats",
+          [](PySimulation& s) {
+            const auto lock = s.guard();
+            py::dict out;
+            for (const auto& [key, value] : s.sim().detector().stats().items()) out[py::str(key)] = value;
+            return out;
+          },
+          "Counters of the simulation detector's last update (as Detector.stats).")
+      .def("__repr__", [](PySimulation& s) {
+        const auto lock = s.guard();
+        return "Simulation('" + s.spec() + "', frame=" + std::to_string(s.sim().frame()) + ")";
+      });
+
+  m.def("scenes", [] {
+    py::list out;
+    for (const sim::SceneInfo& info : sim::all_scenes()) {
+      py::dict d;
+      d["name"] = std::string(info.name);
+      d["summary"] = std::string(info.summary);
+      py::dict params;
+      for (const sim::SceneParamInfo& p : info.params) {
+        params[py::str(std::string(p.key))] =
+            py::make_tuple(std::string(p.default_value), std::string(p.description));
+      }
+      d["params"] = params;
+      out.append(d);
+    }
+    return out;
+  }, "Every scene: list of dicts name, summary, params {key: (default, description)}; the last, "
+     "'file', lists the keys of Simulation.from_mesh.");
+
+  m.def(
+      "render",
+      [](const TriMesh& mesh, py::handle positions, std::optional<PyContacts> contacts, int width, int height,
+         double yaw, double pitch, std::optional<double> distance, bool wireframe, int supersample) {
+        const PictureArgs args = picture_args(width, height, yaw, pitch, distance, wireframe, false, true,
+                                              supersample);
+        args.check();
+        PositionsArg arg;
+        PositionsView x = mesh.positions();
+        if (!positions.is_none()) {
+          arg = positions_arg(positions, "positions");
+          x = arg.doubles();
+          if (x.size() != static_cast<std::size_t>(mesh.num_vertices())) {
+            throw py::value_error("render: positions have " + std::to_string(x.size()) +
+                                  " rows, the mesh " + std::to_string(mesh.num_vertices()) + " vertices");
+          }
+        }
+        render::Picture picture;
+        {
+          py::gil_scoped_release release;
+          check_finite(x);
+          const render::Frame frame{&mesh.topology(), x, contacts ? contacts->set.get() : nullptr, {}, {}, {}};
+          picture = render::render_frame(frame, args.camera(x), width, height, args.options(), supersample);
+        }
+        return picture_array(std::move(picture));
+      },
+      py::arg("mesh"), py::arg("positions") = py::none(), py::arg("contacts") = py::none(), py::arg("width") = 640,
+      py::arg("height") = 480, py::kw_only(), py::arg("yaw") = 30.0, py::arg("pitch") = 20.0,
+      py::arg("distance") = py::none(), py::arg("wireframe") = false, py::arg("supersample") = 2, R"doc(
+Draws a mesh (at positions, an (n, 3) real array, or its own) with optional Contacts of those
+positions (edges in collision in red, VF contacts as segments), as the CLI's `render FILE`.
+Returns a new (height, width, 3) uint8 RGB array. The GIL is released while drawing.
+)doc");
+}
+
+}  // namespace crumple::python
