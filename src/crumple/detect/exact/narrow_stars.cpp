@@ -1,10 +1,9 @@
 #include <crumple/core/parallel.hpp>
 #include <crumple/detect/exact/box_tree.hpp>
 #include <crumple/detect/exact/narrow_frame.hpp>
+#include <crumple/detect/exact/stars.hpp>
 
-#include <algorithm>
 #include <atomic>
-#include <utility>
 #include <vector>
 
 namespace crumple::exact {
@@ -20,35 +19,21 @@ Box corner_box(const NarrowFrame& frame, const PackedFace& t, Scalar r) {
   return b;
 }
 
-/// The box of the features of face t without vertex v that t owns (its corners other than v,
-/// the ends of its sides without v), NaN points left out, inflated by r; empty if none.
-Box owned_far_box(const NarrowFrame& frame, const PackedFace& t, Index v, Scalar r) {
-  Box b = Box::empty();
-  for (std::size_t k = 0; k < 3; ++k) {
-    const Index u = t.v[k], w = t.v[(k + 1) % 3];
-    if ((t.vertex_mask >> k & 1u) && u != v) b.grow(narrow::at(frame.x, u));
-    if ((t.edge_mask >> k & 1u) && u != v && w != v) {
-      b.grow(narrow::at(frame.x, u));
-      b.grow(narrow::at(frame.x, w));
-    }
-  }
-  b.inflate(r);
-  return b;
-}
-
 }  // namespace
 
 std::size_t narrow_stars(NarrowFrame& frame, const std::vector<Index>& stars, const FeatureOwnership& own) {
   if (!frame.proximity || stars.empty()) return 0;
   const Topology& topo = frame.topo;
   const Scalar r = frame.pad / 2;
+  const auto point_box = [&](Index u) {
+    Box b = Box::empty();
+    b.grow(narrow::at(frame.x, u));
+    return b;
+  };
   std::atomic<std::size_t> examined{0};
   parallel_for_chunks(stars.size(), frame.threads, 1, [&](std::size_t begin, std::size_t end) {
     LocalContacts local{frame.spares.take()};
-    std::vector<Index> faces;
-    std::vector<Box> boxes;
-    std::vector<std::pair<Index, Index>> pairs;
-    BoxTree tree;
+    StarScratch scratch;
     const auto vf = [&](Index u, Index g) {
       if (!frame.kinds.vf) return;
       const Vec3& p = narrow::at(frame.x, u);
@@ -63,32 +48,11 @@ std::size_t narrow_stars(NarrowFrame& frame, const std::vector<Index>& stars, co
     };
     for (std::size_t i = begin; i < end; ++i) {
       const Index v = stars[i];
-      const auto around = topo.vertex_faces()[v];
-      faces.assign(around.begin(), around.end());
-      std::sort(faces.begin(), faces.end());
-      faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
-      boxes.resize(faces.size());
-      for (std::size_t k = 0; k < faces.size(); ++k) boxes[k] = corner_box(frame, frame.packed[static_cast<std::size_t>(faces[k])], r);
-      tree.build(boxes);
-      // Every orphan sub-pair of two faces f, g around v has an owned feature without v: the
-      // vertex of a vertex-face pair (v is on both faces), or one of two edges that share no
-      // vertex. So a sub-pair within pad has the box of one face's owned features without v,
-      // inflated by pad / 2, meet the other face's box inflated by as much; and a face that owns
-      // no such feature asks nothing (so many copies of one face cost linear time).
-      pairs.clear();
-      for (std::size_t k = 0; k < faces.size(); ++k) {
-        const Box far = owned_far_box(frame, frame.packed[static_cast<std::size_t>(faces[k])], v, r);
-        if (!(far.lo[0] <= far.hi[0])) continue;  // owns nothing without v (or only NaN)
-        tree.query(far, [&](std::uint32_t j) {
-          if (j != k) pairs.emplace_back(std::min(faces[k], faces[j]), std::max(faces[k], faces[j]));
-        });
-      }
-      std::sort(pairs.begin(), pairs.end());
-      pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
-      examined += pairs.size();
-      for (const auto& [f, g] : pairs) {
-        if (smallest_shared_vertex(topo, f, g) == v) for_each_orphan(topo, own, f, g, vf, ee);
-      }
+      examined += star_pairs(
+          topo, v, scratch,
+          [&](Index f) { return corner_box(frame, frame.packed[static_cast<std::size_t>(f)], r); },
+          [&](Index f) { return owned_far_box(topo, own, f, v, r, point_box); },
+          [&](Index f, Index g) { for_each_orphan(topo, own, f, g, vf, ee); });
     }
     frame.collect(local);
   });
