@@ -50,7 +50,7 @@ HybridParams HybridParams::from_spec(const MethodSpec& spec) {
   if (draw < 0 || draw > 100'000'000) fail("draw must be in [0, 1e8] (0 = adaptive), got " + std::to_string(draw));
   p.draw = static_cast<int>(draw);
   static constexpr std::array<std::string_view, 4> kPropagation{"auto", "none", "linear", "full"};
-  const std::string prop = spec.get_choice("propagation", "auto", kPropagation);
+  const std::string prop = spec.get_choice("propagation", "linear", kPropagation);
   p.auto_propagation = prop == "auto";
   if (prop == "none") p.propagation = Propagation::None;
   if (prop == "full") p.propagation = Propagation::Full;
@@ -248,6 +248,7 @@ struct HybridDetector::Impl {
   // Per frame.
   std::vector<Box> boxes, previous_boxes;
   std::vector<Scalar> motion, near_factor;
+  std::vector<int> leaf_zones;  ///< zones each leaf is in
   std::vector<std::uint64_t> zone_keys;
   LeafTree tree;
   std::vector<Box> face_box, edge_box;
@@ -395,6 +396,7 @@ void HybridDetector::Impl::build(const Topology& topo, int leaf_size) {
   previous_boxes = boxes;
   motion.assign(static_cast<std::size_t>(nl), 0);
   near_factor.assign(static_cast<std::size_t>(nl), 2);
+  leaf_zones.assign(static_cast<std::size_t>(nl), 0);
   face_box.assign(static_cast<std::size_t>(nf), Box::empty());
   face_box_gen.assign(static_cast<std::size_t>(nf), 0);
   edge_box.assign(static_cast<std::size_t>(topo.num_edges()), Box::empty());
@@ -585,6 +587,11 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
     }
   }
   m.zones.swap(zones);
+  std::fill(m.leaf_zones.begin(), m.leaf_zones.end(), 0);
+  for (const Zone& z : m.zones) {
+    ++m.leaf_zones[static_cast<std::size_t>(z.a)];
+    if (z.a != z.b) ++m.leaf_zones[static_cast<std::size_t>(z.b)];
+  }
   std::vector<Kept> old_kept;
   old_kept.swap(m.kept);
 
@@ -664,6 +671,11 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
   for (const Zone& z : m.zones) zones_due += due(z) ? 1 : 0;
   const auto rows_size = [](std::span<const Index> s) { return static_cast<Index>(s.size()); };
   std::vector<Kept> carried;
+  // A zone whose examination the budget cut short counts as not examined: it stays due.
+  const auto unfinish = [&](Zone& z) {
+    z.examined = false;
+    --examined;
+  };
 
   for (const std::size_t zi : order) {
     Zone& z = m.zones[zi];
@@ -681,6 +693,11 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
     ctx.near2 = nz * nz;
     const Index particles = rows_size(m.owned_verts[z.a]) + (z.a == z.b ? 0 : rows_size(m.owned_verts[z.b]));
     const double share = particles > 0 ? static_cast<double>(z.contacts) / particles : 0;
+    // A leaf's particles are shared among the zones it is in, so that the draws of a frame
+    // follow the rule over the whole mesh, not once per zone.
+    const double zone_particles =
+        static_cast<double>(rows_size(m.owned_verts[z.a])) / m.leaf_zones[la] +
+        (z.a == z.b ? 0.0 : static_cast<double>(rows_size(m.owned_verts[z.b])) / m.leaf_zones[lb]);
     EngineConfig config = base;
     config.propagation = params_.auto_propagation ? (share > 0.5 ? Propagation::None : Propagation::Linear)
                                                   : params_.propagation;
@@ -692,6 +709,7 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
       // Every pair of owned elements, behind a box pre-test (the box of one side grown by h).
       const auto vf_side = [&](Index owner, Index other) {
         for (const Index v : m.owned_verts[owner]) {
+          if (out_of_time()) return;
           const Vec3& p = x[static_cast<std::size_t>(v)];
           for (const Index f : m.leaf_faces[other]) {
             Box b = m.fbox(topo, x, f);
@@ -709,7 +727,7 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
       if (run_ee) {
         const auto ea = m.owned_edges[z.a];
         const auto eb = m.owned_edges[z.b];
-        for (std::size_t i = 0; i < ea.size(); ++i) {
+        for (std::size_t i = 0; i < ea.size() && !out_of_time(); ++i) {
           Box b = m.ebox(topo, x, ea[i]);
           b.inflate(h);
           for (std::size_t j = z.a == z.b ? i + 1 : 0; j < eb.size(); ++j) {
@@ -722,7 +740,7 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
       if (run_ef) {
         const auto fa = m.leaf_faces[z.a];
         const auto fb = m.leaf_faces[z.b];
-        for (std::size_t i = 0; i < fa.size(); ++i) {
+        for (std::size_t i = 0; i < fa.size() && !out_of_time(); ++i) {
           const Box& b = m.fbox(topo, x, fa[i]);
           for (std::size_t j = z.a == z.b ? i + 1 : 0; j < fb.size(); ++j) {
             if (!b.overlaps(m.fbox(topo, x, fb[j])) || topo.faces_adjacent(fa[i], fb[j])) continue;
@@ -731,6 +749,7 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
           }
         }
       }
+      if (out_of_time()) unfinish(z);
       continue;
     }
 
@@ -739,6 +758,11 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
     const std::size_t c_vf = m.vf.colliding_pairs().size();
     const std::size_t c_ef = m.ef.colliding_pairs().size();
     for (std::size_t k = z.kept_begin; k < z.kept_end; ++k) {
+      if (out_of_time()) {  // the rest wait, as they are, for the next frame
+        carried.insert(carried.end(), old_kept.begin() + static_cast<std::ptrdiff_t>(k),
+                       old_kept.begin() + static_cast<std::ptrdiff_t>(z.kept_end));
+        break;
+      }
       const Kept& kp = old_kept[k];
       if (kp.type == kEE && run_ee) m.ee.process_pair(ctx, kp.pair);
       if (kp.type == kVF && run_vf) m.vf.process_pair(ctx, kp.pair);
@@ -749,7 +773,7 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
     int n_draw = params_.draw;
     if (n_draw == 0) {
       const double rate = share < 0.3 ? 0.1 : share > 0.5 ? 1.0 : 0.1 + (share - 0.3) / 0.2 * 0.9;
-      n_draw = std::max(1, static_cast<int>(std::ceil(rate * particles)));
+      n_draw = std::max(1, static_cast<int>(std::ceil(rate * zone_particles)));
     }
     const auto pick = [&](std::span<const Index> s) { return s[static_cast<std::size_t>(uniform_index(m.rng, static_cast<Index>(s.size())))]; };
     for (int d = 0; d < n_draw && !out_of_time(); ++d) {
@@ -774,6 +798,7 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
     if (run_ee) m.ee.propagate_from(ctx, c_ee);
     if (run_vf) m.vf.propagate_from(ctx, c_vf);
     if (run_ef) m.ef.propagate_from(ctx, c_ef);
+    if (out_of_time()) unfinish(z);
   }
   const double search_ms = ms_since(search_start);
 

@@ -22,9 +22,10 @@
 ///    the zones per frame (`zones`), stops the examinations; the zones left wait, with their kept
 ///    pairs, and come first next frame since they are older.
 ///  - Adaptive parameters per zone (§4.2.1, from the thesis' rule of thumb): draws from the
-///    zone's particle count and its share in collision last time (10% of its particles below
-///    30%, one per particle above 50%), propagation dropped above 50%, and the near distance from
-///    the zone's measured motion per frame.
+///    zone's particles (each leaf's shared among its zones) and its share in collision last time
+///    (10% of its particles below 30%, one per particle above 50%), optionally propagation
+///    dropped above 50% (`propagation=auto`), and the near distance from the leaves' measured
+///    motion per frame.
 ///
 /// Every primitive has an owner leaf: a face its leaf; a vertex the leaf of its first incident
 /// face, an edge that of its first incident face. A pair's zone is that of its owners.
@@ -62,8 +63,10 @@ struct HybridParams {
   ZoneSearch search = ZoneSearch::Stochastic;     ///< [search]
   int draw = 0;                                   ///< draws per zone and pair type, 0 = adaptive [draw]
   /// `auto`: the thesis' rule per zone (linear propagation, none above 50% in collision);
-  /// else `propagation` in every zone. [propagation = auto | none | linear | full]
-  bool auto_propagation = true;
+  /// else `propagation` in every zone. [propagation = auto | none | linear | full] The default
+  /// is `linear`: dropping propagation in busy zones saved little time and lost recall
+  /// (docs/hybrid.md).
+  bool auto_propagation = false;
   Propagation propagation = Propagation::Linear;
   /// Near distance as a multiple of h; 0 = adaptive per leaf: max(2, 1 + 2 m / h), at most 8,
   /// m = the leaf's largest vertex displacement over the last step. [near]
