@@ -269,7 +269,7 @@ TEST(Hybrid, BudgetStopsTheWorkAndResumesWhereItStopped) {
 
 TEST(Hybrid, SavedStateReplaysTheLastUpdateAndContinuesIdentically) {
   const FoldingSequence& seq = folding();
-  for (const char* spec : {"hybrid", "hybrid:every=3,seed=4"}) {
+  for (const char* spec : {"hybrid", "hybrid:every=3,seed=4", "hybrid:zones=5"}) {
     SCOPED_TRACE(spec);
     auto a = make(spec, seq.thickness());
     a->set_topology(seq.mesh().topology_ptr());
@@ -313,6 +313,29 @@ TEST(Hybrid, SavedStateReplaysTheLastUpdateAndContinuesIdentically) {
     EXPECT_THROW(small->load_state(state), InputError);
     EXPECT_NO_THROW(small->load_state(""));
   }
+}
+
+TEST(Hybrid, DegenerateInputs) {
+  // Two separate triangles, one vertex hovering over the other: found by both searches (the
+  // stochastic one draws a single pair per frame here, so within a few frames; it keeps it).
+  const TriMesh two = TriMesh::create({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0.25, 0.25, 0.05),
+                                       Vec3(2, 2, 1), Vec3(2, 3, 1)},
+                                      {{0, 1, 2}, {3, 4, 5}});
+  ContactSet got;
+  for (const char* spec : {"hybrid", "hybrid:search=exact", "hybrid:leaf=4,every=2"}) {
+    auto d = make(spec, 0.1);
+    d->set_topology(two.topology_ptr());
+    for (int i = 0; i < 8; ++i) d->update(two.positions(), got);
+    ASSERT_EQ(got.vf.size(), 1u) << spec;
+    EXPECT_EQ(got.vf[0].vertex, 3);
+    EXPECT_EQ(got.vf[0].face, 0);
+    EXPECT_EQ(as_hybrid(*d).num_leaves(), 2);
+  }
+  // Thickness 0: nothing is in contact.
+  auto zero = make("hybrid", 0);
+  zero->set_topology(folding().mesh().topology_ptr());
+  zero->update(folding().positions(folding().size() - 1), got);
+  EXPECT_TRUE(got.empty());
 }
 
 TEST(Hybrid, DeterministicForASeed) {

@@ -445,7 +445,7 @@ std::string HybridDetector::save_state() const {
   std::ostringstream out;
   out << "hybrid-state-1 " << params_.to_string() << " rng " << (m.saved ? m.saved_rng : m.rng) << " zones "
       << zones.size();
-  for (const Zone& z : zones) out << " " << z.a << " " << z.b << " " << (z.never ? -1 : z.age) << " " << z.contacts;
+  for (const Zone& z : zones) out << " " << z.a << " " << z.b << " " << z.age << " " << (z.never ? 1 : 0) << " " << z.contacts;
   out << " kept " << kept.size();
   for (const Kept& k : kept) out << " " << int(k.type) << " " << k.pair.a << " " << k.pair.b;
   return out.str();
@@ -471,12 +471,11 @@ void HybridDetector::load_state(std::string_view text) {
   if (n > leaves * (leaves + 1) / 2) fail("more zones than leaf pairs");
   std::vector<Zone> zones(n);
   for (Zone& z : zones) {
-    int age = 0;
-    if (!(in >> z.a >> z.b >> age >> z.contacts)) fail("truncated zone list");
+    int never = 0;
+    if (!(in >> z.a >> z.b >> z.age >> never >> z.contacts)) fail("truncated zone list");
     if (z.a < 0 || z.b < z.a || z.b >= num_leaves()) fail("zone leaves out of range for this mesh");
-    if (age < -1 || z.contacts < 0) fail("bad zone age or contact count");
-    z.never = age < 0;
-    z.age = std::max(age, 0);
+    if (z.age < 0 || (never != 0 && never != 1) || z.contacts < 0) fail("bad zone age, flag or contact count");
+    z.never = never == 1;
   }
   for (std::size_t i = 1; i < zones.size(); ++i) {
     if (!(zones[i - 1].key() < zones[i].key())) fail("zones not in order");

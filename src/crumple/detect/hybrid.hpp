@@ -116,8 +116,8 @@ class HybridDetector final : public Detector {
   /// Zones of the last update, sorted by (leaf_a, leaf_b).
   std::span<const ZoneInfo> zones() const;
 
-  /// `hybrid-state-1 <params> rng <generator> zones N (a b age contacts) ... kept M (type a b)
-  /// ...`: the state before the last update (see `Detector::save_state`).
+  /// `hybrid-state-1 <params> rng <generator> zones N (a b age never contacts) ... kept M
+  /// (type a b) ...`: the state before the last update (see `Detector::save_state`).
   std::string save_state() const override;
   /// Checks that the saved parameters equal this detector's and every entry fits the topology.
   void load_state(std::string_view text) override;
