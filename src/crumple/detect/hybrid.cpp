@@ -271,14 +271,14 @@ struct HybridDetector::Impl {
   bool saved = false;
 
   void build(const Topology& topo, int leaf_size);
-  std::uint64_t zone_of(const Topology& topo, int type, PrimitivePair p) const {
+  /// The zone of a pair (its owners' leaves), or ~0 when an element has no owner.
+  std::uint64_t zone_of(int type, PrimitivePair p) const {
     Index la = -1, lb = -1;
     switch (type) {
       case kEE: la = edge_owner[static_cast<std::size_t>(p.a)], lb = edge_owner[static_cast<std::size_t>(p.b)]; break;
       case kVF: la = vertex_owner[static_cast<std::size_t>(p.a)], lb = face_leaf[static_cast<std::size_t>(p.b)]; break;
       default: la = edge_owner[static_cast<std::size_t>(p.a)], lb = face_leaf[static_cast<std::size_t>(p.b)]; break;
     }
-    (void)topo;
     if (la < 0 || lb < 0) return ~std::uint64_t{0};
     return pair_key(std::min(la, lb), std::max(la, lb));
   }
@@ -492,9 +492,8 @@ void HybridDetector::load_state(std::string_view text) {
     const Index nb = type == kEE ? topo.num_edges() : topo.num_faces();
     if (k.pair.a < 0 || k.pair.a >= na || k.pair.b < 0 || k.pair.b >= nb) fail("pair out of range for this mesh");
     k.type = static_cast<std::uint8_t>(type);
-    k.zone = m.zone_of(topo, type, k.pair);
+    k.zone = m.zone_of(type, k.pair);
     kept.push_back(k);
-    if (kept.size() > static_cast<std::size_t>(topo.num_edges()) * 4 + 64) fail("too many kept pairs");
   }
   if (in >> word) fail("unexpected '" + word + "' after the kept pairs");
   std::sort(kept.begin(), kept.end());
@@ -806,7 +805,7 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
   std::vector<Kept>& kept = m.kept;
   kept.clear();
   const auto file = [&](int type, const std::vector<PrimitivePair>& pairs) {
-    for (const PrimitivePair& p : pairs) kept.push_back({m.zone_of(topo, type, p), static_cast<std::uint8_t>(type), p});
+    for (const PrimitivePair& p : pairs) kept.push_back({m.zone_of(type, p), static_cast<std::uint8_t>(type), p});
   };
   file(kEE, m.ee.near_pairs());
   file(kEE, m.ee.walking_pairs());
