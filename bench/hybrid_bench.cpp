@@ -106,7 +106,8 @@ bool contains(const ContactSet& got, const EdgeEdgeContact& c) {
 }
 
 /// Runs `spec` on every frame (previous positions as motion), against the reference contacts.
-Run run(const Scene& s, const std::string& spec, const std::vector<ContactSet>& ref, std::vector<double>* times = nullptr) {
+Run run(const Scene& s, const std::string& spec, const std::vector<ContactSet>& ref,
+        std::vector<double>* times = nullptr) {
   auto d = make_detector(MethodSpec::parse(spec), {.thickness = s.h, .threads = 1});
   d->set_topology(s.frames->mesh().topology_ptr());
   Run r;
@@ -148,7 +149,8 @@ Run run(const Scene& s, const std::string& spec, const std::vector<ContactSet>& 
   r.mean_ms = sum / static_cast<double>(ms.size());
   std::vector<double> sorted = ms;
   std::sort(sorted.begin(), sorted.end());
-  r.p99_ms = sorted[std::min(sorted.size() - 1, static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(sorted.size()))) - 1)];
+  const auto rank = static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(sorted.size())));
+  r.p99_ms = sorted[std::min(sorted.size(), std::max<std::size_t>(rank, 1)) - 1];
   if (times) *times = std::move(ms);
   return r;
 }

@@ -38,8 +38,8 @@ const FoldingSequence& folding() {
   return s;
 }
 
-/// Frames 120..219 (..159 under sanitizers) of the simulator's `hanging-cloth` (the thesis' scene: a 10×10 cloth falling
-/// through itself, 15–55% of the edges in collision).
+/// Frames 120..219 (..159 under sanitizers) of the simulator's `hanging-cloth` (the thesis'
+/// scene: a 10×10 cloth falling through itself, 15–55% of the edges in collision).
 const VectorFrames& cloth() {
   static const VectorFrames f = [] {
 #ifdef CRUMPLE_SANITIZED
@@ -118,8 +118,8 @@ ContactMatch run(const std::string& spec, const FrameSource& frames, Scalar h, C
 TEST(HybridParams, ParsesDefaultsAndErrors) {
   const HybridParams bare = HybridParams::from_spec(MethodSpec::parse("hybrid"));
   EXPECT_TRUE(bare == HybridParams{});
-  const HybridParams p = HybridParams::from_spec(
-      MethodSpec::parse("hybrid:leaf=32,every=3,budget=2.5,zones=7,search=exact,draw=5,propagation=full,near=3,steps=4,seed=9"));
+  const HybridParams p = HybridParams::from_spec(MethodSpec::parse(
+      "hybrid:leaf=32,every=3,budget=2.5,zones=7,search=exact,draw=5,propagation=full,near=3,steps=4,seed=9"));
   EXPECT_EQ(p.leaf, 32);
   EXPECT_EQ(p.every, 3);
   EXPECT_EQ(p.budget_ms, 2.5);

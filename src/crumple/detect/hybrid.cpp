@@ -180,8 +180,9 @@ class LeafTree {
         if (centres.hi[k] - centres.lo[k] > centres.hi[axis] - centres.lo[axis]) axis = k;
       }
       const std::size_t mid = begin + (end - begin) / 2;
-      std::nth_element(order_.begin() + static_cast<std::ptrdiff_t>(begin), order_.begin() + static_cast<std::ptrdiff_t>(mid),
-                       order_.begin() + static_cast<std::ptrdiff_t>(end), [&](Index x, Index y) {
+      const auto first = order_.begin();
+      std::nth_element(first + static_cast<std::ptrdiff_t>(begin), first + static_cast<std::ptrdiff_t>(mid),
+                       first + static_cast<std::ptrdiff_t>(end), [&](Index x, Index y) {
                          const Box& bx = (*boxes_)[static_cast<std::size_t>(x)];
                          const Box& by = (*boxes_)[static_cast<std::size_t>(y)];
                          const Scalar cx = bx.lo[axis] + bx.hi[axis], cy = by.lo[axis] + by.hi[axis];
@@ -445,7 +446,9 @@ std::string HybridDetector::save_state() const {
   std::ostringstream out;
   out << "hybrid-state-1 " << params_.to_string() << " rng " << (m.saved ? m.saved_rng : m.rng) << " zones "
       << zones.size();
-  for (const Zone& z : zones) out << " " << z.a << " " << z.b << " " << z.age << " " << (z.never ? 1 : 0) << " " << z.contacts;
+  for (const Zone& z : zones) {
+    out << " " << z.a << " " << z.b << " " << z.age << " " << (z.never ? 1 : 0) << " " << z.contacts;
+  }
   out << " kept " << kept.size();
   for (const Kept& k : kept) out << " " << int(k.type) << " " << k.pair.a << " " << k.pair.b;
   return out.str();
@@ -773,7 +776,9 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
       const double rate = share < 0.3 ? 0.1 : share > 0.5 ? 1.0 : 0.1 + (share - 0.3) / 0.2 * 0.9;
       n_draw = std::max(1, static_cast<int>(std::ceil(rate * zone_particles)));
     }
-    const auto pick = [&](std::span<const Index> s) { return s[static_cast<std::size_t>(uniform_index(m.rng, static_cast<Index>(s.size())))]; };
+    const auto pick = [&](std::span<const Index> s) {
+      return s[static_cast<std::size_t>(uniform_index(m.rng, static_cast<Index>(s.size())))];
+    };
     for (int d = 0; d < n_draw && !out_of_time(); ++d) {
       const bool swap = z.a != z.b && (m.rng() & 1) != 0;
       const Index p = swap ? z.b : z.a, q = swap ? z.a : z.b;
@@ -823,9 +828,10 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
     const std::ptrdiff_t i = m.find_zone(pair_key(std::min(la, lb), std::max(la, lb)));
     if (i >= 0) ++m.zones[static_cast<std::size_t>(i)].found;
   };
-  for (const auto& c : out.vf) count(m.vertex_owner[static_cast<std::size_t>(c.vertex)], m.face_leaf[static_cast<std::size_t>(c.face)]);
-  for (const auto& c : out.ee) count(m.edge_owner[static_cast<std::size_t>(c.edge0)], m.edge_owner[static_cast<std::size_t>(c.edge1)]);
-  for (const auto& c : out.tt) count(m.face_leaf[static_cast<std::size_t>(c.face0)], m.face_leaf[static_cast<std::size_t>(c.face1)]);
+  const auto at = [](const std::vector<Index>& owner, Index i) { return owner[static_cast<std::size_t>(i)]; };
+  for (const auto& c : out.vf) count(at(m.vertex_owner, c.vertex), at(m.face_leaf, c.face));
+  for (const auto& c : out.ee) count(at(m.edge_owner, c.edge0), at(m.edge_owner, c.edge1));
+  for (const auto& c : out.tt) count(at(m.face_leaf, c.face0), at(m.face_leaf, c.face1));
   double est_missed = 0;
   int oldest = 0;
   std::size_t due_left = 0;
