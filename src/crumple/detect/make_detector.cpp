@@ -4,6 +4,7 @@
 #include <crumple/detect/broad_phase/sweep_prune.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/detect/exact_detector.hpp>
+#include <crumple/detect/hybrid.hpp>
 #include <crumple/detect/naive.hpp>
 #include <crumple/detect/stochastic.hpp>
 
@@ -30,6 +31,8 @@ std::unique_ptr<Detector> make_detector(const MethodSpec& spec, const DetectorOp
     }
     case Method::Stochastic:
       return std::make_unique<StochasticDetector>(options, StochasticParams::from_spec(spec));
+    case Method::Hybrid:
+      return std::make_unique<HybridDetector>(options, HybridParams::from_spec(spec));
   }
   throw InputError("no factory for method " + std::string(to_string(spec.method())));
 }

@@ -67,7 +67,24 @@ constexpr std::array<ParamInfo, 3> kSapParams{{
      "order (stats: overflow, contacts_dropped)"},
 }};
 
-constexpr std::array<MethodInfo, 5> kMethods{{
+constexpr std::array<ParamInfo, 10> kHybridParams{{
+    {"leaf", "64", "faces per leaf of the coarse hierarchy (4..4096); zones are overlapping leaf pairs"},
+    {"every", "1", "coverage period: a zone not examined for this many frames is examined first"},
+    {"budget", "0",
+     "time budget per frame in ms (0 = none): zones are examined in order until it is spent, the "
+     "rest come first next frame (results then depend on the machine's speed)"},
+    {"zones", "0", "most zones examined per frame (0 = all): a budget counted in zones"},
+    {"search", "stochastic",
+     "stochastic | exact: inside a zone, random pairs converged (the thesis) or every pair"},
+    {"draw", "0", "random pairs per zone and pair type (0 = the thesis' rule from the zone's size and contacts)"},
+    {"propagation", "linear",
+     "none | linear | full | auto (the thesis' rule: linear, none in zones above 50% in collision)"},
+    {"near", "0", "near distance as a multiple of the thickness (0 = from each leaf's motion, 2..8)"},
+    {"steps", "8", "convergence moves per walk and frame; an unfinished walk goes on next frame"},
+    {"seed", "1", "random seed (same seed and frames, no budget: same contacts)"},
+}};
+
+constexpr std::array<MethodInfo, 6> kMethods{{
     {Method::Naive, "naive",
      "O(n^2) test of every vertex-face and edge-edge pair (the thesis baseline and the exact "
      "reference)",
@@ -88,6 +105,10 @@ constexpr std::array<MethodInfo, 5> kMethods{{
      "exact: sweep and prune of face boxes with insertion sort across frames (I-COLLIDE) + the "
      "shared exact narrow phase",
      {.exact = true, .stochastic = false, .uses_motion = false}, kSapParams},
+    {Method::Hybrid, "hybrid",
+     "the thesis' future work: stochastic search inside the zones of a coarse hierarchy, every "
+     "zone examined within `every` frames, under a time budget (docs/hybrid.md)",
+     {.exact = false, .stochastic = true, .uses_motion = true}, kHybridParams},
 }};
 
 std::string join_names() {

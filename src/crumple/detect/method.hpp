@@ -21,6 +21,7 @@ enum class Method {
   Kdop,        ///< exact: inflated motion-oriented k-DOP hierarchy (kdop_tree.hpp)
   Hash,        ///< exact: spatial hashing (hash_grid.hpp)
   Sap,         ///< exact: sweep and prune, insertion sort across frames (sweep_prune.hpp)
+  Hybrid,      ///< stochastic search inside a coarse hierarchy's zones, time budget (hybrid.hpp)
 };
 
 /// What a method guarantees, for tests and tools that treat methods generically.

@@ -1,7 +1,8 @@
 #pragma once
 /// \file
 /// The generic engine of the stochastic detector (thesis §3.2.2.6: "only the distance functions
-/// between primitives are specialised"). Internal header: used by stochastic.cpp and its tests.
+/// between primitives are specialised"). Internal header: used by stochastic.cpp, hybrid.cpp
+/// and their tests.
 ///
 /// `PairEngine<Traits>` runs Algorithm 3 for one primitive pair type. A traits class supplies:
 ///   static constexpr PairType kType;
@@ -178,17 +179,7 @@ class PairEngine {
   /// Phase 1: resets the per-frame tables, converges the pairs kept from the last frame, then
   /// takes the unfinished walks further.
   void begin_frame(Context& ctx, const EngineConfig& config) {
-    config_ = config;
-    stats_ = {};
-    cache_.clear();
-    path_.clear();
-    prop_.clear();
-    verdict_.clear();
-    colliding_.clear();
-    previous_.swap(near_);
-    near_.clear();
-    previous_walking_.swap(walking_);
-    walking_.clear();
+    start_frame(config);
     const auto run = [&](const std::vector<PrimitivePair>& pairs, std::vector<PrimitivePair>& carry) {
       for (std::size_t i = 0; i < pairs.size(); ++i) {
         if (out_of_time()) {  // carry the rest over as they are; they go on next frame
@@ -226,9 +217,42 @@ class PairEngine {
 
   /// Phase 3: propagation from every colliding pair (the colliding list grows while it is
   /// walked: it is the propagation queue).
-  void propagate_all(Context& ctx) {
-    if (config_.propagation == Propagation::None) return;
-    for (std::size_t i = 0; i < colliding_.size() && !out_of_time(); ++i) propagate(ctx, colliding_[i]);
+  void propagate_all(Context& ctx) { propagate_from(ctx, 0); }
+
+  // Finer steps for callers that schedule the work themselves (the hybrid detector, which runs
+  // the three phases zone by zone): `start_frame`, then any sequence of `process_pair` and
+  // `propagate_from`; the kept pairs of the last frame are the caller's to hand back.
+
+  /// Resets the per-frame tables, counters and lists without processing anything; the kept
+  /// pairs and walks of the last frame are forgotten (read them before).
+  void start_frame(const EngineConfig& config) {
+    config_ = config;
+    stats_ = {};
+    cache_.clear();
+    path_.clear();
+    prop_.clear();
+    verdict_.clear();
+    colliding_.clear();
+    previous_.swap(near_);
+    near_.clear();
+    previous_walking_.swap(walking_);
+    walking_.clear();
+  }
+  /// Changes the configuration within a frame (per-zone parameters); the tables are kept.
+  void set_config(const EngineConfig& config) { config_ = config; }
+  /// Converges `p` (a kept, walking or drawn pair) and keeps it when it ends a near local
+  /// minimum not reached by another walk this frame (Algorithm 3's inner step).
+  void process_pair(Context& ctx, PrimitivePair p) {
+    process(ctx, canon(p.a, p.b));
+    count_kept();
+  }
+  /// Propagation from the colliding pairs recorded from index `first` on, including those it
+  /// records itself; stops at the deadline. Returns the colliding count when it stopped.
+  std::size_t propagate_from(Context& ctx, std::size_t first) {
+    if (config_.propagation == Propagation::None) return colliding_.size();
+    std::size_t i = first;
+    for (; i < colliding_.size() && !out_of_time(); ++i) propagate(ctx, colliding_[i]);
+    return i;
   }
 
  private:

@@ -1,0 +1,303 @@
+// Recall against a per-frame time budget: the hybrid detector (docs/hybrid.md), the stochastic
+// detector and the hybrid's exhaustive zone search cut off at the budget, on recorded scenes
+// and seeded folding sheets, against the exact `kdop` (one thread) on the same frames.
+//
+// The budget of a scene is a multiple (0.25, 0.5, 1, 2, 8, 32) of kdop's mean time per frame on
+// that scene, measured in the same run. Per method: recall (found / reference contacts over all
+// frames), recall of the reference contacts closer than h/4, the worst frame's recall, the mean
+// and 99th-percentile time per frame, the p99 over the budget, and false contacts (always 0:
+// checked on every frame). Writes hybrid.md, hybrid.csv and one hybrid-<scene>.svg per scene.
+//
+//   build/release/bench/hybrid_bench --out docs/benchmarks            # every scene
+//   build/release/bench/hybrid_bench --quick --out /tmp/h             # two small scenes
+//   build/release/bench/hybrid_bench --scenes folding-24,hanging-cloth
+#include <crumple/core/json.hpp>
+#include <crumple/detect/compare.hpp>
+#include <crumple/detect/detector.hpp>
+#include <crumple/sim/scene.hpp>
+#include <report/svg_plot.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iostream>
+#include <memory>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace crumple {
+namespace {
+
+struct Scene {
+  std::string name;
+  std::string description;
+  std::unique_ptr<FrameSource> frames;
+  Scalar h = 0;
+};
+
+/// Frames [first, last) of a recording as a frame source.
+std::unique_ptr<FrameSource> slice(sim::Recording r, std::size_t first, std::size_t last) {
+  last = std::min(last, r.frames.size());
+  std::vector<Positions> kept(r.frames.begin() + static_cast<std::ptrdiff_t>(first),
+                              r.frames.begin() + static_cast<std::ptrdiff_t>(last));
+  return std::make_unique<VectorFrames>(std::move(r.mesh), std::move(kept), r.spec);
+}
+
+Scene folding(Index n, std::size_t frames, std::size_t first) {
+  const FoldingSequence seq({.n = n, .frames = frames, .seed = 1});
+  std::vector<Positions> kept;
+  for (std::size_t i = first; i < frames; ++i) kept.push_back(seq.positions(i));
+  Scene s;
+  s.name = "folding-" + std::to_string(n);
+  s.description = "folding sheet " + std::to_string(n) + "x" + std::to_string(n) + " (" +
+                  std::to_string(seq.mesh().num_faces()) + " triangles), frames " + std::to_string(first) + "-" +
+                  std::to_string(frames - 1) + " of " + std::to_string(frames) + ", seed 1, h = l/4";
+  s.h = seq.thickness();
+  s.frames = std::make_unique<VectorFrames>(seq.mesh(), std::move(kept), s.name);
+  return s;
+}
+
+Scene recorded(const std::string& name, const std::string& spec, std::size_t frames, std::size_t first) {
+  sim::Recording r = sim::record_scene(spec, static_cast<std::int64_t>(frames), 1);
+  Scene s;
+  s.name = name;
+  s.h = r.thickness;
+  s.description = "`" + r.spec + "` (" + std::to_string(r.mesh.num_faces()) + " triangles), frames " +
+                  std::to_string(first) + "-" + std::to_string(frames) + ", seed 1";
+  s.frames = slice(std::move(r), first, frames + 1);
+  return s;
+}
+
+Scene make_scene(const std::string& name, bool quick) {
+  if (name == "folding-24") return folding(24, quick ? 30 : 60, 0);
+  if (name == "folding-100") return folding(100, 32, quick ? 28 : 12);
+  if (name == "folding-300") return folding(300, 32, quick ? 30 : 20);
+  if (name == "hanging-cloth") return recorded(name, "hanging-cloth", quick ? 150 : 600, quick ? 100 : 100);
+  if (name == "strip") return recorded(name, "hanging-cloth:nx=100,ny=10,size=2,depth=0.2", quick ? 60 : 300, 0);
+  if (name == "cloth-on-sphere-64") return recorded(name, "cloth-on-sphere:n=64", quick ? 40 : 240, quick ? 20 : 40);
+  if (name == "crumple-64") return recorded(name, "crumple:n=64", quick ? 40 : 300, quick ? 20 : 100);
+  if (name == "crumple-100") return recorded(name, "crumple:n=100", quick ? 40 : 200, quick ? 20 : 100);
+  throw std::runtime_error("unknown scene " + name);
+}
+
+using Clock = std::chrono::steady_clock;
+
+struct Run {
+  std::string label, spec;
+  double fraction = 0;  ///< budget / kdop mean, 0 = none
+  double budget_ms = 0;
+  ContactMatch total;
+  std::size_t close = 0, close_found = 0;
+  double worst = 1, mean_ms = 0, p99_ms = 0;
+  double zones_left = 0;  ///< frames where a due zone was left (hybrid)
+};
+
+bool contains(const ContactSet& got, const VertexFaceContact& c) {
+  return std::binary_search(got.vf.begin(), got.vf.end(), c, CanonicalLess{});
+}
+bool contains(const ContactSet& got, const EdgeEdgeContact& c) {
+  return std::binary_search(got.ee.begin(), got.ee.end(), c, CanonicalLess{});
+}
+
+/// Runs `spec` on every frame (previous positions as motion), against the reference contacts.
+Run run(const Scene& s, const std::string& spec, const std::vector<ContactSet>& ref,
+        std::vector<double>* times = nullptr) {
+  auto d = make_detector(MethodSpec::parse(spec), {.thickness = s.h, .threads = 1});
+  d->set_topology(s.frames->mesh().topology_ptr());
+  Run r;
+  r.spec = spec;
+  std::vector<double> ms;
+  Positions previous;
+  ContactSet got;
+  const Scalar close2 = s.h / 4;
+  for (std::size_t i = 0; i < s.frames->size(); ++i) {
+    const Positions x = s.frames->positions(i);
+    const auto t0 = Clock::now();
+    d->update(previous.empty() ? PositionsView{} : PositionsView(previous), x, got);
+    ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+    if (!ref.empty()) {
+      const ContactMatch m = match_contacts(got, ref[i]);
+      if (m.false_contacts > 0) {
+        std::fprintf(stderr, "FALSE CONTACTS: %s frame %zu: %zu\n", spec.c_str(), i, m.false_contacts);
+      }
+      r.total += m;
+      r.worst = std::min(r.worst, m.recall());
+      for (const auto& c : ref[i].vf) {
+        if (c.distance < close2) {
+          ++r.close;
+          r.close_found += contains(got, c) ? 1 : 0;
+        }
+      }
+      for (const auto& c : ref[i].ee) {
+        if (c.distance < close2) {
+          ++r.close;
+          r.close_found += contains(got, c) ? 1 : 0;
+        }
+      }
+    }
+    r.zones_left += d->stats().get("zones_due_left") > 0 ? 1 : 0;
+    previous = x;
+  }
+  double sum = 0;
+  for (double t : ms) sum += t;
+  r.mean_ms = sum / static_cast<double>(ms.size());
+  std::vector<double> sorted = ms;
+  std::sort(sorted.begin(), sorted.end());
+  const auto rank = static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(sorted.size())));
+  r.p99_ms = sorted[std::min(sorted.size(), std::max<std::size_t>(rank, 1)) - 1];
+  if (times) *times = std::move(ms);
+  return r;
+}
+
+/// The 1-, 5- and 15-minute load averages (Linux), or "unknown".
+std::string load_average() {
+  std::ifstream in("/proc/loadavg");
+  double a = 0, b = 0, c = 0;
+  if (!(in >> a >> b >> c)) return "unknown";
+  char text[64];
+  std::snprintf(text, sizeof text, "%.2f, %.2f, %.2f", a, b, c);
+  return text;
+}
+
+std::string fmt(double v, const char* f = "%.4f") {
+  char b[64];
+  std::snprintf(b, sizeof b, f, v);
+  return b;
+}
+
+}  // namespace
+}  // namespace crumple
+
+int main(int argc, char** argv) {
+  using namespace crumple;
+  bool quick = false;
+  std::string out_dir = ".";
+  std::vector<std::string> names = {"folding-24",   "hanging-cloth", "strip",       "cloth-on-sphere-64",
+                                    "crumple-64",   "folding-100",   "folding-300"};
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--quick") {
+      quick = true;
+      names = {"folding-24", "hanging-cloth"};
+    } else if (a == "--out" && i + 1 < argc) {
+      out_dir = argv[++i];
+    } else if (a == "--scenes" && i + 1 < argc) {
+      names.clear();
+      std::stringstream list(argv[++i]);
+      for (std::string n; std::getline(list, n, ',');) names.push_back(n);
+    } else {
+      std::cerr << "usage: hybrid_bench [--quick] [--out DIR] [--scenes a,b,...]\n";
+      return 2;
+    }
+  }
+  std::filesystem::create_directories(out_dir);
+  const std::vector<double> fractions = {0.25, 0.5, 1, 2, 8, 32};
+  struct Family {
+    const char* label;
+    const char* spec;  ///< ",budget=B" is appended
+  };
+  const std::vector<Family> budgeted = {
+      {"hybrid (stochastic zones)", "hybrid"},
+      {"hybrid, exact zones (cut-off exact)", "hybrid:search=exact"},
+      {"stochastic direct, 1000 pairs + propagation", "stochastic:variant=direct,active=1000,propagation=linear"},
+  };
+  const std::vector<Family> free = {
+      {"hybrid, thesis rule: no propagation above 50% (no budget)", "hybrid:propagation=auto"},
+      {"hybrid (no budget)", "hybrid"},
+      {"hybrid, exact zones (no budget)", "hybrid:search=exact"},
+      {"hybrid, every=4 (no budget)", "hybrid:every=4"},
+      {"stochastic vertex, setting 1 (no budget)", "stochastic:variant=vertex,setting=1"},
+  };
+  std::ostringstream md, csv;
+  csv << "scene,method,spec,budget_fraction,budget_ms,kdop_ms,recall,close_recall,worst_frame,mean_ms,p99_ms,"
+         "p99_over_budget,false_contacts,frames_due_zone_left\n";
+  md << "# Hybrid detector: recall against a time budget\n\n"
+     << "Generated by `build/release/bench/hybrid_bench" << (quick ? " --quick" : "") << " --out DIR`"
+     << " (one thread per detector; the budget is a multiple of kdop's mean time per frame on the same scene,"
+     << " measured in the same run; times are wall-clock). Load average when the run started: " << load_average()
+     << " (on a loaded machine every time includes time spent descheduled: compare methods within a table, and"
+     << " read p99 as the machine's, not the method's). Method and reading: docs/hybrid.md.\n\n";
+  for (const std::string& name : names) {
+    std::cerr << "scene " << name << "...\n";
+    const Scene s = make_scene(name, quick);
+    // The reference: kdop, one thread, run twice (the second run is timed, warm).
+    auto kdop_ref = make_detector(MethodSpec::parse("kdop"), {.thickness = s.h, .threads = 1});
+    std::vector<ContactSet> ref;
+    {
+      kdop_ref->set_topology(s.frames->mesh().topology_ptr());
+      Positions previous;
+      for (std::size_t i = 0; i < s.frames->size(); ++i) {
+        const Positions x = s.frames->positions(i);
+        ContactSet c;
+        kdop_ref->update(previous.empty() ? PositionsView{} : PositionsView(previous), x, c);
+        ref.push_back(std::move(c));
+        previous = x;
+      }
+    }
+    std::vector<double> kdop_ms;
+    Run kd = run(s, "kdop", ref, &kdop_ms);
+    kd.label = "kdop (exact, reference)";
+    const double T = kd.mean_ms;
+    std::size_t contacts = 0;
+    for (const auto& c : ref) contacts += c.size();
+    std::vector<Run> rows = {kd};
+    for (const Family& f : free) {
+      std::cerr << "  " << f.spec << "\n";
+      Run r = run(s, f.spec, ref);
+      r.label = f.label;
+      rows.push_back(r);
+    }
+    std::vector<bench::PlotSeries> series(budgeted.size());
+    for (std::size_t k = 0; k < budgeted.size(); ++k) series[k].label = budgeted[k].label;
+    for (const double fr : fractions) {
+      for (std::size_t k = 0; k < budgeted.size(); ++k) {
+        const double B = fr * T;
+        std::string spec = budgeted[k].spec;
+        spec += (spec.find(':') == std::string::npos ? ":budget=" : ",budget=") + json_number(B);
+        std::cerr << "  " << spec << "\n";
+        Run r = run(s, spec, ref);
+        r.label = budgeted[k].label;
+        r.fraction = fr;
+        r.budget_ms = B;
+        rows.push_back(r);
+        series[k].points.emplace_back(fr, r.total.recall());
+      }
+    }
+    std::ostringstream section;
+    section << "## " << s.name << "\n\n" << s.description << "; h = " << fmt(s.h, "%.4g") << "; " << s.frames->size()
+       << " frames, " << contacts << " reference contacts (" << fmt(double(contacts) / double(s.frames->size()), "%.0f")
+       << " a frame); kdop " << fmt(T, "%.3f") << " ms a frame.\n\n"
+       << "| method | budget (× kdop) | recall | recall d < h/4 | worst frame | mean ms | p99 ms | p99 / budget |\n"
+       << "|---|---|---|---|---|---|---|---|\n";
+    for (const Run& r : rows) {
+      const double close = r.close == 0 ? 1.0 : double(r.close_found) / double(r.close);
+      section << "| " << r.label << " | " << (r.fraction > 0 ? fmt(r.fraction, "%.2f") : "–") << " | "
+         << fmt(r.total.recall()) << " | " << fmt(close) << " | " << fmt(r.worst, "%.3f") << " | "
+         << fmt(r.mean_ms, "%.3f") << " | " << fmt(r.p99_ms, "%.3f") << " | "
+         << (r.fraction > 0 ? fmt(r.p99_ms / r.budget_ms, "%.2f") : "–") << " |\n";
+      csv << s.name << ",\"" << r.label << "\",\"" << r.spec << "\"," << r.fraction << "," << r.budget_ms << "," << T
+          << "," << r.total.recall() << "," << close << "," << r.worst << "," << r.mean_ms << "," << r.p99_ms << ","
+          << (r.fraction > 0 ? r.p99_ms / r.budget_ms : 0) << "," << r.total.false_contacts << "," << r.zones_left
+          << "\n";
+    }
+    section << "\n![" << s.name << "](hybrid-" << s.name << ".svg)\n\n";
+    std::ofstream(out_dir + "/hybrid-" + s.name + ".svg")
+        << bench::render_svg({.title = "Recall against time budget: " + s.name,
+                              .x_label = "budget per frame (x kdop's mean time)",
+                              .y_label = "recall",
+                              .log_x = true,
+                              .x_categories = {}},
+                             series);
+    std::cout << section.str() << std::flush;
+    md << section.str();
+  }
+  std::ofstream(out_dir + "/hybrid.md") << md.str();
+  std::ofstream(out_dir + "/hybrid.csv") << csv.str();
+  return 0;
+}
