@@ -11,6 +11,7 @@
 //
 //   ccd_mesh_bench [--data DIR] [--scenes a,b] [--threads 1,2] [--method kdop] [--json FILE] [--markdown FILE]
 #include <crumple/core/error.hpp>
+#include <crumple/core/json.hpp>
 #include <crumple/core/timing.hpp>
 #include <crumple/detect/continuous.hpp>
 #include <crumple/io/mesh_io.hpp>
@@ -50,6 +51,12 @@ std::vector<std::string> split(const std::string& s) {
     if (!item.empty()) out.push_back(item);
   }
   return out;
+}
+
+std::string stats_json(const DetectorStats& stats) {
+  JsonObject object;
+  for (const auto& [key, value] : stats.items()) object.add(key, value);
+  return object.str();
 }
 
 void reset_peak_rss() {
@@ -143,12 +150,12 @@ int main(int argc, char** argv) {
                       "\"narrow_ms\":%.3f,\"whole_ms\":%.3f,\"narrow_thread_ms\":%.3f,\"candidates\":%zu,"
                       "\"vf_tests\":%.0f,\"ee_tests\":%.0f,\"orphan_vf\":%.0f,\"orphan_ee\":%.0f,\"narrow_boxes\":%.0f,"
                       "\"vf_impacts\":%zu,\"ee_impacts\":%zu,\"conservative_hits\":%.0f,\"earliest_toi\":%.17g,"
-                      "\"peak_rss_mb\":%.1f}\n",
+                      "\"peak_rss_mb\":%.1f,\"stats\":",
                       scene.name, m0.num_faces(), delta, t.c_str(), method.c_str(), broad_ms, narrow_ms, whole_ms,
                       st.get("narrow_cpu_ms"), candidates, st.get("vf_tests"), st.get("ee_tests"),
                       st.get("orphan_vf"), st.get("orphan_ee"), st.get("narrow_boxes"), impacts.vf.size(),
                       impacts.ee.size(), st.get("conservative_hits"), collision_free_step(impacts), rss);
-        json << line;
+        json << line << stats_json(st) << "}\n";
         // Written after every run, so an interrupted bench keeps what it measured.
         if (!json_path.empty()) std::ofstream(json_path) << json.str();
         if (!markdown_path.empty()) std::ofstream(markdown_path) << md.str();

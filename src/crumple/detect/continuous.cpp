@@ -12,6 +12,7 @@
 #include <crumple/geometry/distance.hpp>
 
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -36,7 +37,9 @@ struct OwnedFace {
 /// Counters of one chunk of work, summed into the query's stats under a lock.
 struct Counts {
   double vf_box_rejected = 0, ee_box_rejected = 0, vf_tests = 0, ee_tests = 0, boxes = 0;
+  std::array<double, 8> outcomes{};  ///< narrow-phase tests per `CcdOutcome`
   void add(const Counts& o) {
+    for (std::size_t k = 0; k < outcomes.size(); ++k) outcomes[k] += o.outcomes[k];
     vf_box_rejected += o.vf_box_rejected;
     ee_box_rejected += o.ee_box_rejected;
     vf_tests += o.vf_tests;
@@ -87,6 +90,7 @@ struct Tester {
     const geometry::CcdResult r =
         geometry::vertex_face_ccd({s(v), s(t[0]), s(t[1]), s(t[2])}, {e(v), e(t[0]), e(t[1]), e(t[2])}, step.narrow);
     counts.boxes += static_cast<double>(r.boxes);
+    ++counts.outcomes[static_cast<std::size_t>(r.outcome)];
     if (!r.hit) return;
     VertexFaceImpact impact;
     impact.vertex = v;
@@ -128,6 +132,7 @@ struct Tester {
     const geometry::CcdResult r =
         geometry::edge_edge_ccd({s(a[0]), s(a[1]), s(b[0]), s(b[1])}, {e(a[0]), e(a[1]), e(b[0]), e(b[1])}, step.narrow);
     counts.boxes += static_cast<double>(r.boxes);
+    ++counts.outcomes[static_cast<std::size_t>(r.outcome)];
     if (!r.hit) return;
     EdgeEdgeImpact impact;
     impact.edge0 = e0;
@@ -404,6 +409,10 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
   stats_.set("vf_tests", sink.counts.vf_tests);
   stats_.set("ee_tests", sink.counts.ee_tests);
   stats_.set("narrow_boxes", sink.counts.boxes);
+  for (std::size_t k = 0; k < sink.counts.outcomes.size(); ++k) {
+    stats_.set("narrow_" + std::string(geometry::to_string(static_cast<geometry::CcdOutcome>(k))),
+               sink.counts.outcomes[k]);
+  }
   stats_.set("orphan_vf", static_cast<double>(ovf.size()));
   stats_.set("orphan_ee", static_cast<double>(oee.size()));
   stats_.set("isolated_vertices", static_cast<double>(s.isolated.size()));

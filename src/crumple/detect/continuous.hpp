@@ -132,7 +132,8 @@ class ContinuousQuery {
   /// phase), `vf_box_rejected` / `ee_box_rejected` (sub-pairs whose swept boxes are apart),
   /// `vf_tests` / `ee_tests` (narrow-phase calls), `orphan_vf` / `orphan_ee`,
   /// `isolated_vertices`, `vf_impacts` / `ee_impacts`, `conservative_hits` (impacts decided by
-  /// budget, precision or range only), `narrow_boxes`; `update_ms` (broad-phase refit, sort or
+  /// budget, precision or range only), `narrow_boxes`, `narrow_<outcome>` (tests per
+  /// `CcdOutcome`, e.g. `narrow_separated-hull`); `update_ms` (broad-phase refit, sort or
   /// hash), `stream_ms` (wall time of the candidate stream: traversal and the narrow phase of
   /// its candidates, interleaved on the threads), `narrow_cpu_ms` (thread time spent in the
   /// narrow phase inside the stream), `orphan_ms`, `sort_ms`, `total_ms`; and the broad
