@@ -59,8 +59,9 @@ struct Step {
 
 bool apart(const Box& a, const Box& b, Scalar reach) {
   // Rounding of hi + reach is at most 2^-53 (M + reach), far below reach − δ (Step::reach).
-  return (a.lo[0] > b.hi[0] + reach) | (b.lo[0] > a.hi[0] + reach) | (a.lo[1] > b.hi[1] + reach) |
-         (b.lo[1] > a.hi[1] + reach) | (a.lo[2] > b.hi[2] + reach) | (b.lo[2] > a.hi[2] + reach);
+  // Ors over ints: branch-free without clang's bitwise-on-bool warning.
+  return (int(a.lo[0] > b.hi[0] + reach) | int(b.lo[0] > a.hi[0] + reach) | int(a.lo[1] > b.hi[1] + reach) |
+          int(b.lo[1] > a.hi[1] + reach) | int(a.lo[2] > b.hi[2] + reach) | int(b.lo[2] > a.hi[2] + reach)) != 0;
 }
 
 Vec3 at(PositionsView x0, PositionsView x1, Index v, Scalar t) {
