@@ -55,7 +55,8 @@ int main(int argc, char** argv) {
       crumple::cli::add_bench_command);
   add("render", "Render a scene, a mesh or frames to PNG with colliding edges in red",
       crumple::cli::add_render_command);
-  add("ccd", "Continuous collision detection: narrow-phase queries from a file", crumple::cli::add_ccd_command);
+  add("ccd", "Continuous collision detection between two frames, or narrow-phase queries from a file",
+      crumple::cli::add_ccd_command);
 
   try {
     app.parse(argc, argv);

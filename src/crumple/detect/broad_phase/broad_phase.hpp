@@ -19,6 +19,17 @@
 /// a float rounding, or a frame-to-frame cache's slack: the narrow phase rejects them), and,
 /// when `FrameInput::owns` is given, may leave out pairs of which neither face owns a vertex
 /// and not both own an edge.
+///
+/// Continuous queries (`FrameInput::continuous`, detect/continuous.hpp): every face moves
+/// linearly from `previous` to `positions`, and the contract holds for the volumes the faces
+/// sweep over the whole step: every pair sharing no vertex whose swept volumes, each grown by
+/// `radius`, meet is emitted. All three broad phases then bound each face by its corners at
+/// both ends of the step (a point of a linearly moving face stays in the convex hull of those
+/// six corners) and drop their current-position filters.
+///
+/// Streaming: a `CandidateBuffer` with a consumer hands each chunk to it as the chunk is
+/// added, in the adding thread, instead of keeping it; emitters call `flush_if_full` between
+/// units of work, so the candidates in memory are bounded by the chunks in flight.
 
 #include <crumple/core/types.hpp>
 #include <crumple/detect/detector.hpp>
@@ -30,6 +41,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <mutex>
@@ -55,6 +67,9 @@ struct FrameInput {
   /// of which neither owns a vertex and not both own an edge holds no sub-pair, and a broad
   /// phase may leave it out.
   std::span<const std::uint8_t> owns;
+  /// A continuous query: `previous` is given and the candidates must cover each face's whole
+  /// motion (file comment). `kdop` then sweeps whatever its `sweep` parameter says.
+  bool continuous = false;
 };
 
 /// Bytes of storage a container holds (what `Spares` hands out first).
@@ -95,9 +110,15 @@ class Spares {
   std::vector<T> spare_;
 };
 
-/// Thread-safe sink of candidate chunks (each task appends its own vector once).
+/// Thread-safe sink of candidate chunks (each task appends its own vector once, or, when
+/// streaming, whenever `flush_if_full` finds it full).
 class CandidateBuffer {
  public:
+  /// Receives a chunk of candidates; called concurrently from the broad phase's threads.
+  using Consumer = std::function<void(std::span<const FacePair>)>;
+  /// Chunks handed to a consumer hold about this many candidates (`flush_if_full`).
+  static constexpr std::size_t kStreamChunk = std::size_t{1} << 14;
+
   /// An empty chunk to fill, reusing the storage of a cleared one when there is some.
   std::vector<FacePair> take() { return spares_.take(); }
   void add(std::vector<FacePair>&& chunk) {
@@ -105,9 +126,30 @@ class CandidateBuffer {
       if (chunk.capacity() > 0) spares_.give(std::move(chunk));
       return;
     }
+    if (consumer_) {
+      {
+        const std::lock_guard lock(mutex_);
+        total_ += chunk.size();
+      }
+      consumer_(chunk);  // an exception leaves the chunk to be freed; the loop rethrows it
+      spares_.give(std::move(chunk));
+      return;
+    }
     const std::lock_guard lock(mutex_);
     total_ += chunk.size();
     chunks_.push_back(std::move(chunk));
+  }
+  /// Streams: every chunk added from now on goes to `consumer` and is not kept (`chunks()`
+  /// stays empty; `total()` still counts). An empty function stops streaming.
+  void set_consumer(Consumer consumer) { consumer_ = std::move(consumer); }
+  bool streaming() const { return static_cast<bool>(consumer_); }
+  /// When streaming and `chunk` holds at least `kStreamChunk` candidates, adds it and replaces
+  /// it by an empty one; otherwise does nothing (a kept chunk is not split).
+  void flush_if_full(std::vector<FacePair>& chunk) {
+    if (consumer_ && chunk.size() >= kStreamChunk) {
+      add(std::move(chunk));
+      chunk = take();
+    }
   }
   std::size_t total() const { return total_; }
   const std::vector<std::vector<FacePair>>& chunks() const { return chunks_; }
@@ -122,6 +164,7 @@ class CandidateBuffer {
   std::mutex mutex_;
   std::vector<std::vector<FacePair>> chunks_;
   Spares<std::vector<FacePair>> spares_;
+  Consumer consumer_;
   std::size_t total_ = 0;
 };
 
@@ -172,7 +215,8 @@ inline bool faces_share_vertex(const Face& a, const Face& b) {
   return s != 0;
 }
 
-/// Every face's box (current positions, and previous ones too when `sweep` and given),
+/// Every face's box (current positions, and previous ones too when `sweep` and given; callers
+/// pass `in.continuous` or their own sweep parameter),
 /// inflated by `in.radius`; computed in parallel. A NaN corner is skipped (the box of the
 /// face's finite corners); a face with all corners NaN has the empty box.
 void face_boxes(const Topology& topo, const FrameInput& in, bool sweep, std::vector<Box>& out);

@@ -68,7 +68,7 @@ void HashGrid::update(const FrameInput& in, DetectorStats& stats) {
   const std::size_t nf = static_cast<std::size_t>(topo.num_faces());
   if (nf == 0) return;
   const auto t0 = std::chrono::steady_clock::now();
-  face_boxes(topo, in, false, boxes_);
+  face_boxes(topo, in, in.continuous, boxes_);
   if (cell_size_ == 0) {
     // Of the finite edges: one NaN vertex made the mean NaN, and the cells size 1 whatever the
     // mesh's scale.
@@ -194,6 +194,7 @@ void HashGrid::self_pairs(CandidateBuffer& out, DetectorStats& stats) {
           local.push_back({std::min(ea.face, eb.face), std::max(ea.face, eb.face)});
         }
       }
+      out.flush_if_full(local);
     }
     out.add(std::move(local));
   });
@@ -210,6 +211,7 @@ void HashGrid::self_pairs(CandidateBuffer& out, DetectorStats& stats) {
           if (faces_share_vertex(topo.face(o), topo.face(gi))) continue;
           local.push_back({std::min(o, gi), std::max(o, gi)});
         }
+        out.flush_if_full(local);
       }
       out.add(std::move(local));
     });

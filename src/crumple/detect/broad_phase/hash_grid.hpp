@@ -4,7 +4,8 @@
 /// VMV 2003) adapted to vertex–face and edge–edge proximity, a broad phase
 /// (broad_phase.hpp) of the exact detector.
 ///
-/// Every frame, each face's box (current positions, inflated by half the padded thickness) is
+/// Every frame, each face's box (current positions — for a continuous query, both ends of the
+/// step — inflated by half the padded thickness) is
 /// entered into every grid cell it overlaps; cell (i, j, k) goes to bucket
 /// ((i p1) xor (j p2) xor (k p3)) mod n with the paper's primes, in unsigned 64-bit arithmetic.
 /// Buckets are filled by a counting sort, so no table clearing and no per-bucket allocation.

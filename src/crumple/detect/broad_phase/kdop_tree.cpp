@@ -817,8 +817,9 @@ class DopTree final : public KdopTree::Impl {
 
   // ---- refit -------------------------------------------------------------------------------
   void refit(const FrameInput& in) {
-    const bool swept = params_.sweep && !in.previous.empty();
-    swept_ = swept;
+    const bool swept = (params_.sweep || in.continuous) && !in.previous.empty();
+    // A continuous query's candidates cover the whole motion: no current-position filter.
+    swept_ = swept && !in.continuous;
     if (swept) now_dops_.resize(order_.size());
     const Scalar radius = refit_radius_;
     const bool moves = mode_ == Mode::reuse;  // displacement boxes since the refresh frame
@@ -1289,7 +1290,10 @@ class DopTree final : public KdopTree::Impl {
     // At least 64 tasks a thread, which the threads claim as they go. The splitting is serial
     // (the other threads wait meanwhile), so it stops there. The node pairs are split as the recursion descends (`each_child_pair`,
     // `each_descent`), by float lane tests, cheaper than the nodes' double k-DOPs pair by pair.
-    const std::size_t target = resolve_threads(threads) > 1 ? 64 * static_cast<std::size_t>(resolve_threads(threads)) : 1;
+    // A streamed traversal is split on one thread too, so that its chunks stay small.
+    const std::size_t target = resolve_threads(threads) > 1 || out.streaming()
+                                   ? 64 * static_cast<std::size_t>(resolve_threads(threads))
+                                   : 1;
     for (int round = 0; round < 16 && tasks.size() < target; ++round) {
       std::vector<std::array<Index, 2>> next;
       bool expanded = false;
@@ -1331,6 +1335,7 @@ class DopTree final : public KdopTree::Impl {
         } else {
           coherent ? pair<true>(a, b, w) : pair<false>(a, b, w);
         }
+        if (!coherent) out.flush_if_full(w.out);  // streaming only; a recording keeps its chunk
       }
       out.add(std::move(w.out));
       const std::lock_guard lock(mutex);
@@ -1364,7 +1369,7 @@ class DopTree final : public KdopTree::Impl {
   void choose_coherence(const FrameInput& in) {
     refit_radius_ = in.radius;
     mode_ = Mode::off;
-    if (!params_.coherence || in.intersection_only || (params_.sweep && !in.previous.empty())) {
+    if (!params_.coherence || in.intersection_only || in.continuous || (params_.sweep && !in.previous.empty())) {
       cache_valid_ = false;
       return;
     }

@@ -70,6 +70,8 @@ struct KdopParams {
   /// motion-oriented inflation. The contact set is the same either way (contacts are proximity
   /// at the current positions, and leaf pairs are also checked with boxes of the current
   /// positions), so it only costs traversal time; off by default (docs/exact-detectors.md).
+  /// A continuous query (`FrameInput::continuous`, detect/continuous.hpp) always sweeps and
+  /// keeps every pair whose swept k-DOPs overlap.
   bool sweep = false;
   /// Normal-cone culling of self-tests for intersection-only queries (see the file comment).
   /// Off by default: on the real meshes it skips under 1% of the candidates and costs more

@@ -37,7 +37,7 @@ void SweepPrune::update(const FrameInput& in, DetectorStats& stats) {
   const std::size_t nf = static_cast<std::size_t>(topo.num_faces());
   if (nf == 0) return;
   const auto t0 = std::chrono::steady_clock::now();
-  face_boxes(topo, in, false, boxes_);
+  face_boxes(topo, in, in.continuous, boxes_);
   if (axis_ < 0) {
     axis_ = params_.axis;
     if (axis_ < 0) {  // axis of largest variance of the box centres
@@ -119,6 +119,7 @@ void SweepPrune::self_pairs(CandidateBuffer& out, DetectorStats& stats) {
         const Index f = order_[i], g = order_[j];
         local.push_back({std::min(f, g), std::max(f, g)});
       }
+      out.flush_if_full(local);
     }
     out.add(std::move(local));
   });

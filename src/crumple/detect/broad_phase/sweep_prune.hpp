@@ -4,7 +4,8 @@
 /// I-COLLIDE, I3D 1995), a broad phase
 /// (broad_phase.hpp) of the exact detector.
 ///
-/// The face boxes (current positions, inflated by half the padded thickness) are kept sorted
+/// The face boxes (current positions — for a continuous query, both ends of the step —
+/// inflated by half the padded thickness) are kept sorted
 /// by their lower end along one axis — the axis of largest centroid spread, chosen at the
 /// first frame. The order persists across frames and is restored by insertion sort, O(n +
 /// swaps) under temporal coherence (falls back to a full sort when the swaps exceed 32 n,

@@ -1,0 +1,476 @@
+#include <crumple/core/atomic_file.hpp>
+#include <crumple/core/error.hpp>
+#include <crumple/core/parallel.hpp>
+#include <crumple/core/timing.hpp>
+#include <crumple/detect/broad_phase/broad_phase.hpp>
+#include <crumple/detect/broad_phase/hash_grid.hpp>
+#include <crumple/detect/broad_phase/kdop_tree.hpp>
+#include <crumple/detect/broad_phase/sweep_prune.hpp>
+#include <crumple/detect/continuous.hpp>
+#include <crumple/detect/exact/orphans.hpp>
+#include <crumple/detect/exact/ownership.hpp>
+#include <crumple/geometry/distance.hpp>
+
+#include <algorithm>
+#include <array>
+#include <charconv>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <string>
+#include <tuple>
+#include <utility>
+
+namespace crumple {
+
+namespace {
+
+/// A face with what it owns (exact/ownership.hpp): VF (v, g) is tested only in the face pair
+/// {owner(v), g}, EE (e1, e2) only in {owner(e1), owner(e2)}.
+struct OwnedFace {
+  Face v;
+  std::array<Index, 3> e;
+  std::uint8_t vertex_mask = 0;
+  std::uint8_t edge_mask = 0;
+};
+
+/// Counters of one chunk of work, summed into the query's stats under a lock.
+struct Counts {
+  double vf_box_rejected = 0, ee_box_rejected = 0, vf_tests = 0, ee_tests = 0, boxes = 0;
+  std::array<double, 8> outcomes{};  ///< narrow-phase tests per `CcdOutcome`
+  void add(const Counts& o) {
+    for (std::size_t k = 0; k < outcomes.size(); ++k) outcomes[k] += o.outcomes[k];
+    vf_box_rejected += o.vf_box_rejected;
+    ee_box_rejected += o.ee_box_rejected;
+    vf_tests += o.vf_tests;
+    ee_tests += o.ee_tests;
+    boxes += o.boxes;
+  }
+};
+
+/// What the sub-pair tests of one query share.
+struct Step {
+  const Topology& topo;
+  PositionsView x0, x1;
+  std::span<const Box> vertex_box;  ///< per vertex, its segment's box (exact: min and max)
+  Scalar reach;                     ///< δ (1 + 1e-6) + 1e-9 M: the box test's margin
+  geometry::CcdOptions narrow;
+};
+
+bool apart(const Box& a, const Box& b, Scalar reach) {
+  // Rounding of hi + reach is at most 2^-53 (M + reach), far below reach − δ (Step::reach).
+  // Ors over ints: branch-free without clang's bitwise-on-bool warning.
+  return (int(a.lo[0] > b.hi[0] + reach) | int(b.lo[0] > a.hi[0] + reach) | int(a.lo[1] > b.hi[1] + reach) |
+          int(b.lo[1] > a.hi[1] + reach) | int(a.lo[2] > b.hi[2] + reach) | int(b.lo[2] > a.hi[2] + reach)) != 0;
+}
+
+Vec3 at(PositionsView x0, PositionsView x1, Index v, Scalar t) {
+  const Vec3& p = x0[static_cast<std::size_t>(v)];
+  return p + t * (x1[static_cast<std::size_t>(v)] - p);
+}
+
+/// Tests sub-pairs and keeps the impacts (one per thread and chunk).
+struct Tester {
+  const Step& step;
+  ImpactSet found;
+  Counts counts;
+
+  void vertex_face(Index v, Index f) {
+    const Face& t = step.topo.face(f);
+    const auto& vb = step.vertex_box;
+    Box fb = vb[static_cast<std::size_t>(t[0])];
+    fb.merge(vb[static_cast<std::size_t>(t[1])]);
+    fb.merge(vb[static_cast<std::size_t>(t[2])]);
+    if (apart(vb[static_cast<std::size_t>(v)], fb, step.reach)) {
+      ++counts.vf_box_rejected;
+      return;
+    }
+    ++counts.vf_tests;
+    const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
+    const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
+    const geometry::CcdResult r =
+        geometry::vertex_face_ccd({s(v), s(t[0]), s(t[1]), s(t[2])}, {e(v), e(t[0]), e(t[1]), e(t[2])}, step.narrow);
+    counts.boxes += static_cast<double>(r.boxes);
+    ++counts.outcomes[static_cast<std::size_t>(r.outcome)];
+    if (!r.hit) return;
+    VertexFaceImpact impact;
+    impact.vertex = v;
+    impact.face = f;
+    impact.toi = r.toi;
+    impact.outcome = r.outcome;
+    const Vec3 p = at(step.x0, step.x1, v, r.toi), a = at(step.x0, step.x1, t[0], r.toi),
+               b = at(step.x0, step.x1, t[1], r.toi), c = at(step.x0, step.x1, t[2], r.toi);
+    const geometry::PointTriangleResult q = geometry::point_triangle(p, a, b, c);
+    impact.distance = std::sqrt(q.sqr_distance);
+    impact.barycentric = q.barycentric;
+    const Vec3 away = p - q.closest;
+    if (const Scalar len = away.norm(); len > 0) {
+      impact.normal = away / len;
+    } else {
+      const Vec3 n = (b - a).cross(c - a);
+      if (const Scalar n_len = n.norm(); n_len > 0) impact.normal = n / n_len;
+    }
+    found.vf.push_back(impact);
+  }
+
+  void edge_edge(Index e0, Index e1) {
+    Edge a = step.topo.edge(e0), b = step.topo.edge(e1);
+    if (b < a) {
+      std::swap(a, b);
+      std::swap(e0, e1);
+    }
+    const auto& vb = step.vertex_box;
+    Box ab = vb[static_cast<std::size_t>(a[0])], bb = vb[static_cast<std::size_t>(b[0])];
+    ab.merge(vb[static_cast<std::size_t>(a[1])]);
+    bb.merge(vb[static_cast<std::size_t>(b[1])]);
+    if (apart(ab, bb, step.reach)) {
+      ++counts.ee_box_rejected;
+      return;
+    }
+    ++counts.ee_tests;
+    const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
+    const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
+    const geometry::CcdResult r =
+        geometry::edge_edge_ccd({s(a[0]), s(a[1]), s(b[0]), s(b[1])}, {e(a[0]), e(a[1]), e(b[0]), e(b[1])}, step.narrow);
+    counts.boxes += static_cast<double>(r.boxes);
+    ++counts.outcomes[static_cast<std::size_t>(r.outcome)];
+    if (!r.hit) return;
+    EdgeEdgeImpact impact;
+    impact.edge0 = e0;
+    impact.edge1 = e1;
+    impact.a = a;
+    impact.b = b;
+    impact.toi = r.toi;
+    impact.outcome = r.outcome;
+    const Vec3 p0 = at(step.x0, step.x1, a[0], r.toi), p1 = at(step.x0, step.x1, a[1], r.toi),
+               q0 = at(step.x0, step.x1, b[0], r.toi), q1 = at(step.x0, step.x1, b[1], r.toi);
+    const geometry::SegmentSegmentResult q = geometry::segment_segment(p0, p1, q0, q1);
+    impact.distance = std::sqrt(q.sqr_distance);
+    impact.s = q.s;
+    impact.t = q.t;
+    const Vec3 across = q.closest1 - q.closest0;
+    if (const Scalar len = across.norm(); len > 0) {
+      impact.normal = across / len;
+    } else {
+      const Vec3 n = (p1 - p0).cross(q1 - q0);
+      if (const Scalar n_len = n.norm(); n_len > 0) impact.normal = n / n_len;
+    }
+    found.ee.push_back(impact);
+  }
+
+  /// Every owned sub-pair of faces f and g (sharing no vertex).
+  void face_pair(const OwnedFace& f, Index fi, const OwnedFace& g, Index gi) {
+    for (int k = 0; k < 3; ++k) {
+      if (f.vertex_mask >> k & 1u) vertex_face(f.v[static_cast<std::size_t>(k)], gi);
+      if (g.vertex_mask >> k & 1u) vertex_face(g.v[static_cast<std::size_t>(k)], fi);
+    }
+    if (!(f.edge_mask && g.edge_mask)) return;
+    for (int i = 0; i < 3; ++i) {
+      if (!(f.edge_mask >> i & 1u)) continue;
+      for (int j = 0; j < 3; ++j) {
+        if (g.edge_mask >> j & 1u) edge_edge(f.e[static_cast<std::size_t>(i)], g.e[static_cast<std::size_t>(j)]);
+      }
+    }
+  }
+};
+
+/// Where a tester's results go: appended under the lock (impacts are few; order is restored
+/// by the final sort).
+struct Sink {
+  std::mutex mutex;
+  ImpactSet impacts;
+  Counts counts;
+  double narrow_cpu_ms = 0;
+  void take(Tester& t, double ms) {
+    const std::lock_guard lock(mutex);
+    impacts.vf.insert(impacts.vf.end(), t.found.vf.begin(), t.found.vf.end());
+    impacts.ee.insert(impacts.ee.end(), t.found.ee.begin(), t.found.ee.end());
+    counts.add(t.counts);
+    narrow_cpu_ms += ms;
+  }
+};
+
+std::unique_ptr<BroadPhase> make_broad_phase(const MethodSpec& spec) {
+  switch (spec.method()) {
+    case Method::Kdop:
+      return std::make_unique<KdopTree>(KdopParams::from_spec(spec));
+    case Method::Hash:
+      return std::make_unique<HashGrid>(HashParams::from_spec(spec));
+    case Method::Sap:
+      return std::make_unique<SweepPrune>(SapParams::from_spec(spec));
+    default:
+      throw InputError("continuous query: method " + spec.to_string() +
+                       " has no broad phase; expected kdop, hash or sap");
+  }
+}
+
+void put_double(std::ostream& out, double value) {
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof buffer, value, std::chars_format::general, 17);
+  out.write(buffer, result.ptr - buffer);
+}
+
+}  // namespace
+
+struct ContinuousQuery::State {
+  std::unique_ptr<BroadPhase> broad;
+  CandidateBuffer candidates;
+  exact::Orphans orphans;
+  std::vector<Index> isolated;
+  std::vector<std::uint8_t> face_owns;
+  std::vector<OwnedFace> faces;
+  std::vector<Box> vertex_box;
+};
+
+ContinuousQuery::ContinuousQuery(std::shared_ptr<const Topology> topology, ContinuousOptions options)
+    : topology_(std::move(topology)), options_(std::move(options)), state_(std::make_unique<State>()) {
+  CRUMPLE_CHECK(topology_ != nullptr, "ContinuousQuery: null topology");
+  const Scalar delta = options_.min_separation;
+  if (!(std::isfinite(delta) && delta >= 0)) {
+    throw InputError("continuous query: the minimum separation must be a finite number >= 0, got " +
+                     std::to_string(delta));
+  }
+  const geometry::CcdOptions& n = options_.narrow;
+  if (!(n.time_tolerance > 0 && n.distance_tolerance >= 0 && n.separation_tolerance >= 0 && n.max_boxes >= 1 &&
+        std::isfinite(n.distance_tolerance) && std::isfinite(n.separation_tolerance))) {
+    throw InputError(
+        "continuous query: narrow-phase options need time_tolerance > 0, finite distance and separation "
+        "tolerances >= 0 and max_boxes >= 1");
+  }
+  options_.narrow.min_separation = delta;
+  State& s = *state_;
+  s.broad = make_broad_phase(options_.method);
+  const Topology& topo = *topology_;
+  const exact::FeatureOwnership own = exact::own_features(topo);
+  s.orphans = exact::list_orphans(topo, own);
+  s.isolated = own.isolated;
+  s.face_owns = own.face_owns();
+  s.faces.resize(static_cast<std::size_t>(topo.num_faces()));
+  for (Index f = 0; f < topo.num_faces(); ++f) {
+    OwnedFace& of = s.faces[static_cast<std::size_t>(f)];
+    of.v = topo.face(f);
+    of.e = topo.face_edges(f);
+    of.vertex_mask = own.vertex_mask[static_cast<std::size_t>(f)];
+    of.edge_mask = own.edge_mask[static_cast<std::size_t>(f)];
+  }
+  s.broad->build(topo);
+}
+
+ContinuousQuery::~ContinuousQuery() = default;
+
+namespace {
+
+/// Checks the sizes and finiteness of a step's positions and fills the vertex boxes; returns
+/// the largest coordinate magnitude.
+Scalar prepare_step(const Topology& topo, PositionsView x0, PositionsView x1, int threads,
+                    std::vector<Box>& vertex_box) {
+  const auto nv = static_cast<std::size_t>(topo.num_vertices());
+  for (const auto& [x, name] : {std::pair{x0, "previous"}, std::pair{x1, "current"}}) {
+    if (x.size() != nv) {
+      throw InputError(std::string("continuous query: ") + name + " positions have " + std::to_string(x.size()) +
+                       " entries for " + std::to_string(nv) + " vertices");
+    }
+  }
+  vertex_box.resize(nv);
+  std::mutex mutex;
+  Scalar magnitude = 0;
+  std::size_t bad = nv;  // the first vertex with a non-finite coordinate
+  parallel_for_chunks(nv, threads, 4096, [&](std::size_t begin, std::size_t end) {
+    Scalar m = 0;
+    std::size_t first_bad = nv;
+    for (std::size_t v = begin; v < end; ++v) {
+      if (!(x0[v].allFinite() && x1[v].allFinite())) {
+        first_bad = std::min(first_bad, v);
+        continue;
+      }
+      Box b = Box::empty();
+      b.grow(x0[v]);
+      b.grow(x1[v]);
+      vertex_box[v] = b;
+      m = std::max({m, x0[v].cwiseAbs().maxCoeff(), x1[v].cwiseAbs().maxCoeff()});
+    }
+    const std::lock_guard lock(mutex);
+    magnitude = std::max(magnitude, m);
+    bad = std::min(bad, first_bad);
+  });
+  if (bad < nv) {
+    const char* which = x0[bad].allFinite() ? "current" : "previous";
+    throw InputError(std::string("continuous query: vertex ") + std::to_string(bad) + " has a non-finite coordinate in the " +
+                     which + " positions");
+  }
+  return magnitude;
+}
+
+}  // namespace
+
+std::size_t ContinuousQuery::count_candidates(PositionsView previous, PositionsView current) {
+  State& s = *state_;
+  const Topology& topo = *topology_;
+  stats_.clear();
+  const Scalar magnitude = prepare_step(topo, previous, current, options_.threads, s.vertex_box);
+  const Scalar reach = options_.min_separation * (1 + 1e-6) + 1e-9 * magnitude;
+  const auto t0 = std::chrono::steady_clock::now();
+  FrameInput in{previous, current, reach / 2, options_.threads, false, s.face_owns, true};
+  s.broad->update(in, stats_);
+  stats_.set("update_ms", ms_since(t0));
+  const auto t1 = std::chrono::steady_clock::now();
+  s.candidates.clear();
+  s.candidates.set_consumer([](std::span<const FacePair>) {});
+  s.broad->self_pairs(s.candidates, stats_);
+  s.candidates.set_consumer({});
+  stats_.set("stream_ms", ms_since(t1));
+  const std::size_t n = s.candidates.total();
+  s.candidates.clear();
+  stats_.set("candidates", static_cast<double>(n));
+  return n;
+}
+
+void ContinuousQuery::query(PositionsView previous, PositionsView current, ImpactSet& out) {
+  out.clear();
+  State& s = *state_;
+  const Topology& topo = *topology_;
+  const int threads = options_.threads;
+  stats_.clear();
+  const auto start = std::chrono::steady_clock::now();
+  const Scalar magnitude = prepare_step(topo, previous, current, threads, s.vertex_box);
+  // Two features within δ at some t lie in faces whose swept boxes, each grown by δ/2, meet;
+  // the margin covers the rounding of every box bound (docs/ccd.md, broad phase).
+  const Scalar reach = options_.min_separation * (1 + 1e-6) + 1e-9 * magnitude;
+  const Step step{topo, previous, current, s.vertex_box, reach, options_.narrow};
+  Sink sink;
+
+  // Broad phase, its candidates streamed to the narrow phase on its threads.
+  const auto t0 = std::chrono::steady_clock::now();
+  FrameInput in{previous, current, reach / 2, threads, false, s.face_owns, true};
+  s.broad->update(in, stats_);
+  stats_.set("update_ms", ms_since(t0));
+  const auto t1 = std::chrono::steady_clock::now();
+  s.candidates.clear();
+  s.candidates.set_consumer([&](std::span<const FacePair> chunk) {
+    const auto c0 = std::chrono::steady_clock::now();
+    Tester tester{step, {}, {}};
+    for (const FacePair& p : chunk) {
+      tester.face_pair(s.faces[static_cast<std::size_t>(p[0])], p[0], s.faces[static_cast<std::size_t>(p[1])], p[1]);
+    }
+    sink.take(tester, ms_since(c0));
+  });
+  try {
+    s.broad->self_pairs(s.candidates, stats_);
+  } catch (...) {
+    s.candidates.set_consumer({});
+    s.candidates.clear();
+    throw;
+  }
+  s.candidates.set_consumer({});
+  stats_.set("candidates", static_cast<double>(s.candidates.total()));
+  s.candidates.clear();
+  stats_.set("stream_ms", ms_since(t1));
+  stats_.set("narrow_cpu_ms", sink.narrow_cpu_ms);
+
+  // Orphans (sub-pairs of faces sharing a vertex) and the vertices of no face.
+  const auto t2 = std::chrono::steady_clock::now();
+  const auto& ovf = s.orphans.vf;
+  parallel_for_chunks(ovf.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+    Tester tester{step, {}, {}};
+    for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[i][0], ovf[i][1]);
+    sink.take(tester, 0);
+  });
+  const auto& oee = s.orphans.ee;
+  parallel_for_chunks(oee.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+    Tester tester{step, {}, {}};
+    for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[i].e[0], oee[i].e[1]);
+    sink.take(tester, 0);
+  });
+  if (!s.isolated.empty()) {
+    parallel_for_chunks(static_cast<std::size_t>(topo.num_faces()), threads, 1024,
+                        [&](std::size_t begin, std::size_t end) {
+                          Tester tester{step, {}, {}};
+                          for (std::size_t f = begin; f < end; ++f) {
+                            for (const Index v : s.isolated) tester.vertex_face(v, static_cast<Index>(f));
+                          }
+                          sink.take(tester, 0);
+                        });
+  }
+  stats_.set("orphan_ms", ms_since(t2));
+
+  const auto t3 = std::chrono::steady_clock::now();
+  out = std::move(sink.impacts);
+  std::sort(out.vf.begin(), out.vf.end(), [](const VertexFaceImpact& x, const VertexFaceImpact& y) {
+    return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face);
+  });
+  std::sort(out.ee.begin(), out.ee.end(),
+            [](const EdgeEdgeImpact& x, const EdgeEdgeImpact& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); });
+  stats_.set("sort_ms", ms_since(t3));
+
+  double conservative = 0;
+  for (const auto& i : out.vf) conservative += i.outcome != geometry::CcdOutcome::kHitTolerance;
+  for (const auto& i : out.ee) conservative += i.outcome != geometry::CcdOutcome::kHitTolerance;
+  stats_.set("vf_box_rejected", sink.counts.vf_box_rejected);
+  stats_.set("ee_box_rejected", sink.counts.ee_box_rejected);
+  stats_.set("vf_tests", sink.counts.vf_tests);
+  stats_.set("ee_tests", sink.counts.ee_tests);
+  stats_.set("narrow_boxes", sink.counts.boxes);
+  for (std::size_t k = 0; k < sink.counts.outcomes.size(); ++k) {
+    stats_.set("narrow_" + std::string(geometry::to_string(static_cast<geometry::CcdOutcome>(k))),
+               sink.counts.outcomes[k]);
+  }
+  stats_.set("orphan_vf", static_cast<double>(ovf.size()));
+  stats_.set("orphan_ee", static_cast<double>(oee.size()));
+  stats_.set("isolated_vertices", static_cast<double>(s.isolated.size()));
+  stats_.set("vf_impacts", static_cast<double>(out.vf.size()));
+  stats_.set("ee_impacts", static_cast<double>(out.ee.size()));
+  stats_.set("conservative_hits", conservative);
+  stats_.set("total_ms", ms_since(start));
+}
+
+Scalar collision_free_step(const ImpactSet& impacts) {
+  Scalar t = 1;
+  for (const auto& i : impacts.vf) t = std::min(t, i.toi);
+  for (const auto& i : impacts.ee) t = std::min(t, i.toi);
+  return t;
+}
+
+void write_impacts(std::ostream& out, const ImpactSet& impacts) {
+  const auto vec = [&](const Vec3& v) {
+    for (int k = 0; k < 3; ++k) {
+      out << ' ';
+      put_double(out, v[k]);
+    }
+  };
+  for (const auto& i : impacts.vf) {
+    out << "vf " << i.vertex << ' ' << i.face << ' ';
+    put_double(out, i.toi);
+    vec(i.barycentric);
+    vec(i.normal);
+    out << '\n';
+  }
+  for (const auto& i : impacts.ee) {
+    out << "ee " << i.a[0] << ' ' << i.a[1] << ' ' << i.b[0] << ' ' << i.b[1] << ' ';
+    put_double(out, i.toi);
+    out << ' ';
+    put_double(out, i.s);
+    out << ' ';
+    put_double(out, i.t);
+    vec(i.normal);
+    out << '\n';
+  }
+}
+
+void write_impacts_file(const std::filesystem::path& path, const ImpactSet& impacts) {
+  write_file_atomically(path, [&](std::ostream& out) { write_impacts(out, impacts); });
+}
+
+ImpactSet continuous_impacts(std::shared_ptr<const Topology> topology, PositionsView previous, PositionsView current,
+                             const ContinuousOptions& options) {
+  ContinuousQuery query(std::move(topology), options);
+  ImpactSet out;
+  query.query(previous, current, out);
+  return out;
+}
+
+Scalar collision_free_step(std::shared_ptr<const Topology> topology, PositionsView previous, PositionsView current,
+                           const ContinuousOptions& options) {
+  return collision_free_step(continuous_impacts(std::move(topology), previous, current, options));
+}
+
+}  // namespace crumple

@@ -1,0 +1,415 @@
+// Mesh-level continuous collision detection (detect/continuous.hpp) against brute force: every
+// vertex against every face it is not a corner of, every pair of edges sharing no vertex,
+// through the same narrow phase. Identical impacts (pairs, TOIs bit for bit, outcomes) for
+// every broad phase and thread count, on seeded lattices with random motion and on small real
+// frame pairs; a tunnelling vertex the start and end boxes miss; bad input.
+#include <crumple/core/error.hpp>
+#include <crumple/detect/broad_phase/hash_grid.hpp>
+#include <crumple/detect/broad_phase/kdop_tree.hpp>
+#include <crumple/detect/broad_phase/sweep_prune.hpp>
+#include <crumple/detect/continuous.hpp>
+#include <crumple/io/mesh_io.hpp>
+#include <crumple/mesh/shapes.hpp>
+#include <support/meshes.hpp>
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <sstream>
+#include <string>
+#include <tuple>
+#include <vector>
+
+namespace crumple {
+namespace {
+
+/// One impact as the tests compare it: kind, the pair's vertex ids, the TOI's bits, outcome.
+using Key = std::tuple<char, Index, Index, Index, Index>;
+struct Hit {
+  Scalar toi;
+  geometry::CcdOutcome outcome;
+  bool operator==(const Hit&) const = default;
+};
+using Hits = std::map<Key, Hit>;
+
+Hits hits_of(const ImpactSet& s) {
+  Hits out;
+  for (const auto& i : s.vf) out[{'v', i.vertex, i.face, -1, -1}] = {i.toi, i.outcome};
+  for (const auto& i : s.ee) out[{'e', i.a[0], i.a[1], i.b[0], i.b[1]}] = {i.toi, i.outcome};
+  return out;
+}
+
+/// All non-adjacent VF and EE pairs through the narrow phase, in the argument order the query
+/// uses (vertex then the face's corners; the edge with the smaller vertex pair first).
+Hits brute_force(const Topology& topo, PositionsView x0, PositionsView x1, Scalar delta) {
+  geometry::CcdOptions options;
+  options.min_separation = delta;
+  Hits out;
+  const auto s = [&](Index i) { return x0[static_cast<std::size_t>(i)]; };
+  const auto e = [&](Index i) { return x1[static_cast<std::size_t>(i)]; };
+  for (Index v = 0; v < topo.num_vertices(); ++v) {
+    for (Index f = 0; f < topo.num_faces(); ++f) {
+      const Face& t = topo.face(f);
+      if (t[0] == v || t[1] == v || t[2] == v) continue;
+      const auto r = geometry::vertex_face_ccd({s(v), s(t[0]), s(t[1]), s(t[2])}, {e(v), e(t[0]), e(t[1]), e(t[2])},
+                                               options);
+      if (r.hit) out[{'v', v, f, -1, -1}] = {r.toi, r.outcome};
+    }
+  }
+  for (Index i = 0; i < topo.num_edges(); ++i) {
+    for (Index j = i + 1; j < topo.num_edges(); ++j) {
+      Edge a = topo.edge(i), b = topo.edge(j);
+      if (a[0] == b[0] || a[0] == b[1] || a[1] == b[0] || a[1] == b[1]) continue;
+      if (b < a) std::swap(a, b);
+      const auto r =
+          geometry::edge_edge_ccd({s(a[0]), s(a[1]), s(b[0]), s(b[1])}, {e(a[0]), e(a[1]), e(b[0]), e(b[1])}, options);
+      if (r.hit) out[{'e', a[0], a[1], b[0], b[1]}] = {r.toi, r.outcome};
+    }
+  }
+  return out;
+}
+
+Scalar earliest(const Hits& hits) {
+  Scalar t = 1;
+  for (const auto& [key, hit] : hits) t = std::min(t, hit.toi);
+  return t;
+}
+
+std::string describe(const Hits& a, const Hits& b) {
+  std::ostringstream out;
+  int shown = 0;
+  for (const auto& [key, hit] : a) {
+    const auto it = b.find(key);
+    if ((it == b.end() || !(it->second == hit)) && shown++ < 5) {
+      out << "only/different in first: " << std::get<0>(key) << ' ' << std::get<1>(key) << ' ' << std::get<2>(key)
+          << ' ' << std::get<3>(key) << ' ' << std::get<4>(key) << " toi " << hit.toi << '\n';
+    }
+  }
+  for (const auto& [key, hit] : b) {
+    if (!a.count(key) && shown++ < 10) {
+      out << "only in second: " << std::get<0>(key) << ' ' << std::get<1>(key) << ' ' << std::get<2>(key) << ' '
+          << std::get<3>(key) << ' ' << std::get<4>(key) << " toi " << hit.toi << '\n';
+    }
+  }
+  return out.str();
+}
+
+/// Every broad phase, and variations of their parameters (kdop without `sweep`: a continuous
+/// query sweeps anyway; tiny hash cells and table; another sweep axis).
+const std::vector<std::string> kAllSpecs{"kdop", "kdop:sweep=off,leaf=4,arity=2", "hash", "hash:cell=0.5,table=97",
+                                         "sap",  "sap:axis=z"};
+const std::vector<std::string> kMethods{"kdop", "hash", "sap"};
+
+/// Checks every broad phase and thread count against brute force; returns the impact count.
+std::size_t check_all(const std::string& name, const std::shared_ptr<const Topology>& topo, PositionsView x0,
+                      PositionsView x1, Scalar delta, const std::vector<std::string>& specs = kMethods) {
+  const Hits expected = brute_force(*topo, x0, x1, delta);
+  for (const std::string& spec : specs) {
+    for (const int threads : {1, 3}) {
+      ContinuousOptions options;
+      options.min_separation = delta;
+      options.method = MethodSpec::parse(spec);
+      options.threads = threads;
+      ContinuousQuery query(topo, options);
+      ImpactSet impacts;
+      query.query(x0, x1, impacts);
+      const Hits got = hits_of(impacts);
+      EXPECT_EQ(got.size(), impacts.size()) << "duplicate impacts";
+      EXPECT_TRUE(got == expected) << name << " delta " << delta << " " << spec << " threads " << threads << ": "
+                                   << got.size() << " impacts, brute force " << expected.size() << "\n"
+                                   << describe(got, expected);
+      EXPECT_EQ(collision_free_step(impacts), earliest(expected)) << name << " " << spec;
+      // Sorted, and the impact's geometry is consistent.
+      EXPECT_TRUE(std::is_sorted(impacts.vf.begin(), impacts.vf.end(), [](const auto& p, const auto& q) {
+        return std::tie(p.vertex, p.face) < std::tie(q.vertex, q.face);
+      }));
+      EXPECT_TRUE(std::is_sorted(impacts.ee.begin(), impacts.ee.end(),
+                                 [](const auto& p, const auto& q) { return std::tie(p.a, p.b) < std::tie(q.a, q.b); }));
+      for (const auto& i : impacts.vf) {
+        EXPECT_NEAR(i.barycentric.sum(), 1.0, 1e-12);
+        EXPECT_TRUE(i.normal.norm() == 0 || std::abs(i.normal.norm() - 1) < 1e-12);
+      }
+      for (const auto& i : impacts.ee) {
+        EXPECT_TRUE(i.s >= 0 && i.s <= 1 && i.t >= 0 && i.t <= 1);
+        EXPECT_EQ(topo->edge(i.edge0), i.a);
+        EXPECT_EQ(topo->edge(i.edge1), i.b);
+      }
+      // Orphans and candidates together test each sub-pair once: the tests plus the box
+      // rejections never exceed the brute-force pair count.
+      const DetectorStats& st = query.stats();
+      EXPECT_EQ(st.get("vf_impacts") + st.get("ee_impacts"), static_cast<double>(impacts.size()));
+    }
+  }
+  return expected.size();
+}
+
+TEST(Continuous, LatticesWithRandomMotionMatchBruteForce) {
+  std::size_t total = 0;
+  for (const std::uint64_t seed : {1u, 2u, 3u}) {
+    const TriMesh mesh = shapes::lattice(7, 6);
+    const auto topo = mesh.topology_ptr();
+    const Positions x0 = testing::crumple_lattice(mesh, 0.15, seed);
+    // Large random motion: vertices cross faces and edges cross edges during the step.
+    const Positions x1 = testing::jitter(testing::crumple_lattice(mesh, 0.25, seed + 10), 0.12, seed + 20);
+    for (const Scalar delta : {0.0, 0.02}) {
+      total += check_all("lattice seed " + std::to_string(seed), topo, x0, x1, delta, kAllSpecs);
+    }
+  }
+  EXPECT_GT(total, 50u) << "the motion must make impacts, or the comparison proves little";
+}
+
+TEST(Continuous, SmallMeshGroupMatchesBruteForce) {
+  std::size_t total = 0;
+  std::uint64_t seed = 7;
+  for (const auto& [name, mesh] : testing::small_meshes()) {
+    const auto topo = mesh.topology_ptr();
+    const Positions x1 = testing::jitter(mesh.positions(), 0.15, ++seed);
+    for (const Scalar delta : {0.0, 0.05}) total += check_all(name, topo, mesh.positions(), x1, delta);
+  }
+  EXPECT_GT(total, 10u);
+}
+
+TEST(Continuous, RealSmallMeshesMatchBruteForce) {
+  std::size_t total = 0;
+  {
+    const TriMesh t0 = io::read_mesh(testing::data_path("ipc-toolkit-tests/thick-cloth/t0.ply"));
+    const TriMesh t1 = io::read_mesh(testing::data_path("ipc-toolkit-tests/thick-cloth/t1.ply"));
+    const Scalar diag = compute_bounds(t0.positions()).diagonal();
+    for (const Scalar delta : {0.0, 1e-2 * diag}) {
+      total += check_all("thick-cloth", t0.topology_ptr(), t0.positions(), t1.positions(), delta);
+    }
+  }
+  for (const char* file : {"two-cubes-close.ply", "two-cubes-intersecting.ply"}) {
+    const TriMesh m = io::read_mesh(testing::data_path(std::string("ipc-toolkit-tests/") + file));
+    const Scalar diag = compute_bounds(m.positions()).diagonal();
+    const Positions x1 = testing::jitter(m.positions(), 0.05 * diag, 42);
+    for (const Scalar delta : {0.0, 1e-2 * diag}) {
+      total += check_all(file, m.topology_ptr(), m.positions(), x1, delta);
+    }
+  }
+  EXPECT_GT(total, 10u);
+}
+
+/// The faces of `mesh` whose centroids at `x0` are nearest to vertex `centre`, re-indexed into
+/// a mesh of their own, with both frames' positions.
+struct Region {
+  std::shared_ptr<const Topology> topo;
+  Positions x0, x1;
+};
+Region region(const TriMesh& mesh, PositionsView x1, Index centre, std::size_t faces) {
+  const Topology& topo = mesh.topology();
+  const PositionsView x0 = mesh.positions();
+  const Vec3 c = x0[static_cast<std::size_t>(centre)];
+  std::vector<std::pair<Scalar, Index>> order;
+  for (Index f = 0; f < topo.num_faces(); ++f) {
+    const Face& t = topo.face(f);
+    Vec3 m = Vec3::Zero();
+    for (const Index v : t) m += x0[static_cast<std::size_t>(v)];
+    order.emplace_back((m / 3 - c).squaredNorm(), f);
+  }
+  std::sort(order.begin(), order.end());
+  order.resize(std::min(faces, order.size()));
+  std::vector<Index> remap(static_cast<std::size_t>(topo.num_vertices()), -1);
+  Region r;
+  std::vector<Face> kept;
+  for (const auto& [d, f] : order) {
+    Face nf;
+    for (int k = 0; k < 3; ++k) {
+      const auto v = static_cast<std::size_t>(topo.face(f)[static_cast<std::size_t>(k)]);
+      if (remap[v] < 0) {
+        remap[v] = static_cast<Index>(r.x0.size());
+        r.x0.push_back(x0[v]);
+        r.x1.push_back(x1[v]);
+      }
+      nf[static_cast<std::size_t>(k)] = remap[v];
+    }
+    kept.push_back(nf);
+  }
+  r.topo = TriMesh::create(r.x0, kept).topology_ptr();
+  return r;
+}
+
+TEST(Continuous, RegionsOfRealFramePairsMatchBruteForce) {
+  // Patches of two consecutive frames of the sample CCD scenes, around a vertex of one of the
+  // full scene's impacts at δ = 0, where surfaces meet. Cloth-ball's cloth rests on itself
+  // (thousands of impacts in a small patch, each costing the narrow phase hundreds of boxes at
+  // δ > 0), so it is taken smaller and at δ = 0 only.
+  struct Case {
+    const char* f0;
+    const char* f1;
+    Index centre;
+    std::size_t faces;
+    bool with_delta;
+  };
+  const Case cases[] = {
+      {"sample-scalable-ccd/cloth-funnel/frames/227.ply", "sample-scalable-ccd/cloth-funnel/frames/228.ply", 8481, 700,
+       true},
+      {"sample-scalable-ccd/cloth-ball/frames/cloth_ball92.ply", "sample-scalable-ccd/cloth-ball/frames/cloth_ball93.ply",
+       100, 250, false},
+  };
+#ifdef CRUMPLE_SANITIZED
+  const std::size_t shrink = 3;
+#else
+  const std::size_t shrink = 1;
+#endif
+  for (const Case& c : cases) {
+    const TriMesh m0 = io::read_mesh(testing::data_path(c.f0));
+    const TriMesh m1 = io::read_mesh(testing::data_path(c.f1));
+    const Region r = region(m0, m1.positions(), c.centre, c.faces / shrink);
+    const Scalar diag = compute_bounds(m0.positions()).diagonal();
+    std::size_t total = check_all(c.f0, r.topo, r.x0, r.x1, 0);
+    if (c.with_delta) total += check_all(c.f0, r.topo, r.x0, r.x1, 1e-3 * diag);
+    EXPECT_GT(total, 0u) << c.f0;
+  }
+}
+
+TEST(Continuous, ATunnellingVertexIsFoundByEveryBroadPhase) {
+  // A triangle at rest in z = 0 and a far-away small triangle falling through it in one step:
+  // its boxes at t = 0 and t = 1 are 20 apart, only the swept box meets the first triangle.
+  const auto topo = TriMesh::create({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0.2, 0.2, 10),
+                                     Vec3(0.3, 0.2, 10), Vec3(0.2, 0.3, 10)},
+                                    {{0, 1, 2}, {3, 4, 5}})
+                        .topology_ptr();
+  Positions x0{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0.2, 0.2, 10), Vec3(0.3, 0.2, 10), Vec3(0.2, 0.3, 10)};
+  Positions x1 = x0;
+  for (int v = 3; v < 6; ++v) x1[static_cast<std::size_t>(v)].z() = -10;
+  for (const std::string& spec : kAllSpecs) {
+    ContinuousOptions options;
+    options.method = MethodSpec::parse(spec);
+    const ImpactSet impacts = continuous_impacts(topo, x0, x1, options);
+    ASSERT_EQ(impacts.vf.size(), 3u) << spec;  // each falling vertex through the resting face
+    EXPECT_EQ(impacts.vf[0].vertex, 3);
+    EXPECT_EQ(impacts.vf[0].face, 0);
+    const Scalar step = collision_free_step(impacts);
+    EXPECT_LE(step, 0.5) << spec;
+    EXPECT_GE(step, 0.5 - 2e-6) << spec;
+    EXPECT_NEAR(impacts.vf[0].normal.z(), 1, 1e-6) << spec;  // from the face towards the vertex, above it
+  }
+}
+
+TEST(Continuous, BroadPhasesStreamTheSameCandidatesInBoundedChunks) {
+  // 3,200 faces with boxes grown by 0.06 (edges 0.025): about 10 × kStreamChunk candidates.
+  const TriMesh mesh = shapes::lattice(40, 40);
+  const Positions x0 = testing::crumple_lattice(mesh, 0.1, 5);
+  const Positions x1 = testing::jitter(x0, 0.02, 6);
+  std::vector<std::unique_ptr<BroadPhase>> phases;
+  phases.push_back(std::make_unique<KdopTree>(KdopParams{}));
+  phases.push_back(std::make_unique<HashGrid>(HashParams{}));
+  phases.push_back(std::make_unique<SweepPrune>(SapParams{}));
+  for (auto& phase : phases) {
+    for (const int threads : {1, 3}) {
+      phase->build(mesh.topology());
+      FrameInput in{x0, x1, 0.06, threads, false, {}, true};
+      DetectorStats stats;
+      phase->update(in, stats);
+      CandidateBuffer kept;
+      phase->self_pairs(kept, stats);
+      std::vector<FacePair> all;
+      for (const auto& chunk : kept.chunks()) all.insert(all.end(), chunk.begin(), chunk.end());
+      std::sort(all.begin(), all.end());
+      ASSERT_GT(all.size(), 8 * CandidateBuffer::kStreamChunk) << to_string(phase->method());
+      CandidateBuffer streamed;
+      std::mutex mutex;
+      std::vector<FacePair> got;
+      std::size_t largest = 0;
+      streamed.set_consumer([&](std::span<const FacePair> chunk) {
+        const std::lock_guard lock(mutex);
+        got.insert(got.end(), chunk.begin(), chunk.end());
+        largest = std::max(largest, chunk.size());
+      });
+      phase->update(in, stats);
+      phase->self_pairs(streamed, stats);
+      EXPECT_TRUE(streamed.chunks().empty());
+      EXPECT_EQ(streamed.total(), all.size());
+      std::sort(got.begin(), got.end());
+      EXPECT_TRUE(got == all) << to_string(phase->method()) << " threads " << threads;
+      // A chunk is handed on once it holds kStreamChunk candidates, after the unit of work
+      // (bucket, box, traversal task) that filled it: far below the total.
+      EXPECT_LT(largest, 4 * CandidateBuffer::kStreamChunk) << to_string(phase->method()) << " threads " << threads;
+    }
+  }
+}
+
+TEST(Continuous, NoMotionAndFarApartGivesAFullStep) {
+  const TriMesh mesh = shapes::lattice(4, 4);
+  const ImpactSet impacts = continuous_impacts(mesh.topology_ptr(), mesh.positions(), mesh.positions());
+  EXPECT_TRUE(impacts.empty());
+  EXPECT_EQ(collision_free_step(impacts), 1.0);
+  EXPECT_EQ(collision_free_step(mesh.topology_ptr(), mesh.positions(), mesh.positions()), 1.0);
+}
+
+TEST(Continuous, WithinDeltaAtTheStartGivesAZeroStep) {
+  const TriMesh mesh = shapes::folded_cloth({.n = 8, .gap = 0.05, .wave = 0.0, .thickness = 0.06});
+  ContinuousOptions options;
+  options.min_separation = 0.1;  // more than the fold's gap: pairs are within δ at t = 0
+  EXPECT_EQ(collision_free_step(mesh.topology_ptr(), mesh.positions(), mesh.positions(), options), 0.0);
+}
+
+TEST(Continuous, BadInputThrowsInputError) {
+  const TriMesh mesh = shapes::lattice(3, 3);
+  const auto topo = mesh.topology_ptr();
+  const Positions& x = mesh.positions();
+  ContinuousQuery query(topo, {});
+  ImpactSet out;
+  const Positions shorter(x.begin(), x.end() - 1);
+  EXPECT_THROW(query.query(shorter, x, out), InputError);
+  EXPECT_THROW(query.query(x, shorter, out), InputError);
+  Positions nan = x;
+  nan[5].y() = std::numeric_limits<Scalar>::quiet_NaN();
+  try {
+    query.query(x, nan, out);
+    ADD_FAILURE() << "NaN accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("vertex 5"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("current"), std::string::npos) << e.what();
+  }
+  Positions inf = x;
+  inf[2].x() = std::numeric_limits<Scalar>::infinity();
+  EXPECT_THROW(query.query(inf, x, out), InputError);
+  EXPECT_TRUE(out.empty());
+  ContinuousOptions bad;
+  bad.min_separation = -1;
+  EXPECT_THROW(ContinuousQuery(topo, bad), InputError);
+  bad.min_separation = std::numeric_limits<Scalar>::quiet_NaN();
+  EXPECT_THROW(ContinuousQuery(topo, bad), InputError);
+  ContinuousOptions naive;
+  naive.method = MethodSpec(Method::Naive);
+  EXPECT_THROW(ContinuousQuery(topo, naive), InputError);
+  // The query still works after the errors.
+  query.query(x, x, out);
+  EXPECT_TRUE(out.empty());
+}
+
+TEST(Continuous, ImpactsTextIsStable) {
+  ImpactSet set;
+  VertexFaceImpact vf;
+  vf.vertex = 3;
+  vf.face = 0;
+  vf.toi = 0.5;
+  vf.barycentric = Vec3(0.25, 0.25, 0.5);
+  vf.normal = Vec3(0, 0, 1);
+  set.vf.push_back(vf);
+  EdgeEdgeImpact ee;
+  ee.a = {0, 1};
+  ee.b = {2, 5};
+  ee.toi = 0.1;
+  ee.s = 1.0 / 3;
+  ee.t = 1;
+  ee.normal = Vec3(0, -1, 0);
+  set.ee.push_back(ee);
+  std::ostringstream out;
+  write_impacts(out, set);
+  EXPECT_EQ(out.str(),
+            "vf 3 0 0.5 0.25 0.25 0.5 0 0 1\n"
+            "ee 0 1 2 5 0.10000000000000001 0.33333333333333331 1 0 -1 0\n");
+}
+
+}  // namespace
+}  // namespace crumple
+
