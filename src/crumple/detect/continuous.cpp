@@ -7,12 +7,15 @@
 #include <crumple/detect/broad_phase/kdop_tree.hpp>
 #include <crumple/detect/broad_phase/sweep_prune.hpp>
 #include <crumple/detect/continuous.hpp>
+#include <crumple/detect/exact/box_tree.hpp>
 #include <crumple/detect/exact/orphans.hpp>
 #include <crumple/detect/exact/ownership.hpp>
+#include <crumple/detect/exact/stars.hpp>
 #include <crumple/geometry/distance.hpp>
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -215,8 +218,8 @@ void put_double(std::ostream& out, double value) {
 struct ContinuousQuery::State {
   std::unique_ptr<BroadPhase> broad;
   CandidateBuffer candidates;
+  exact::FeatureOwnership own;
   exact::Orphans orphans;
-  std::vector<Index> isolated;
   std::vector<std::uint8_t> face_owns;
   std::vector<OwnedFace> faces;
   std::vector<Box> vertex_box;
@@ -241,9 +244,9 @@ ContinuousQuery::ContinuousQuery(std::shared_ptr<const Topology> topology, Conti
   State& s = *state_;
   s.broad = make_broad_phase(options_.method);
   const Topology& topo = *topology_;
-  const exact::FeatureOwnership own = exact::own_features(topo);
+  s.own = exact::own_features(topo);
+  const exact::FeatureOwnership& own = s.own;
   s.orphans = exact::list_orphans(topo, own);
-  s.isolated = own.isolated;
   s.face_owns = own.face_owns();
   s.faces.resize(static_cast<std::size_t>(topo.num_faces()));
   for (Index f = 0; f < topo.num_faces(); ++f) {
@@ -381,15 +384,47 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
     for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[i].e[0], oee[i].e[1]);
     sink.take(tester, 0);
   });
-  if (!s.isolated.empty()) {
-    parallel_for_chunks(static_cast<std::size_t>(topo.num_faces()), threads, 1024,
-                        [&](std::size_t begin, std::size_t end) {
-                          Tester tester{step, {}, {}};
-                          for (std::size_t f = begin; f < end; ++f) {
-                            for (const Index v : s.isolated) tester.vertex_face(v, static_cast<Index>(f));
-                          }
-                          sink.take(tester, 0);
-                        });
+  // Around the stars, the orphan sub-pairs of the face pairs whose swept boxes meet
+  // (exact/stars.hpp); the vertices of no face against the faces whose swept boxes they meet.
+  const Scalar half = reach / 2;
+  const auto swept_box = [&](Index u) { return s.vertex_box[static_cast<std::size_t>(u)]; };
+  const auto face_box = [&](Index f) {
+    Box b = Box::empty();
+    for (const Index u : topo.face(f)) b.merge(swept_box(u));
+    b.inflate(half);
+    return b;
+  };
+  std::atomic<std::size_t> star_pairs{0};
+  parallel_for_chunks(s.orphans.stars.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
+    Tester tester{step, {}, {}};
+    exact::StarScratch scratch;
+    for (std::size_t i = begin; i < end; ++i) {
+      const Index v = s.orphans.stars[i];
+      star_pairs += exact::star_pairs(
+          topo, v, scratch, face_box, [&](Index f) { return exact::owned_far_box(topo, s.own, f, v, half, swept_box); },
+          [&](Index f, Index g) {
+            exact::for_each_orphan(
+                topo, s.own, f, g, [&](Index u, Index face) { tester.vertex_face(u, face); },
+                [&](Index e0, Index e1) { tester.edge_edge(e0, e1); });
+          });
+    }
+    sink.take(tester, 0);
+  });
+  const std::vector<Index>& isolated = s.own.isolated;
+  if (!isolated.empty()) {
+    std::vector<Box> boxes(static_cast<std::size_t>(topo.num_faces()));
+    for (std::size_t f = 0; f < boxes.size(); ++f) boxes[f] = face_box(static_cast<Index>(f));
+    exact::BoxTree tree;
+    tree.build(boxes);
+    parallel_for_chunks(isolated.size(), threads, 64, [&](std::size_t begin, std::size_t end) {
+      Tester tester{step, {}, {}};
+      for (std::size_t i = begin; i < end; ++i) {
+        Box near = swept_box(isolated[i]);
+        near.inflate(half);
+        tree.query(near, [&](std::uint32_t f) { tester.vertex_face(isolated[i], static_cast<Index>(f)); });
+      }
+      sink.take(tester, 0);
+    });
   }
   stats_.set("orphan_ms", ms_since(t2));
 
@@ -416,7 +451,9 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
   }
   stats_.set("orphan_vf", static_cast<double>(ovf.size()));
   stats_.set("orphan_ee", static_cast<double>(oee.size()));
-  stats_.set("isolated_vertices", static_cast<double>(s.isolated.size()));
+  stats_.set("orphan_stars", static_cast<double>(s.orphans.stars.size()));
+  stats_.set("orphan_star_pairs", static_cast<double>(star_pairs.load()));
+  stats_.set("isolated_vertices", static_cast<double>(isolated.size()));
   stats_.set("vf_impacts", static_cast<double>(out.vf.size()));
   stats_.set("ee_impacts", static_cast<double>(out.ee.size()));
   stats_.set("conservative_hits", conservative);
