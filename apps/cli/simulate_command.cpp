@@ -117,7 +117,9 @@ Start load(const SimulateArgs& args, std::optional<SideFile>& side) {
         start.scene = sim::make_scene_from_model(std::move(model), state_from_mass_spring(data, time), spec);
       } else {
         start.scene = sim::make_scene(spec, start.seed);
-        start.scene.model = std::move(model);
+        // MassSpring has no bending hinges: the scene's own are rebuilt from its spec.
+        const auto hinges = start.scene.model.hinges();
+        start.scene.model = model.with_hinges({hinges.begin(), hinges.end()});
         start.scene.state = state_from_mass_spring(data, time);
       }
       start.source = "state " + path.string() + " (" + start.scene.spec + ", frame " + std::to_string(start.frame) + ")";
