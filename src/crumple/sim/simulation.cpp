@@ -70,6 +70,7 @@ Simulation::Simulation(Model model, State state, ForceField field,
 void Simulation::detect_now() {
   const auto start = Clock::now();
   detector_->update(state_.x, contacts_);
+  ++detections_;
   if (per_frame()) filter_contacts();
   contacts_valid_ = true;
   detect_ms_ += ms_since(start);
@@ -211,12 +212,14 @@ FrameStats Simulation::frame_stats() {
     s.obstacle_penetration = std::max(s.obstacle_penetration, response::max_penetration(o, state_.time, state_.x));
   }
   s.cg_iterations = cg_iterations_;
+  s.detections = detections_;
   s.corrections = corrections_;
   s.energy = compute_energy(model_, field_, state_).total();
   for (const Vec3& v : state_.v) s.max_speed = std::max(s.max_speed, v.norm());
   if (!state_.x.empty()) s.bounds = compute_bounds(state_.x);
   integrate_ms_ = detect_ms_ = response_ms_ = 0;
   cg_iterations_ = 0;
+  detections_ = 0;
   corrections_ = 0;
   return s;
 }

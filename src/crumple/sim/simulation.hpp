@@ -102,6 +102,7 @@ struct FrameStats {
   Scalar min_distance = 0;
   Scalar obstacle_penetration = 0;  ///< deepest vertex inside an obstacle at the frame's end (m)
   int cg_iterations = 0;            ///< summed over the frame's steps (implicit Euler)
+  int detections = 0;               ///< detector updates run for this frame
   std::size_t corrections = 0;      ///< response corrections applied over the frame's steps
   Scalar energy = 0;     ///< total mechanical energy at the frame's end (`compute_energy`, J)
   Scalar max_speed = 0;  ///< largest particle speed at the frame's end (m/s)
@@ -177,6 +178,7 @@ class Simulation {
   // Accumulated over the current frame.
   double integrate_ms_ = 0, detect_ms_ = 0, response_ms_ = 0;
   int cg_iterations_ = 0;
+  int detections_ = 0;
   std::size_t corrections_ = 0;
 };
 
