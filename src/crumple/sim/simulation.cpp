@@ -62,7 +62,8 @@ Simulation::Simulation(Model model, State state, ForceField field,
   integrator_ = make_integrator(settings_.integrator, settings_.integrator_options);
   if (!state_.x.empty()) initial_spread_ = compute_bounds(state_.x).diagonal();
   DetectorOptions detection = settings_.detector;
-  if (per_frame()) detection.thickness *= 2;  // the frame's search radius (see `ResponseModel`)
+  CRUMPLE_CHECK(settings_.search_factor > 1, "search_factor must be > 1");
+  if (per_frame()) detection.thickness *= settings_.search_factor;  // see `ResponseModel`
   detector_ = make_detector(settings_.method, detection);
   detector_->set_topology(model_.topology_ptr());
 }

@@ -57,7 +57,8 @@ class DivergenceError : public Error {
 ///  - AnnexB: the thesis' loop above: detection at every step's start, Annex B velocity and
 ///    position corrections (`response::resolve`) after it.
 ///  - Proximity: detection once per frame, at the frame's start, with the search radius
-///    2 h_c (pairs up to h_c apart plus a slack of h_c for the frame's relative motion); the
+///    `search_factor` × h_c (pairs up to h_c apart plus a slack for the frame's relative
+///    motion); the
 ///    frame's contacts (normals and weights from the frame's start) serve every step of the
 ///    frame: after each, the pairs whose gap fell below h_c get proximity impulses with
 ///    friction (`response::resolve_proximity`). A pair that was farther than 2 h_c at the
@@ -84,6 +85,9 @@ struct Settings {
   int passes = 4;            ///< Gauss–Seidel sweeps per step (>= 1)
   ResponseModel response_model = ResponseModel::AnnexB;
   Scalar self_friction = 0;  ///< Coulomb coefficient between touching parts (Proximity model)
+  /// Proximity model: the frame's detection radius as a multiple of the thickness (> 1); the
+  /// slack beyond h_c is the relative motion a frame may bring without being missed.
+  Scalar search_factor = 2;
   /// Largest spread of the particles, as a multiple of the initial one, before the run counts
   /// as diverged (see `DivergenceError`). A cloth's springs keep it near its own size.
   Scalar max_spread_growth = 10;
