@@ -402,6 +402,8 @@ class Projective final : public Integrator {
     Key key;
     key.h = h;
     key.air = field.air_damping;
+    CRUMPLE_CHECK(!field.drag || (field.drag->vertex >= 0 && field.drag->vertex < model.num_particles()),
+                  "drag vertex out of range");
     if (field.drag && !model.pinned(field.drag->vertex)) {
       key.drag_vertex = field.drag->vertex;
       key.drag_stiffness = field.drag->stiffness;
