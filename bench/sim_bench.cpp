@@ -1,6 +1,12 @@
 // Simulation cost per step, by part: integration (each integrator), detection (naive and the
 // exact accelerated methods), self-collision response, on the hanging-cloth scene at 10x10 and
 // 100x100 after it has fallen for a while (so there are contacts to respond to).
+// `frame/SCENE/N`: whole frames of the built-in scenes with their defaults (projective dynamics,
+// one detection per frame with kdop, proximity response), after a warm-up of 30 frames (0.5 s,
+// the cloth in contact), reporting ms per frame by part, contacts (VF + EE closer than the
+// thickness), intersecting triangle pairs at the last frame (exact: kdop with kinds tt) and
+// frames per second (docs/benchmarks/simulation.md):
+//   ./build/release/bench/sim_bench --benchmark_filter=frame/ --benchmark_out=sim.json
 //   ./build/release/bench/sim_bench --benchmark_format=json
 #include <crumple/sim/scene.hpp>
 
@@ -74,7 +80,49 @@ void BM_Response(benchmark::State& bench, int n) {
   bench.counters["contacts"] = static_cast<double>(contacts.size());
 }
 
+/// Whole frames of a built-in scene with its default settings.
+void BM_Frame(benchmark::State& bench, const std::string& spec) {
+  Scene s = make_scene(SceneSpec::parse(spec), 1);
+  Settings settings = s.settings;
+  settings.method = MethodSpec::parse("kdop");
+  Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
+                 settings);
+  sim.current_stats();
+  for (int f = 0; f < 30; ++f) sim.advance_frame();
+  double integrate = 0, detect = 0, response = 0, contacts = 0, frames = 0;
+  for (auto _ : bench) {
+    const FrameStats st = sim.advance_frame();
+    integrate += st.integrate_ms;
+    detect += st.detect_ms;
+    response += st.response_ms;
+    contacts += static_cast<double>(st.vf + st.ee);
+    frames += 1;
+  }
+  DetectorOptions tt_options;
+  tt_options.kinds = ContactKinds::parse("tt");
+  auto tt = make_detector(MethodSpec::parse("kdop"), tt_options);
+  tt->set_topology(sim.model().topology_ptr());
+  ContactSet intersections;
+  tt->update(sim.state().x, intersections);
+  bench.counters["integrate_ms"] = integrate / frames;
+  bench.counters["detect_ms"] = detect / frames;
+  bench.counters["response_ms"] = response / frames;
+  bench.counters["contacts"] = contacts / frames;
+  bench.counters["tt_pairs_last_frame"] = static_cast<double>(intersections.tt.size());
+  bench.counters["vertices"] = sim.model().num_particles();
+  bench.counters["fps"] = benchmark::Counter(frames, benchmark::Counter::kIsRate);
+}
+
 void register_all() {
+  for (const char* scene : {"cloth-on-sphere", "crumple"}) {
+    for (int n : {32, 64, 100}) {
+      const std::string spec = std::string(scene) + ":n=" + std::to_string(n);
+      benchmark::RegisterBenchmark(("frame/" + spec).c_str(), BM_Frame, spec)
+          ->Unit(benchmark::kMillisecond)
+          ->Iterations(20)
+          ->UseRealTime();
+    }
+  }
   for (int n : {10, 100}) {
     for (IntegratorKind k : all_integrators()) {
       benchmark::RegisterBenchmark(("integrate/" + std::string(to_string(k)) + "/" + std::to_string(n)).c_str(),

@@ -1,5 +1,8 @@
 #include <crumple/core/error.hpp>
+#include <crumple/geometry/distance.hpp>
 #include <crumple/response/contact_response.hpp>
+
+#include <algorithm>
 
 namespace crumple::response {
 
@@ -24,6 +27,7 @@ Stencil make_stencil(const EdgeEdgeContact& c) {
   s.vertex = {c.a[0], c.a[1], c.b[0], c.b[1]};
   s.weight = {-(1 - c.s), -c.s, 1 - c.t, c.t};
   s.normal = c.normal;
+  s.edge_edge = true;
   return s;
 }
 
@@ -37,6 +41,27 @@ std::vector<Stencil> make_stencils(const ContactSet& contacts, std::span<const F
     if (c.normal.squaredNorm() > 0) out.push_back(make_stencil(c));
   }
   return out;
+}
+
+void refresh_stencil(Stencil& s, std::span<const Vec3> x) {
+  const auto p = [&](int k) { return x[at(s.vertex[static_cast<std::size_t>(k)])]; };
+  Vec3 from, to;
+  if (s.edge_edge) {
+    const geometry::SegmentSegmentResult r = geometry::segment_segment(p(0), p(1), p(2), p(3));
+    s.weight = {-(1 - r.s), -r.s, 1 - r.t, r.t};
+    from = r.closest0;
+    to = r.closest1;
+  } else {
+    const geometry::PointTriangleResult r = geometry::point_triangle(p(0), p(1), p(2), p(3));
+    s.weight = {1, -r.barycentric[0], -r.barycentric[1], -r.barycentric[2]};
+    from = r.closest;
+    to = p(0);
+  }
+  const Vec3 d = to - from;
+  const Scalar length = d.norm();
+  if (!(length > 0)) return;
+  const Vec3 n = d / length;
+  s.normal = n.dot(s.normal) >= 0 ? n : Vec3(-n);
 }
 
 Scalar relative_normal(const Stencil& s, std::span<const Vec3> q) {
@@ -98,6 +123,57 @@ ResponseStats resolve(std::span<const Stencil> stencils, std::span<const Scalar>
       if (options.position && options.thickness > 0 && relative_normal(s, x) < too_close) {
         if (correct_position(s, inv_mass, x, options.thickness) > 0) ++applied;
       }
+    }
+    stats.corrections += applied;
+    if (applied == 0) {
+      stats.converged = true;
+      break;
+    }
+  }
+  return stats;
+}
+
+namespace {
+/// Adds cᵢ mᵢ⁻¹ λ `direction` to every vertex of the stencil.
+void apply_along(const Stencil& s, std::span<const Scalar> inv_mass, std::span<Vec3> q, Scalar lambda,
+                 const Vec3& direction) {
+  for (int k = 0; k < s.count; ++k) {
+    const Scalar w = s.weight[k] * inv_mass[at(s.vertex[k])];
+    if (w != 0) q[at(s.vertex[k])] += (w * lambda) * direction;
+  }
+}
+}  // namespace
+
+ResponseStats resolve_proximity(std::span<const Stencil> stencils, std::span<const Scalar> inv_mass,
+                                std::span<Vec3> x, std::span<Vec3> v, const ProximityOptions& options) {
+  CRUMPLE_CHECK(options.passes >= 1, "response passes must be >= 1");
+  CRUMPLE_CHECK(options.friction >= 0, "friction must be >= 0");
+  CRUMPLE_CHECK(x.size() == inv_mass.size() && v.size() == inv_mass.size(),
+                "response arrays must have #V entries");
+  ResponseStats stats;
+  const Scalar h = options.thickness;
+  const Scalar too_close = h * (1 - options.position_tolerance);
+  for (int pass = 0; pass < options.passes; ++pass) {
+    ++stats.passes;
+    std::size_t applied = 0;
+    for (const Stencil& s : stencils) {
+      const Scalar gap = relative_normal(s, x);
+      if (!(gap < too_close)) continue;
+      const Scalar d = inverse_effective_mass(s, inv_mass);
+      if (!(d > 0)) continue;
+      apply_along(s, inv_mass, x, (h - gap) / d, s.normal);
+      Vec3 r = Vec3::Zero();
+      for (int k = 0; k < s.count; ++k) r += s.weight[k] * v[at(s.vertex[k])];
+      const Scalar vn = r.dot(s.normal);
+      const Scalar lambda = vn < 0 ? -vn / d : 0;
+      if (lambda > 0) apply_along(s, inv_mass, v, lambda, s.normal);
+      const Vec3 tangential = r - vn * s.normal;
+      const Scalar slide = tangential.norm();
+      if (options.friction > 0 && lambda > 0 && slide > 0) {
+        const Scalar lambda_t = std::min(options.friction * lambda, slide / d);
+        apply_along(s, inv_mass, v, -lambda_t, tangential / slide);
+      }
+      ++applied;
     }
     stats.corrections += applied;
     if (applied == 0) {

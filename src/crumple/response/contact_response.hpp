@@ -36,7 +36,13 @@ struct Stencil {
   std::array<Scalar, 4> weight{0, 0, 0, 0};
   int count = 0;
   Vec3 normal = Vec3::Zero();
+  bool edge_edge = false;  ///< EE (vertices a0 a1 b0 b1) or VF (vertex, then the face's corners)
 };
+
+/// Moves a stencil to the closest points of its primitives at `positions`: new weights, and the
+/// normal of the new closest points, turned to the side of the stencil's current normal (a pair
+/// that crossed is still pushed back to the side it came from); kept when the primitives touch.
+void refresh_stencil(Stencil& stencil, std::span<const Vec3> positions);
 
 /// Stencil of a vertex–face contact; `faces` gives the face's corners.
 Stencil make_stencil(const VertexFaceContact& contact, std::span<const Face> faces);
@@ -85,5 +91,27 @@ struct ResponseStats {
 ResponseStats resolve(std::span<const Stencil> stencils, std::span<const Scalar> inv_mass,
                       std::span<Vec3> positions, std::span<Vec3> velocities,
                       const ResponseOptions& options);
+
+/// Options of the proximity response (`resolve_proximity`).
+struct ProximityOptions {
+  Scalar thickness = 0;  ///< h: contacts with a gap below h are pushed out to h
+  Scalar friction = 0;   ///< Coulomb coefficient μ >= 0 between the two sides of a contact
+  int passes = 4;        ///< maximum sweeps (>= 1)
+  /// A contact is "too close" when its gap < thickness·(1 − position_tolerance).
+  Scalar position_tolerance = 1e-6;
+};
+
+/// Proximity impulses with friction (Bridson, Fedkiw, Anderson, *Robust treatment of
+/// collisions, contact and friction for cloth animation*, SIGGRAPH 2002, §7.1, in the stencil
+/// form above). Only contacts whose gap (Σ cᵢxᵢ)·n is below h act — stencils may come from a
+/// detection with a larger radius, made once per frame — and each one that does, Gauss–Seidel:
+///  1. is pushed out to the gap h (μ = (h − g) / Σ cᵢ² mᵢ⁻¹, as `correct_position`);
+///  2. loses its approaching normal relative velocity (λ = −v_rel·n / Σ cᵢ² mᵢ⁻¹ when < 0);
+///  3. has its tangential relative velocity v_t reduced by Coulomb friction: an impulse
+///     λ_t = min(μ λ, |v_t| / Σ cᵢ² mᵢ⁻¹) against v_t, so sliding stops when |v_t| ≤ μ λ Σ cᵢ² mᵢ⁻¹.
+/// Momentum is conserved (Σ cᵢ = 0). Sweeps until none acts or `passes` ran.
+ResponseStats resolve_proximity(std::span<const Stencil> stencils, std::span<const Scalar> inv_mass,
+                                std::span<Vec3> positions, std::span<Vec3> velocities,
+                                const ProximityOptions& options);
 
 }  // namespace crumple::response

@@ -34,6 +34,15 @@ void compute_forces(const Model& model, const ForceField& field, std::span<const
     f[at(sp.a)] += fa;
     f[at(sp.b)] -= fa;
   }
+  for (const Hinge& hg : model.hinges()) {
+    Vec3 bend = Vec3::Zero(), rate = Vec3::Zero();
+    for (std::size_t k = 0; k < 4; ++k) {
+      bend += hg.weight[k] * x[at(hg.vertex[k])];
+      rate += hg.weight[k] * v[at(hg.vertex[k])];
+    }
+    const Vec3 g = hg.stiffness * bend + hg.damping * rate;
+    for (std::size_t k = 0; k < 4; ++k) f[at(hg.vertex[k])] -= hg.weight[k] * g;
+  }
   if (field.drag) {
     const DragForce& g = *field.drag;
     CRUMPLE_CHECK(g.vertex >= 0 && at(g.vertex) < n, "drag vertex out of range");
@@ -65,6 +74,17 @@ ForceJacobians compute_force_jacobians(const Model& model, const ForceField& fie
       add_block(tv, sp.b, sp.b, b.dv);
       add_block(tv, sp.a, sp.b, -b.dv);
       add_block(tv, sp.b, sp.a, -b.dv);
+    }
+  }
+  for (const Hinge& hg : model.hinges()) {
+    for (std::size_t i = 0; i < 4; ++i) {
+      for (std::size_t j = 0; j < 4; ++j) {
+        const Scalar ww = hg.weight[i] * hg.weight[j];
+        for (int r = 0; r < 3; ++r) {
+          tx.emplace_back(3 * hg.vertex[i] + r, 3 * hg.vertex[j] + r, -hg.stiffness * ww);
+          if (hg.damping > 0) tv.emplace_back(3 * hg.vertex[i] + r, 3 * hg.vertex[j] + r, -hg.damping * ww);
+        }
+      }
     }
   }
   if (field.air_damping != 0) {
@@ -109,6 +129,11 @@ Energy compute_energy(const Model& model, const ForceField& field, const State& 
   for (const Spring& sp : model.springs()) {
     const Scalar stretch = (state.x[at(sp.a)] - state.x[at(sp.b)]).norm() - sp.rest_length;
     e.spring += 0.5 * sp.stiffness * stretch * stretch;
+  }
+  for (const Hinge& hg : model.hinges()) {
+    Vec3 bend = Vec3::Zero();
+    for (std::size_t k = 0; k < 4; ++k) bend += hg.weight[k] * state.x[at(hg.vertex[k])];
+    e.bending += 0.5 * hg.stiffness * bend.squaredNorm();
   }
   if (field.drag) {
     e.drag = 0.5 * field.drag->stiffness * (field.drag->target - state.x[at(field.drag->vertex)]).squaredNorm();

@@ -1,7 +1,7 @@
 #pragma once
 /// \file
 /// Forces on a mass–spring model: gravity, springs (Hooke + damping along the spring, see
-/// `Spring`), air (viscous) damping and a "mouse spring" dragging one particle towards a point.
+/// `Spring`), bending hinges (`Hinge`), air (viscous) damping and a "mouse spring" dragging one particle towards a point.
 /// Pure functions of (model, field, x, v); pinned particles receive forces but never move.
 
 #include <crumple/sim/mass_spring.hpp>
@@ -34,7 +34,8 @@ void compute_forces(const Model& model, const ForceField& field, std::span<const
                     std::span<const Vec3> v, std::vector<Vec3>& forces);
 
 /// Jacobians of the forces, 3#V × 3#V, particle i in rows/columns 3i..3i+2:
-/// ∂f/∂x (springs and the drag) and ∂f/∂v (spring damping, air damping, drag damping).
+/// ∂f/∂x (springs, hinges and the drag) and ∂f/∂v (spring and hinge damping, air damping, drag
+/// damping). A hinge adds the constant −s w wᵀ ⊗ I₃ (and −c w wᵀ ⊗ I₃ to ∂f/∂v).
 /// The spring term is −k [ d̂d̂ᵀ + max(0, 1 − L/l) (I − d̂d̂ᵀ) ], the transverse part clamped at 0
 /// for compressed springs so that M − h ∂f/∂v − h² ∂f/∂x stays symmetric positive definite
 /// (Baraff & Witkin 1998; Choi & Ko 2002). Both matrices are symmetric.
@@ -53,14 +54,15 @@ struct SpringBlocks {
 };
 SpringBlocks spring_blocks(const Spring& spring, Scalar damping, const Vec3& xa, const Vec3& xb);
 
-/// Energies (J): kinetic ½ Σ m v², spring ½ Σ k (l − L)², gravity −Σ m g·x (free particles),
-/// drag ½ k |target − x|².
+/// Energies (J): kinetic ½ Σ m v², spring ½ Σ k (l − L)², bending ½ Σ s |Σ wᵢ xᵢ|² (hinges),
+/// gravity −Σ m g·x (free particles), drag ½ k |target − x|².
 struct Energy {
   Scalar kinetic = 0;
   Scalar spring = 0;
   Scalar gravity = 0;
   Scalar drag = 0;
-  Scalar total() const { return kinetic + spring + gravity + drag; }
+  Scalar bending = 0;
+  Scalar total() const { return kinetic + spring + gravity + drag + bending; }
 };
 Energy compute_energy(const Model& model, const ForceField& field, const State& state);
 

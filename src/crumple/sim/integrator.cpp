@@ -2,6 +2,7 @@
 #include <crumple/sim/integrator.hpp>
 
 #include <Eigen/IterativeLinearSolvers>
+#include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
 
 #include <algorithm>
@@ -14,8 +15,9 @@ namespace crumple::sim {
 
 namespace {
 
-constexpr std::array<IntegratorKind, 4> kKinds{IntegratorKind::ExplicitEuler, IntegratorKind::SymplecticEuler,
-                                               IntegratorKind::Rk4, IntegratorKind::ImplicitEuler};
+constexpr std::array<IntegratorKind, 5> kKinds{IntegratorKind::ExplicitEuler, IntegratorKind::SymplecticEuler,
+                                               IntegratorKind::Rk4, IntegratorKind::ImplicitEuler,
+                                               IntegratorKind::Projective};
 
 /// a = M⁻¹ f (zero for pinned particles).
 void accelerations(const Model& model, const ForceField& field, std::span<const Vec3> x,
@@ -149,6 +151,19 @@ class ImplicitEuler final : public Integrator {
       b_.segment<3>(3 * sp.a) += h * kv;
       b_.segment<3>(3 * sp.b) -= h * kv;
     }
+    const auto hinges = model.hinges();
+    for (std::size_t k = 0; k < hinges.size(); ++k) {
+      const Hinge& hg = hinges[k];
+      Vec3 rate = Vec3::Zero();
+      for (std::size_t i = 0; i < 4; ++i) rate += hg.weight[i] * s.v[static_cast<std::size_t>(hg.vertex[i])];
+      for (std::size_t i = 0; i < 4; ++i) {
+        b_.segment<3>(3 * hg.vertex[i]) -= h * hg.stiffness * hg.weight[i] * rate;
+        for (std::size_t j = 0; j < 4; ++j) {
+          const Scalar coefficient = (h * hg.damping + h2 * hg.stiffness) * hg.weight[i] * hg.weight[j];
+          add(hinge_block_[k][4 * i + j], hg.vertex[j], coefficient * Mat3::Identity());
+        }
+      }
+    }
     for (Index i = 0; i < n; ++i) {
       const auto k = static_cast<std::size_t>(i);
       Scalar diagonal = mass[k] + h * field.air_damping * mass[k];
@@ -196,20 +211,29 @@ class ImplicitEuler final : public Integrator {
   /// Builds the block pattern when the model's springs differ from the cached ones.
   void prepare(const Model& model) {
     const auto springs = model.springs();
+    const auto hinges = model.hinges();
     const Index n = model.num_particles();
-    bool same = pattern_n_ == n && pattern_pairs_.size() == springs.size();
+    bool same = pattern_n_ == n && pattern_pairs_.size() == springs.size() && pattern_hinges_.size() == hinges.size();
     for (std::size_t k = 0; same && k < springs.size(); ++k) {
       same = pattern_pairs_[k] == std::array<Index, 2>{springs[k].a, springs[k].b};
     }
+    for (std::size_t k = 0; same && k < hinges.size(); ++k) same = pattern_hinges_[k] == hinges[k].vertex;
     if (same) return;
     pattern_n_ = n;
     pattern_pairs_.clear();
+    pattern_hinges_.clear();
     std::vector<std::vector<Index>> neighbours(static_cast<std::size_t>(n));
     for (Index i = 0; i < n; ++i) neighbours[static_cast<std::size_t>(i)].push_back(i);
     for (const Spring& sp : springs) {
       pattern_pairs_.push_back({sp.a, sp.b});
       neighbours[static_cast<std::size_t>(sp.a)].push_back(sp.b);
       neighbours[static_cast<std::size_t>(sp.b)].push_back(sp.a);
+    }
+    for (const Hinge& hg : hinges) {
+      pattern_hinges_.push_back(hg.vertex);
+      for (Index a : hg.vertex) {
+        for (Index b : hg.vertex) neighbours[static_cast<std::size_t>(a)].push_back(b);
+      }
     }
     std::vector<Eigen::Triplet<Scalar>> triplets;
     for (auto& list : neighbours) {
@@ -247,6 +271,15 @@ class ImplicitEuler final : public Integrator {
                                        blocks[static_cast<std::size_t>(q)].second));
       }
     }
+    hinge_block_.resize(hinges.size());
+    for (std::size_t k = 0; k < hinges.size(); ++k) {
+      for (std::size_t i = 0; i < 4; ++i) {
+        for (std::size_t j = 0; j < 4; ++j) {
+          hinge_block_[k][4 * i + j] = block_offset_.size();
+          block_offset_.push_back(offset(hinges[k].vertex[i], hinges[k].vertex[j]));
+        }
+      }
+    }
   }
 
   IntegratorOptions options_;
@@ -257,8 +290,213 @@ class ImplicitEuler final : public Integrator {
   std::vector<std::size_t> block_offset_;  // row offset of each referenced block in its columns
   std::vector<std::size_t> diagonal_block_;
   std::vector<std::array<std::size_t, 4>> spring_block_;
+  std::vector<std::array<Index, 4>> pattern_hinges_;
+  std::vector<std::array<std::size_t, 16>> hinge_block_;  // block (vertex i, vertex j) at 4i + j
   Vector b_, dv_;
   Eigen::ConjugateGradient<Sparse, Eigen::Lower | Eigen::Upper> cg_;
+};
+
+/// Projective dynamics (see the header). The system is over the free particles only: a pinned
+/// particle's known new position moves to the right-hand side.
+class Projective final : public Integrator {
+ public:
+  explicit Projective(const IntegratorOptions& options) : options_(options) {
+    CRUMPLE_CHECK(options.projective_iterations >= 1, "projective iterations must be >= 1");
+  }
+  IntegratorKind kind() const override { return IntegratorKind::Projective; }
+
+  void step(const Model& model, const ForceField& field, State& s, Scalar h) override {
+    check_step(model, s, h);
+    prepare(model, field, h);
+    const std::size_t n = s.x.size();
+    const auto mass = model.mass();
+    const auto springs = model.springs();
+    const auto hinges = model.hinges();
+    const Scalar inv_h2 = 1 / (h * h);
+    // Pinned particles move by h v₀; free ones start from the inertial prediction.
+    next_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) next_[i] = s.x[i] + h * s.v[i];
+    // The constant part of the right-hand side.
+    base_.resize(static_cast<Eigen::Index>(free_.size()), 3);
+    for (std::size_t r = 0; r < free_.size(); ++r) {
+      const std::size_t i = free_[r];
+      const Vec3 b = mass[i] * (inv_h2 * next_[i] + (field.air_damping / h) * s.x[i] + field.gravity);
+      base_.row(static_cast<Eigen::Index>(r)) = b.transpose();
+    }
+    if (field.drag && row_[static_cast<std::size_t>(field.drag->vertex)] >= 0) {
+      const auto i = static_cast<std::size_t>(field.drag->vertex);
+      const Vec3 b = field.drag->stiffness * field.drag->target + (field.drag->damping / h) * s.x[i];
+      base_.row(row_[i]) += b.transpose();
+    }
+    for (const Hinge& hg : hinges) {
+      Vec3 rest = Vec3::Zero(), fixed = Vec3::Zero();
+      for (std::size_t k = 0; k < 4; ++k) {
+        const auto v = static_cast<std::size_t>(hg.vertex[k]);
+        rest += hg.weight[k] * s.x[v];
+        if (row_[v] < 0) fixed += hg.weight[k] * next_[v];
+      }
+      const Vec3 g = (hg.damping / h) * rest - (hg.stiffness + hg.damping / h) * fixed;
+      for (std::size_t k = 0; k < 4; ++k) {
+        const Eigen::Index r = row_[static_cast<std::size_t>(hg.vertex[k])];
+        if (r >= 0) base_.row(r) += (hg.weight[k] * g).transpose();
+      }
+    }
+    Scalar omega = 1;
+    for (int it = 0; it < options_.projective_iterations; ++it) {
+      rhs_ = base_;
+      for (const Spring& sp : springs) {
+        const auto a = static_cast<std::size_t>(sp.a), b = static_cast<std::size_t>(sp.b);
+        const Vec3 d = next_[a] - next_[b];
+        const Scalar l = d.norm();
+        const Vec3 target = l > 0 ? Vec3(sp.rest_length / l * d) : Vec3::Zero();
+        const Eigen::Index ra = row_[a], rb = row_[b];
+        if (ra >= 0) rhs_.row(ra) += (sp.stiffness * (rb >= 0 ? target : Vec3(target + next_[b]))).transpose();
+        if (rb >= 0) rhs_.row(rb) -= (sp.stiffness * (ra >= 0 ? target : Vec3(target - next_[a]))).transpose();
+      }
+      solve();
+      // Chebyshev semi-iterative acceleration (Wang, *A Chebyshev semi-iterative approach for
+      // accelerating projective and position-based dynamics*, SIGGRAPH Asia 2015):
+      // x⁽ᵏ⁺¹⁾ = ω (x̂ − x⁽ᵏ⁻¹⁾) + x⁽ᵏ⁻¹⁾ with ω from the spectral radius estimate ρ.
+      const Scalar rho = options_.projective_rho;
+      omega = it == 0 ? 1 : it == 1 ? 2 / (2 - rho * rho) : 4 / (4 - rho * rho * omega);
+      if (it == 0) older_.assign(next_.begin(), next_.end());
+      for (std::size_t r = 0; r < free_.size(); ++r) {
+        const std::size_t i = free_[r];
+        const Vec3 accelerated = omega * (work_[r] - older_[i]) + older_[i];
+        older_[i] = next_[i];
+        next_[i] = accelerated;
+      }
+    }
+    last_iterations_ = options_.projective_iterations;
+    for (std::size_t r = 0; r < free_.size(); ++r) {
+      const std::size_t i = free_[r];
+      s.v[i] = (next_[i] - s.x[i]) / h;
+    }
+    for (std::size_t i = 0; i < n; ++i) s.x[i] = next_[i];
+    s.time += h;
+  }
+
+ private:
+  using Sparse = Eigen::SparseMatrix<Scalar>;
+  using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, 3>;
+
+  /// What the factored matrix depends on.
+  struct Key {
+    Scalar h = 0, air = 0;
+    Index drag_vertex = -1;
+    Scalar drag_stiffness = 0, drag_damping = 0;
+    std::vector<Scalar> mass;
+    std::vector<std::array<Scalar, 3>> springs;  // a, b, k
+    std::vector<Hinge> hinges;
+    bool operator==(const Key& o) const {
+      const auto same_hinge = [](const Hinge& p, const Hinge& q) {
+        return p.vertex == q.vertex && p.weight == q.weight && p.stiffness == q.stiffness && p.damping == q.damping;
+      };
+      return h == o.h && air == o.air && drag_vertex == o.drag_vertex && drag_stiffness == o.drag_stiffness &&
+             drag_damping == o.drag_damping && mass == o.mass && springs == o.springs &&
+             std::equal(hinges.begin(), hinges.end(), o.hinges.begin(), o.hinges.end(), same_hinge);
+    }
+  };
+
+  void prepare(const Model& model, const ForceField& field, Scalar h) {
+    Key key;
+    key.h = h;
+    key.air = field.air_damping;
+    CRUMPLE_CHECK(!field.drag || (field.drag->vertex >= 0 && field.drag->vertex < model.num_particles()),
+                  "drag vertex out of range");
+    if (field.drag && !model.pinned(field.drag->vertex)) {
+      key.drag_vertex = field.drag->vertex;
+      key.drag_stiffness = field.drag->stiffness;
+      key.drag_damping = field.drag->damping;
+    }
+    key.mass.assign(model.mass().begin(), model.mass().end());
+    for (const Spring& sp : model.springs()) {
+      key.springs.push_back({static_cast<Scalar>(sp.a), static_cast<Scalar>(sp.b), sp.stiffness});
+    }
+    key.hinges.assign(model.hinges().begin(), model.hinges().end());
+    if (factored_ && key == key_) return;
+    key_ = std::move(key);
+    const std::size_t n = static_cast<std::size_t>(model.num_particles());
+    row_.assign(n, -1);
+    free_.clear();
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!model.pinned(static_cast<Index>(i))) {
+        row_[i] = static_cast<Eigen::Index>(free_.size());
+        free_.push_back(i);
+      }
+    }
+    std::vector<Eigen::Triplet<Scalar>> t;
+    const auto mass = model.mass();
+    for (std::size_t r = 0; r < free_.size(); ++r) {
+      const auto rr = static_cast<Eigen::Index>(r);
+      Scalar diagonal = mass[free_[r]] * (1 / (h * h) + field.air_damping / h);
+      if (static_cast<Index>(free_[r]) == key_.drag_vertex) diagonal += key_.drag_stiffness + key_.drag_damping / h;
+      t.emplace_back(rr, rr, diagonal);
+    }
+    for (const Spring& sp : model.springs()) {
+      const Eigen::Index ra = row_[static_cast<std::size_t>(sp.a)], rb = row_[static_cast<std::size_t>(sp.b)];
+      if (ra >= 0) t.emplace_back(ra, ra, sp.stiffness);
+      if (rb >= 0) t.emplace_back(rb, rb, sp.stiffness);
+      if (ra >= 0 && rb >= 0) {
+        t.emplace_back(ra, rb, -sp.stiffness);
+        t.emplace_back(rb, ra, -sp.stiffness);
+      }
+    }
+    for (const Hinge& hg : model.hinges()) {
+      const Scalar weight = hg.stiffness + hg.damping / h;
+      for (std::size_t i = 0; i < 4; ++i) {
+        const Eigen::Index ri = row_[static_cast<std::size_t>(hg.vertex[i])];
+        if (ri < 0) continue;
+        for (std::size_t j = 0; j < 4; ++j) {
+          const Eigen::Index rj = row_[static_cast<std::size_t>(hg.vertex[j])];
+          if (rj >= 0) t.emplace_back(ri, rj, weight * hg.weight[i] * hg.weight[j]);
+        }
+      }
+    }
+    const auto m = static_cast<Eigen::Index>(free_.size());
+    Sparse a(m, m);
+    a.setFromTriplets(t.begin(), t.end());
+    solver_.compute(a);
+    CRUMPLE_CHECK(solver_.info() == Eigen::Success, "projective dynamics: the system matrix is not positive definite");
+    factored_ = true;
+  }
+
+  /// work_ = A⁻¹ rhs_ from the factors A = Pᵀ L D Lᵀ P, the three coordinates at once (one
+  /// pass over L per triangle solve instead of one per column).
+  void solve() {
+    const auto& l = solver_.matrixL().nestedExpression();
+    const auto& d = solver_.vectorD();
+    const auto& p = solver_.permutationP().indices();
+    const std::size_t m = free_.size();
+    tmp_.resize(m);
+    work_.resize(m);
+    for (std::size_t i = 0; i < m; ++i) {
+      tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(i)])] = rhs_.row(static_cast<Eigen::Index>(i)).transpose();
+    }
+    const int* outer = l.outerIndexPtr();
+    const int* inner = l.innerIndexPtr();
+    const Scalar* value = l.valuePtr();
+    for (std::size_t j = 0; j < m; ++j) {  // L y = P b (unit diagonal)
+      const Vec3 yj = tmp_[j];
+      for (int k = outer[j]; k < outer[j + 1]; ++k) tmp_[static_cast<std::size_t>(inner[k])] -= value[k] * yj;
+    }
+    for (std::size_t j = 0; j < m; ++j) tmp_[j] /= d[static_cast<Eigen::Index>(j)];
+    for (std::size_t j = m; j-- > 0;) {  // Lᵀ z = D⁻¹ y
+      Vec3 zj = tmp_[j];
+      for (int k = outer[j]; k < outer[j + 1]; ++k) zj -= value[k] * tmp_[static_cast<std::size_t>(inner[k])];
+      tmp_[j] = zj;
+    }
+    for (std::size_t i = 0; i < m; ++i) work_[i] = tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(i)])];
+  }
+
+  IntegratorOptions options_;
+  Key key_;
+  bool factored_ = false;
+  std::vector<Eigen::Index> row_;  // free row of each particle, -1 when pinned
+  std::vector<std::size_t> free_;  // particle of each free row
+  Eigen::SimplicialLDLT<Sparse> solver_;
+  std::vector<Vec3> next_, older_, tmp_, work_;
+  Matrix base_, rhs_;
 };
 
 }  // namespace
@@ -269,6 +507,7 @@ std::string_view to_string(IntegratorKind kind) {
     case IntegratorKind::SymplecticEuler: return "symplectic-euler";
     case IntegratorKind::Rk4: return "rk4";
     case IntegratorKind::ImplicitEuler: return "implicit-euler";
+    case IntegratorKind::Projective: return "projective";
   }
   return "?";
 }
@@ -290,16 +529,17 @@ std::unique_ptr<Integrator> make_integrator(IntegratorKind kind, const Integrato
     case IntegratorKind::SymplecticEuler: return std::make_unique<SymplecticEuler>();
     case IntegratorKind::Rk4: return std::make_unique<Rk4>();
     case IntegratorKind::ImplicitEuler: return std::make_unique<ImplicitEuler>(options);
+    case IntegratorKind::Projective: return std::make_unique<Projective>(options);
   }
   throw InputError("unknown integrator");
 }
 
 Scalar stable_time_step(const Model& model, IntegratorKind kind) {
   constexpr Scalar kInfinity = std::numeric_limits<Scalar>::infinity();
-  if (kind == IntegratorKind::ImplicitEuler) return kInfinity;
+  if (kind == IntegratorKind::ImplicitEuler || kind == IntegratorKind::Projective) return kInfinity;
   const auto mass = model.mass();
   std::vector<Scalar> row(mass.size(), 0);  // Gershgorin row sums of M^-1/2 K M^-1/2
-  Scalar zeta = kInfinity;
+  Scalar zeta = kInfinity, zeta_max = 0;
   for (const Spring& s : model.springs()) {
     if (!(s.stiffness > 0)) continue;
     const auto a = static_cast<std::size_t>(s.a), b = static_cast<std::size_t>(s.b);
@@ -309,6 +549,18 @@ Scalar stable_time_step(const Model& model, IntegratorKind kind) {
     if (free_a) row[a] += s.stiffness / mass[a] + coupling;
     if (free_b) row[b] += s.stiffness / mass[b] + coupling;
     zeta = std::min(zeta, s.damping_ratio);
+    zeta_max = std::max(zeta_max, s.damping_ratio);
+  }
+  for (const Hinge& hg : model.hinges()) {
+    for (std::size_t i = 0; i < 4; ++i) {
+      const auto a = static_cast<std::size_t>(hg.vertex[i]);
+      if (model.pinned(hg.vertex[i])) continue;
+      for (std::size_t j = 0; j < 4; ++j) {
+        const auto b = static_cast<std::size_t>(hg.vertex[j]);
+        if (model.pinned(hg.vertex[j])) continue;
+        row[a] += hg.stiffness * std::abs(hg.weight[i] * hg.weight[j]) / std::sqrt(mass[a] * mass[b]);
+      }
+    }
   }
   const Scalar omega = std::sqrt(row.empty() ? 0 : *std::max_element(row.begin(), row.end()));
   if (!(omega > 0)) return kInfinity;
@@ -316,11 +568,17 @@ Scalar stable_time_step(const Model& model, IntegratorKind kind) {
     case IntegratorKind::ExplicitEuler:
       return (zeta < 1 ? 2 * zeta : 2 / (zeta + std::sqrt(zeta * zeta - 1))) / omega;
     case IntegratorKind::SymplecticEuler: {
-      const Scalar u = 2 * (std::sqrt(zeta * zeta + 1) - zeta);
-      return (zeta > 0 ? std::min(u, 1 / zeta) : u) / omega;
+      // The bound falls as ζ grows: the most damped spring decides.
+      const Scalar u = 2 * (std::sqrt(zeta_max * zeta_max + 1) - zeta_max);
+      return (zeta_max > 0 ? std::min(u, 1 / zeta_max) : u) / omega;
     }
-    case IntegratorKind::Rk4: return 2.78 / omega;
-    case IntegratorKind::ImplicitEuler: break;
+    case IntegratorKind::Rk4: {
+      // |λ| of the fastest mode: ω, or ω (ζ + √(ζ² − 1)) when overdamped.
+      const Scalar growth = zeta_max > 1 ? zeta_max + std::sqrt(zeta_max * zeta_max - 1) : 1;
+      return 2.78 / (growth * omega);
+    }
+    case IntegratorKind::ImplicitEuler:
+    case IntegratorKind::Projective: break;
   }
   return kInfinity;
 }

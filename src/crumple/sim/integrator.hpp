@@ -15,6 +15,19 @@
 ///    v₁ = v₀ + Δv,  x₁ = x₀ + h v₁, solved by conjugate gradient (Jacobi preconditioner) on the
 ///    sparse system, pinned rows and columns replaced by the identity (Δv = 0). Unconditionally
 ///    stable, dissipative.
+///  - projective dynamics (Liu, Bargteil, O'Brien, Kavan, *Fast simulation of mass-spring
+///    systems*, SIGGRAPH Asia 2013; Bouaziz et al., *Projective dynamics*, SIGGRAPH 2014):
+///    backward Euler as the minimisation of
+///      ½h⁻² |x − x₀ − h v₀|²_M + Σ_springs ½ k |x_a − x_b − d_s|² + Σ_hinges ½ (s + c/h) |Σ wᵢxᵢ|²
+///      − (c/h)(Σ wᵢxᵢ)·(Σ wᵢx₀ᵢ) + air, drag and gravity terms,
+///    alternating a local step (d_s = L (x_a − x_b)/|x_a − x_b|, the spring's rest-length
+///    projection) and a global step, a linear solve with the constant matrix
+///    M/h² + air M/h + Σ k GᵀG + Σ (s + c/h) w wᵀ (+ drag), one matrix for x, y and z, factored
+///    once by sparse Cholesky (Eigen's SimplicialLDLT, AMD ordering) and refactored only when
+///    h, the model or the field's linear terms change. Starts from the inertial prediction
+///    x₀ + h v₀ (warm start: the last step's velocity), runs `projective_iterations` local/global
+///    iterations, v₁ = (x₁ − x₀)/h. Unconditionally stable and dissipative; the springs' own
+///    damping (along the spring) is not modelled, the hinges' is. Pinned particles move by h v₀.
 /// Every integrator is deterministic (same input, same bits) and single-threaded.
 
 #include <crumple/sim/forces.hpp>
@@ -27,9 +40,9 @@
 
 namespace crumple::sim {
 
-enum class IntegratorKind { ExplicitEuler, SymplecticEuler, Rk4, ImplicitEuler };
+enum class IntegratorKind { ExplicitEuler, SymplecticEuler, Rk4, ImplicitEuler, Projective };
 
-/// "explicit-euler", "symplectic-euler", "rk4", "implicit-euler".
+/// "explicit-euler", "symplectic-euler", "rk4", "implicit-euler", "projective".
 std::string_view to_string(IntegratorKind kind);
 /// Parses one of the names above; throws `InputError` listing them.
 IntegratorKind parse_integrator(std::string_view name);
@@ -39,6 +52,9 @@ std::span<const IntegratorKind> all_integrators();
 struct IntegratorOptions {
   Scalar cg_tolerance = 1e-8;   ///< relative residual |r|/|b| at which CG stops (implicit)
   int cg_max_iterations = 1000;
+  int projective_iterations = 10;  ///< local/global iterations per step (projective, >= 1)
+  /// Chebyshev acceleration's spectral radius estimate ρ (projective; 0 = none, < 1).
+  Scalar projective_rho = 0;
 };
 
 class Integrator {
@@ -47,7 +63,8 @@ class Integrator {
   virtual IntegratorKind kind() const = 0;
   /// Advances `state` (x, v, time) by `dt` seconds (> 0).
   virtual void step(const Model& model, const ForceField& field, State& state, Scalar dt) = 0;
-  /// CG iterations of the last step (0 for explicit schemes).
+  /// CG iterations of the last step (implicit Euler), local/global iterations (projective), 0
+  /// for explicit schemes.
   int last_iterations() const { return last_iterations_; }
 
  protected:
@@ -57,10 +74,12 @@ class Integrator {
 /// The largest step h that `kind` is expected to keep stable on `model`'s springs (s): the linear
 /// stability bound of each scheme on x'' = −ω²x − 2ζωx', with ω² bounded above by Gershgorin's
 /// theorem on M⁻¹K (row of particle i: Σ over its springs of k/mᵢ + k/√(mᵢmⱼ), pinned
-/// neighbours adding k/mᵢ only) and ζ the smallest damping ratio of a spring:
+/// neighbours adding k/mᵢ only, and over its hinges s |wᵢ wⱼ| / √(mᵢmⱼ)), ζ the smallest and
+/// ζ⁺ the largest damping ratio of a spring:
 ///   explicit Euler  hω < 2ζ (ζ < 1; 2/(ζ + √(ζ²−1)) above), gains energy without damping;
-///   symplectic Euler  hω < min(2(√(ζ²+1) − ζ), 1/ζ);
-///   RK4  hω < 2.78;  implicit Euler: infinity (unconditionally stable).
+///   symplectic Euler  hω < min(2(√(ζ⁺²+1) − ζ⁺), 1/ζ⁺);
+///   RK4  hω < 2.78 (divided by ζ⁺ + √(ζ⁺²−1) when ζ⁺ > 1);  implicit Euler and projective
+///   dynamics: infinity (unconditionally stable).
 /// Infinity for a model without springs or free particles. An estimate, not a guarantee: the
 /// nonlinear springs, contacts and obstacles can still make a run diverge below it.
 Scalar stable_time_step(const Model& model, IntegratorKind kind);

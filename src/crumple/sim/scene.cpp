@@ -3,6 +3,7 @@
 #include <crumple/mesh/shapes.hpp>
 #include <crumple/sim/scene.hpp>
 
+#include <algorithm>
 #include <array>
 #include <charconv>
 #include <limits>
@@ -24,16 +25,34 @@ namespace {
       {"air", air, "air damping (1/s): force -air * m * v"},                                      \
       {"thickness", thickness, "contact thickness, as a fraction of the mean edge length"}
 
-constexpr std::array<SceneParamInfo, 12> kHanging{{
+// Keys of a material given per unit area and length (`Material`): resolution independent.
+#define CRUMPLE_MATERIAL_KEYS(density, stretch, shear, bend, tau, gravity, air, thickness)              \
+  {"density", density, "cloth mass per area (kg/m^2), lumped on the vertices"},                        \
+      {"stretch", stretch, "in-plane stretch stiffness per unit width (N/m); springs derived per edge"}, \
+      {"shear", shear, "shear stiffness (N/m) of the springs across interior edges (0 = none)"},        \
+      {"bend", bend, "bending rigidity (N*m) of the hinges on interior edges (0 = none)"},               \
+      {"tau", tau, "damping: Kelvin-Voigt relaxation time (s), damping = tau x stiffness"},            \
+      {"gravity", gravity, "gravity (m/s^2, downwards along -y)"},                                      \
+      {"air", air, "air damping (1/s): force -air * m * v"},                                            \
+      {"thickness", thickness, "contact thickness, as a fraction of the mean edge length"}
+
+constexpr std::array<SceneParamInfo, 17> kHanging{{
     {"nx", "10", "quads along x"},
     {"ny", "10", "quads along z"},
     {"size", "1", "side of the cloth along x (m)"},
     {"depth", "0", "side of the cloth along z (m); 0 = size (a square cloth)"},
     {"jitter", "0.01", "seeded random displacement of the initial vertices, fraction of an edge"},
     CRUMPLE_CLOTH_KEYS("0.1", "50", "0.02", "0", "9.81", "0.2", "0.4"),
+    {"material", "off",
+     "on: the cloth from the per-area material keys below (stretch, shear, bend, tau) instead of the "
+     "thesis' per-spring stiffness, damping and bending"},
+    {"stretch", "50", "with material=on: in-plane stretch stiffness per unit width (N/m)"},
+    {"shear", "0", "with material=on: shear stiffness (N/m)"},
+    {"bend", "1e-4", "with material=on: bending rigidity (N*m)"},
+    {"tau", "0.01", "with material=on: Kelvin-Voigt relaxation time (s)"},
 }};
 
-constexpr std::array<SceneParamInfo, 14> kSphere{{
+constexpr std::array<SceneParamInfo, 16> kSphere{{
     {"n", "16", "quads along each side"},
     {"size", "1.5", "side of the square cloth (m)"},
     {"height", "0.7", "initial height of the cloth (m)"},
@@ -41,10 +60,11 @@ constexpr std::array<SceneParamInfo, 14> kSphere{{
     {"friction", "0.3", "Coulomb friction on the sphere and the floor"},
     {"jitter", "0.01", "seeded random displacement of the initial vertices, fraction of an edge"},
     {"sphere-speed", "0", "speed of the sphere along +x (m/s): a kinematic, moving obstacle"},
-    CRUMPLE_CLOTH_KEYS("0.1", "400", "0.1", "0", "9.81", "0.2", "0.3"),
+    CRUMPLE_MATERIAL_KEYS("0.1", "400", "0", "2e-4", "0.01", "9.81", "0.2", "0.3"),
+    {"self-friction", "0.2", "Coulomb friction between touching parts of the cloth"},
 }};
 
-constexpr std::array<SceneParamInfo, 15> kRibbon{{
+constexpr std::array<SceneParamInfo, 17> kRibbon{{
     {"nx", "48", "quads along the ribbon"},
     {"ny", "3", "quads across the ribbon"},
     {"length", "2", "ribbon length along x (m)"},
@@ -53,10 +73,11 @@ constexpr std::array<SceneParamInfo, 15> kRibbon{{
     {"approach", "0.7", "fraction of the length the driven end moves towards the other over twist-time"},
     {"twist-time", "6", "duration of the twist (s); the end is held afterwards"},
     {"jitter", "0.01", "seeded random displacement of the initial vertices, fraction of an edge"},
-    CRUMPLE_CLOTH_KEYS("0.1", "400", "0.1", "2", "0", "0.5", "0.3"),
+    CRUMPLE_MATERIAL_KEYS("0.1", "400", "0", "2e-4", "0.01", "0", "0.5", "0.3"),
+    {"self-friction", "0.2", "Coulomb friction between touching parts of the cloth"},
 }};
 
-constexpr std::array<SceneParamInfo, 14> kCrumple{{
+constexpr std::array<SceneParamInfo, 16> kCrumple{{
     {"n", "20", "quads along each side"},
     {"size", "1", "side of the square cloth (m)"},
     {"final", "0.3", "final gap between the two walls, fraction of size"},
@@ -64,7 +85,8 @@ constexpr std::array<SceneParamInfo, 14> kCrumple{{
     {"friction", "0.2", "Coulomb friction on the floor and the walls"},
     {"jitter", "0.05", "seeded random displacement of the initial vertices, fraction of an edge"},
     {"wall-height", "0.5", "height of the walls (m)"},
-    CRUMPLE_CLOTH_KEYS("0.1", "400", "0.1", "1", "9.81", "0.5", "0.3"),
+    CRUMPLE_MATERIAL_KEYS("0.1", "400", "0", "2e-4", "0.01", "9.81", "0.5", "0.3"),
+    {"self-friction", "0.2", "Coulomb friction between touching parts of the cloth"},
 }};
 
 constexpr std::array<SceneParamInfo, 8> kFile{{
@@ -72,6 +94,7 @@ constexpr std::array<SceneParamInfo, 8> kFile{{
     CRUMPLE_CLOTH_KEYS("0.1", "1000", "0.05", "0", "9.81", "0.1", "0.3"),
 }};
 #undef CRUMPLE_CLOTH_KEYS
+#undef CRUMPLE_MATERIAL_KEYS
 
 constexpr std::array<SceneInfo, 5> kScenes{{
     {"hanging-cloth",
@@ -128,6 +151,16 @@ ClothParams cloth_params(const SceneSpec& spec) {
   p.bending_damping_ratio = p.damping_ratio;
   if (!(p.density > 0)) throw InputError("scene key 'density' must be > 0");
   return p;
+}
+
+Material material(const SceneSpec& spec) {
+  Material m;
+  m.density = spec.get_double("density");
+  m.stretch = spec.get_double("stretch");
+  m.shear = spec.get_double("shear");
+  m.bending = spec.get_double("bend");
+  m.damping = spec.get_double("tau");
+  return m;
 }
 
 ForceField force_field(const SceneSpec& spec) {
@@ -192,6 +225,24 @@ Scene finish(const SceneSpec& spec, Cloth cloth, Scalar jitter_rel, std::uint64_
   return s;
 }
 
+/// The fast default of the scenes with a per-area material: detection once per frame with
+/// proximity impulses and friction (`ResponseModel::Proximity`), projective dynamics, 4 steps of
+/// 1/240 s per frame of 1/60 s, 5 local/global iterations each, Chebyshev-accelerated with
+/// ρ = 0.8 (docs/simulation.md).
+void fast_settings(Scene& s, const SceneSpec& spec) {
+  s.settings.response_model = ResponseModel::Proximity;
+  if (const auto& keys = scene_info(spec.name()).params;
+      std::any_of(keys.begin(), keys.end(), [](const SceneParamInfo& p) { return p.key == "self-friction"; })) {
+    s.settings.self_friction = spec.get_double("self-friction");
+    if (!(s.settings.self_friction >= 0)) throw InputError("scene key 'self-friction' must be >= 0");
+  }
+  s.settings.integrator = IntegratorKind::Projective;
+  s.settings.dt = 1.0 / 240;
+  s.settings.substeps = 4;
+  s.settings.integrator_options.projective_iterations = 5;
+  s.settings.integrator_options.projective_rho = 0.8;
+}
+
 Scene hanging_cloth(const SceneSpec& spec, std::uint64_t seed) {
   const Index nx = lattice_count(spec, "nx"), ny = lattice_count(spec, "ny");
   const Scalar size = spec.get_double("size");
@@ -199,10 +250,19 @@ Scene hanging_cloth(const SceneSpec& spec, std::uint64_t seed) {
   if (!(depth >= 0)) throw InputError("scene key 'depth' must be >= 0 (0 = size)");
   if (depth == 0) depth = size;
   const TriMesh mesh = horizontal_lattice(nx, ny, size, depth, 0);
-  ClothParams params = cloth_params(spec);
-  params.pins = {0};  // the corner at the origin
-  Scene s = finish(spec, make_cloth(mesh, params), spec.get_double("jitter"), seed);
+  Cloth cloth;
+  if (spec.get_bool("material")) {
+    Material m = material(spec);
+    m.pins = {0};  // the corner at the origin
+    cloth = make_cloth(mesh, m);
+  } else {
+    ClothParams params = cloth_params(spec);
+    params.pins = {0};
+    cloth = make_cloth(mesh, params);
+  }
+  Scene s = finish(spec, std::move(cloth), spec.get_double("jitter"), seed);
   s.settings.response = false;
+  if (spec.get_bool("material")) fast_settings(s, spec);
   return s;
 }
 
@@ -210,7 +270,7 @@ Scene cloth_on_sphere(const SceneSpec& spec, std::uint64_t seed) {
   const Index n = lattice_count(spec, "n");
   const Scalar size = spec.get_double("size");
   const TriMesh mesh = horizontal_lattice(n, n, size, size, spec.get_double("height"));
-  Scene s = finish(spec, make_cloth(mesh, cloth_params(spec)), spec.get_double("jitter"), seed);
+  Scene s = finish(spec, make_cloth(mesh, material(spec)), spec.get_double("jitter"), seed);
   const Scalar friction = spec.get_double("friction");
   const Scalar margin = 0.5 * s.settings.detector.thickness;
   s.obstacles.push_back(make_obstacle(response::Sphere{Vec3(0.5 * size, 0.3, 0.5 * size), spec.get_double("radius")},
@@ -218,6 +278,7 @@ Scene cloth_on_sphere(const SceneSpec& spec, std::uint64_t seed) {
   s.obstacles.push_back(make_obstacle(response::Plane{Vec3::Zero(), Vec3::UnitY()}, Vec3::Zero(), kForever,
                                       friction, margin));
   s.settings.response = true;
+  fast_settings(s, spec);
   return s;
 }
 
@@ -225,7 +286,7 @@ Scene twisted_ribbon(const SceneSpec& spec, std::uint64_t seed) {
   const Index nx = lattice_count(spec, "nx"), ny = lattice_count(spec, "ny");
   const Scalar length = spec.get_double("length"), width = spec.get_double("width");
   const TriMesh mesh = horizontal_lattice(nx, ny, length, width, 1);
-  ClothParams params = cloth_params(spec);
+  Material params = material(spec);
   std::vector<Index> fixed, driven;
   for (Index j = 0; j <= ny; ++j) {
     fixed.push_back(j * (nx + 1));
@@ -255,6 +316,7 @@ Scene twisted_ribbon(const SceneSpec& spec, std::uint64_t seed) {
     }
   };
   s.settings.response = true;
+  fast_settings(s, spec);
   return s;
 }
 
@@ -263,7 +325,7 @@ Scene crumple_scene(const SceneSpec& spec, std::uint64_t seed) {
   const Scalar size = spec.get_double("size");
   const Scalar thickness_guess = spec.get_double("thickness") * size / static_cast<Scalar>(n);
   const TriMesh mesh = horizontal_lattice(n, n, size, size, thickness_guess);
-  Scene s = finish(spec, make_cloth(mesh, cloth_params(spec)), spec.get_double("jitter"), seed);
+  Scene s = finish(spec, make_cloth(mesh, material(spec)), spec.get_double("jitter"), seed);
   const Scalar friction = spec.get_double("friction");
   const Scalar margin = 0.5 * s.settings.detector.thickness;
   const Scalar push_time = spec.get_double("push-time");
@@ -284,6 +346,11 @@ Scene crumple_scene(const SceneSpec& spec, std::uint64_t seed) {
   s.obstacles.push_back(make_obstacle(response::Plane{Vec3::Zero(), Vec3::UnitY()}, Vec3::Zero(), kForever,
                                       friction, margin));
   s.settings.response = true;
+  fast_settings(s, spec);
+  // The closing walls squeeze the pile: twice the steps keep its layers apart (tested).
+  s.settings.dt = 1.0 / 480;
+  s.settings.substeps = 8;
+  s.settings.integrator_options.projective_iterations = 3;
   return s;
 }
 

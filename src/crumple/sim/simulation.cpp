@@ -61,15 +61,67 @@ Simulation::Simulation(Model model, State state, ForceField field,
   }
   integrator_ = make_integrator(settings_.integrator, settings_.integrator_options);
   if (!state_.x.empty()) initial_spread_ = compute_bounds(state_.x).diagonal();
-  detector_ = make_detector(settings_.method, settings_.detector);
+  DetectorOptions detection = settings_.detector;
+  CRUMPLE_CHECK(settings_.search_factor > 1, "search_factor must be > 1");
+  if (per_frame()) detection.thickness *= settings_.search_factor;  // see `ResponseModel`
+  detector_ = make_detector(settings_.method, detection);
   detector_->set_topology(model_.topology_ptr());
 }
 
 void Simulation::detect_now() {
   const auto start = Clock::now();
   detector_->update(state_.x, contacts_);
+  ++detections_;
+  if (per_frame()) filter_contacts();
   contacts_valid_ = true;
   detect_ms_ += ms_since(start);
+}
+
+void Simulation::filter_contacts() {
+  const Scalar h = settings_.detector.thickness;
+  close_.vf.clear();
+  close_.ee.clear();
+  close_.tt = contacts_.tt;
+  for (const auto& c : contacts_.vf) {
+    if (c.distance < h) close_.vf.push_back(c);
+  }
+  for (const auto& c : contacts_.ee) {
+    if (c.distance < h) close_.ee.push_back(c);
+  }
+}
+
+void Simulation::proximity_frame() {
+  if (!contacts_valid_) detect_now();
+  const Positions frame_start = state_.x;
+  auto start = Clock::now();
+  stencils_ = response::make_stencils(contacts_, model_.topology().faces());
+  response_ms_ += ms_since(start);
+  response::ProximityOptions options;
+  options.thickness = settings_.detector.thickness;
+  options.friction = settings_.self_friction;
+  options.passes = settings_.passes;
+  for (int k = 0; k < settings_.substeps; ++k) {
+    start = Clock::now();
+    integrator_->step(model_, field_, state_, settings_.dt);
+    cg_iterations_ += integrator_->last_iterations();
+    if (kinematics_) kinematics_(state_);
+    integrate_ms_ += ms_since(start);
+    start = Clock::now();
+    obstacles_pass();
+    for (response::Stencil& stencil : stencils_) response::refresh_stencil(stencil, state_.x);
+    const response::ResponseStats stats =
+        response::resolve_proximity(stencils_, model_.inv_mass(), state_.x, state_.v, options);
+    corrections_ += stats.corrections;
+    if (!obstacles_.empty() && stats.corrections > 0) obstacles_pass();
+    response_ms_ += ms_since(start);
+    check_state(k + 1);
+  }
+  if (fail_safe_) {
+    start = Clock::now();
+    fail_safe_(frame_start, state_);
+    response_ms_ += ms_since(start);
+  }
+  contacts_valid_ = false;
 }
 
 void Simulation::restore_detector_state(std::string_view text) {
@@ -79,7 +131,7 @@ void Simulation::restore_detector_state(std::string_view text) {
 
 const ContactSet& Simulation::contacts() {
   if (!contacts_valid_) detect_now();
-  return contacts_;
+  return per_frame() ? close_ : contacts_;
 }
 
 void Simulation::obstacles_pass() {
@@ -149,23 +201,26 @@ FrameStats Simulation::frame_stats() {
   s.integrate_ms = integrate_ms_;
   s.detect_ms = detect_ms_;
   s.response_ms = response_ms_;
-  s.vf = contacts_.vf.size();
-  s.ee = contacts_.ee.size();
-  s.tt = contacts_.tt.size();
-  s.collision_share = collision_share(model_.topology(), contacts_);
+  const ContactSet& seen = per_frame() ? close_ : contacts_;
+  s.vf = seen.vf.size();
+  s.ee = seen.ee.size();
+  s.tt = seen.tt.size();
+  s.collision_share = collision_share(model_.topology(), seen);
   s.min_distance = std::numeric_limits<Scalar>::infinity();
-  for (const auto& c : contacts_.vf) s.min_distance = std::min(s.min_distance, c.distance);
-  for (const auto& c : contacts_.ee) s.min_distance = std::min(s.min_distance, c.distance);
+  for (const auto& c : seen.vf) s.min_distance = std::min(s.min_distance, c.distance);
+  for (const auto& c : seen.ee) s.min_distance = std::min(s.min_distance, c.distance);
   for (const auto& o : obstacles_) {
     s.obstacle_penetration = std::max(s.obstacle_penetration, response::max_penetration(o, state_.time, state_.x));
   }
   s.cg_iterations = cg_iterations_;
+  s.detections = detections_;
   s.corrections = corrections_;
   s.energy = compute_energy(model_, field_, state_).total();
   for (const Vec3& v : state_.v) s.max_speed = std::max(s.max_speed, v.norm());
   if (!state_.x.empty()) s.bounds = compute_bounds(state_.x);
   integrate_ms_ = detect_ms_ = response_ms_ = 0;
   cg_iterations_ = 0;
+  detections_ = 0;
   corrections_ = 0;
   return s;
 }
@@ -174,6 +229,20 @@ FrameStats Simulation::current_stats() { return frame_stats(); }
 
 FrameStats Simulation::advance_frame() {
   const State start = state_;
+  if (per_frame()) {
+    try {
+      proximity_frame();
+    } catch (const DivergenceError&) {
+      state_ = start;
+      contacts_valid_ = false;
+      integrate_ms_ = detect_ms_ = response_ms_ = 0;
+      cg_iterations_ = 0;
+      corrections_ = 0;
+      throw;
+    }
+    ++frame_;
+    return frame_stats();
+  }
   for (int k = 0; k < settings_.substeps; ++k) {
     step();
     try {

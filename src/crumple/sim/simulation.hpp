@@ -53,6 +53,26 @@ class DivergenceError : public Error {
   int step_;
 };
 
+/// How self-collisions are answered (with `Settings::response` on).
+///  - AnnexB: the thesis' loop above: detection at every step's start, Annex B velocity and
+///    position corrections (`response::resolve`) after it.
+///  - Proximity: detection once per frame, at the frame's start, with the search radius
+///    `search_factor` × h_c (pairs up to h_c apart plus a slack for the frame's relative
+///    motion); the
+///    frame's contacts (normals and weights from the frame's start) serve every step of the
+///    frame: after each, the pairs whose gap fell below h_c get proximity impulses with
+///    friction (`response::resolve_proximity`). A pair that was farther than 2 h_c at the
+///    frame's start and closes in within the frame is not seen: the continuous (CCD) fail-safe
+///    (`Simulation::set_fail_safe`) is what catches it. Frame statistics count the contacts
+///    closer than h_c at the frame's end (the same detection serves the next frame).
+enum class ResponseModel { AnnexB, Proximity };
+
+/// Called at the end of every frame with the positions at the frame's start and the state at
+/// its end (after the response), before the frame's closing detection: the hook for a
+/// continuous-collision fail-safe (CCD impulses, impact zones) that must leave the frame free of
+/// intersections. It may change positions and velocities.
+using FailSafe = std::function<void(PositionsView frame_start, State& state)>;
+
 /// How a simulation steps, detects and responds.
 struct Settings {
   Scalar dt = 1.0 / 600;  ///< step length h (s)
@@ -63,6 +83,11 @@ struct Settings {
   DetectorOptions detector;  ///< thickness h_c, contact kinds, threads
   bool response = false;     ///< self-collision response on/off
   int passes = 4;            ///< Gauss–Seidel sweeps per step (>= 1)
+  ResponseModel response_model = ResponseModel::AnnexB;
+  Scalar self_friction = 0;  ///< Coulomb coefficient between touching parts (Proximity model)
+  /// Proximity model: the frame's detection radius as a multiple of the thickness (> 1); the
+  /// slack beyond h_c is the relative motion a frame may bring without being missed.
+  Scalar search_factor = 2;
   /// Largest spread of the particles, as a multiple of the initial one, before the run counts
   /// as diverged (see `DivergenceError`). A cloth's springs keep it near its own size.
   Scalar max_spread_growth = 10;
@@ -81,6 +106,7 @@ struct FrameStats {
   Scalar min_distance = 0;
   Scalar obstacle_penetration = 0;  ///< deepest vertex inside an obstacle at the frame's end (m)
   int cg_iterations = 0;            ///< summed over the frame's steps (implicit Euler)
+  int detections = 0;               ///< detector updates run for this frame
   std::size_t corrections = 0;      ///< response corrections applied over the frame's steps
   Scalar energy = 0;     ///< total mechanical energy at the frame's end (`compute_energy`, J)
   Scalar max_speed = 0;  ///< largest particle speed at the frame's end (m/s)
@@ -121,9 +147,18 @@ class Simulation {
   std::string detector_state() const { return detector_->save_state(); }
   /// Restores it; the next detection, on the same positions, replays the last one.
   void restore_detector_state(std::string_view text);
+  /// Installs the end-of-frame fail-safe (see `FailSafe`); empty = none.
+  void set_fail_safe(FailSafe fail_safe) { fail_safe_ = std::move(fail_safe); }
 
  private:
   void detect_now();
+  bool per_frame() const {
+    return settings_.response && settings_.response_model == ResponseModel::Proximity;
+  }
+  /// One frame of the Proximity model (see `ResponseModel`).
+  void proximity_frame();
+  /// The contacts closer than h_c among the (wider) detected ones.
+  void filter_contacts();
   void obstacles_pass();
   /// Throws `DivergenceError` (frame being computed, step) when the state is not sane.
   void check_state(int step) const;
@@ -140,11 +175,14 @@ class Simulation {
   std::unique_ptr<Integrator> integrator_;
   std::unique_ptr<Detector> detector_;
   ContactSet contacts_;
+  ContactSet close_;  ///< Proximity model: the detected contacts closer than h_c
   bool contacts_valid_ = false;
+  FailSafe fail_safe_;
   std::vector<response::Stencil> stencils_;
   // Accumulated over the current frame.
   double integrate_ms_ = 0, detect_ms_ = 0, response_ms_ = 0;
   int cg_iterations_ = 0;
+  int detections_ = 0;
   std::size_t corrections_ = 0;
 };
 

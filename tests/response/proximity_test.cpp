@@ -1,0 +1,79 @@
+// Proximity impulses with friction (`resolve_proximity`).
+#include <crumple/response/contact_response.hpp>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace crumple::response {
+namespace {
+
+/// Vertex 3 above the triangle (0, 1, 2) in z = 0, at height `gap`, moving with `velocity`.
+struct VertexOverFace {
+  std::vector<Vec3> x{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0.25, 0.25, 0)};
+  std::vector<Vec3> v{Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};
+  std::vector<Scalar> inv_mass{1, 1, 1, 1};
+  Stencil stencil;
+  VertexOverFace(Scalar gap, const Vec3& velocity) {
+    x[3].z() = gap;
+    v[3] = velocity;
+    stencil.count = 4;
+    stencil.vertex = {3, 0, 1, 2};
+    stencil.weight = {1, -0.5, -0.25, -0.25};
+    stencil.normal = Vec3::UnitZ();
+  }
+  Vec3 momentum() const { return v[0] + v[1] + v[2] + v[3]; }
+  Vec3 relative() const { return v[3] - 0.5 * v[0] - 0.25 * v[1] - 0.25 * v[2]; }
+};
+
+TEST(Proximity, PushesOutStopsApproachAndAppliesCoulombFriction) {
+  const Scalar h = 0.1;
+  VertexOverFace c(0.04, Vec3(1, 0, -2));
+  ProximityOptions options;
+  options.thickness = h;
+  options.friction = 0.2;
+  const Vec3 p0 = c.momentum();
+  const ResponseStats stats = resolve_proximity(std::span<const Stencil>(&c.stencil, 1), c.inv_mass, c.x, c.v, options);
+  EXPECT_TRUE(stats.converged);
+  EXPECT_NEAR(relative_normal(c.stencil, c.x), h, 1e-12) << "pushed out to the thickness";
+  const Vec3 r = c.relative();
+  EXPECT_NEAR(r.z(), 0, 1e-12) << "no approaching normal velocity left";
+  // λ = 2 / d, λ_t = μ λ: the relative tangential speed drops by μ λ d = μ · 2 = 0.4.
+  EXPECT_NEAR(r.x(), 1 - 0.2 * 2, 1e-12);
+  EXPECT_NEAR(r.y(), 0, 1e-12);
+  EXPECT_NEAR((c.momentum() - p0).norm(), 0, 1e-12) << "momentum is conserved";
+}
+
+TEST(Proximity, FrictionStopsSlowSlidingWithoutReversingIt) {
+  VertexOverFace c(0.04, Vec3(0.1, 0, -2));
+  ProximityOptions options;
+  options.thickness = 0.1;
+  options.friction = 0.5;
+  resolve_proximity(std::span<const Stencil>(&c.stencil, 1), c.inv_mass, c.x, c.v, options);
+  EXPECT_NEAR(c.relative().x(), 0, 1e-12);
+}
+
+TEST(Proximity, PairsFartherThanTheThicknessAreLeftAlone) {
+  VertexOverFace c(0.2, Vec3(1, 0, -2));
+  const auto x = c.x, v = c.v;
+  ProximityOptions options;
+  options.thickness = 0.1;
+  options.friction = 0.5;
+  const ResponseStats stats = resolve_proximity(std::span<const Stencil>(&c.stencil, 1), c.inv_mass, c.x, c.v, options);
+  EXPECT_EQ(stats.corrections, 0u);
+  EXPECT_EQ(c.x, x);
+  EXPECT_EQ(c.v, v);
+}
+
+TEST(Proximity, RefreshKeepsTheSideACrossedPairCameFrom) {
+  VertexOverFace c(-0.03, Vec3::Zero());  // the vertex went through the face
+  c.x[3].x() = 0.5;
+  refresh_stencil(c.stencil, c.x);
+  EXPECT_EQ(c.stencil.normal, Vec3::UnitZ()) << "still the side it came from";
+  EXPECT_NEAR(c.stencil.weight[1], -0.25, 1e-12);  // closest point (0.5, 0.25): w = (0.25, 0.5, 0.25)
+  EXPECT_NEAR(c.stencil.weight[2], -0.5, 1e-12);
+  EXPECT_NEAR(relative_normal(c.stencil, c.x), -0.03, 1e-12);
+}
+
+}  // namespace
+}  // namespace crumple::response
