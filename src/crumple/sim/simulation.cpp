@@ -229,32 +229,22 @@ FrameStats Simulation::current_stats() { return frame_stats(); }
 
 FrameStats Simulation::advance_frame() {
   const State start = state_;
-  if (per_frame()) {
-    try {
+  try {
+    if (per_frame()) {
       proximity_frame();
-    } catch (const DivergenceError&) {
-      state_ = start;
-      contacts_valid_ = false;
-      integrate_ms_ = detect_ms_ = response_ms_ = 0;
-      cg_iterations_ = 0;
-      corrections_ = 0;
-      throw;
+    } else {
+      for (int k = 0; k < settings_.substeps; ++k) {
+        step();
+        check_state(k + 1);
+      }
     }
-    ++frame_;
-    return frame_stats();
-  }
-  for (int k = 0; k < settings_.substeps; ++k) {
-    step();
-    try {
-      check_state(k + 1);
-    } catch (const DivergenceError&) {
-      state_ = start;
-      contacts_valid_ = false;
-      integrate_ms_ = detect_ms_ = response_ms_ = 0;
-      cg_iterations_ = 0;
-      corrections_ = 0;
-      throw;
-    }
+  } catch (const DivergenceError&) {  // the frame is undone: the state stays the last good one
+    state_ = start;
+    contacts_valid_ = false;
+    integrate_ms_ = detect_ms_ = response_ms_ = 0;
+    cg_iterations_ = 0;
+    corrections_ = 0;
+    throw;
   }
   ++frame_;
   return frame_stats();
