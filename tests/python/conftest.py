@@ -3,6 +3,7 @@
 import os
 import pathlib
 import subprocess
+import threading
 
 import pytest
 
@@ -41,3 +42,33 @@ def run_cli(cli: pathlib.Path, *args) -> str:
     done = subprocess.run([str(cli), *map(str, args)], capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stderr
     return done.stdout
+
+
+def probes_refused_during(probe, work) -> int:
+    """Runs work() while another thread calls probe() in a loop; returns how many probes were
+    refused with RuntimeError "in use". An object refuses calls exactly while a call into C++
+    is under way on it, so a count above 0 shows that call released the GIL (with the GIL held
+    no probe could run). Iterations are counted, not timed."""
+    started, finished = threading.Event(), threading.Event()
+    refused = []
+
+    def watch():
+        started.set()
+        n = 0
+        while not finished.is_set():
+            try:
+                probe()
+            except RuntimeError as e:
+                assert "in use" in str(e)
+                n += 1
+        refused.append(n)
+
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    started.wait()
+    try:
+        work()
+    finally:
+        finished.set()
+        watcher.join()
+    return refused[0]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import crumple
-from conftest import run_cli
+from conftest import probes_refused_during, run_cli
 
 FUNNEL = ["sample-scalable-ccd/cloth-funnel/frames/227.ply",
           "sample-scalable-ccd/cloth-funnel/frames/228.ply"]
@@ -294,29 +294,9 @@ def test_gil_released_during_update(data):
     det = crumple.Detector("naive", thickness=crumple.default_thickness(m.vertices), threads=1)
     det.set_topology(crumple.TriMesh(m.vertices[:1200], m.faces[np.all(m.faces < 1200, axis=1)]))
     x = np.ascontiguousarray(m.vertices[:1200])
-    # The detector is busy (its properties raise) exactly while an update runs in C++. Every
-    # iteration another thread completes while it is busy ran during that C++ call: none can
-    # if the call holds the GIL, many when it releases it. Iterations are counted, not timed.
-    started, finished = threading.Event(), threading.Event()
-    inside = []
-
-    def watch():
-        started.set()
-        n = 0
-        while not finished.is_set():
-            try:
-                det.stats  # noqa: B018 -- raising is the signal
-            except RuntimeError:
-                n += 1
-        inside.append(n)
-
-    watcher = threading.Thread(target=watch)
-    watcher.start()
-    started.wait()
-    det.update(x)
-    finished.set()
-    watcher.join()
-    assert inside[0] >= 100, inside
+    # Every probe of another thread refused while the update runs ran during that C++ call.
+    refused = probes_refused_during(lambda: det.stats, lambda: det.update(x))
+    assert refused >= 100, refused
 
 
 def test_a_detector_busy_in_another_thread_refuses_other_calls(data):

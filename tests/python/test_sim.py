@@ -1,13 +1,12 @@
 """Simulation and rendering from Python against the CLI's `simulate` and `render`, the arrays
 they give, errors and the GIL."""
 
-import threading
 
 import numpy as np
 import pytest
 
 import crumple
-from conftest import run_cli
+from conftest import probes_refused_during, run_cli
 
 SPHERE = "cloth-on-sphere:n=8"
 
@@ -182,29 +181,8 @@ def test_divergence_error_keeps_the_last_good_frame():
 
 def test_gil_released_while_stepping():
     s = crumple.Simulation("hanging-cloth:nx=16,ny=16", threads=1)
-    # As for Detector.update: another thread's probes fail ("in use") only while run() is
-    # inside C++; with the GIL held there none could run at all.
-    started, finished = threading.Event(), threading.Event()
-    inside = []
-
-    def watch():
-        started.set()
-        n = 0
-        while not finished.is_set():
-            try:
-                s.positions  # noqa: B018 -- raising is the signal
-            except RuntimeError as e:
-                assert "in use" in str(e)
-                n += 1
-        inside.append(n)
-
-    watcher = threading.Thread(target=watch)
-    watcher.start()
-    started.wait()
-    s.run(10)
-    finished.set()
-    watcher.join()
-    assert inside[0] >= 100, inside
+    refused = probes_refused_during(lambda: s.positions, lambda: s.run(10))
+    assert refused >= 100, refused
 
 
 def test_scenes_lists_every_scene_and_its_keys():
