@@ -66,6 +66,43 @@ Simulation::Simulation(Model model, State state, ForceField field,
   if (per_frame()) detection.thickness *= settings_.search_factor;  // see `ResponseModel`
   detector_ = make_detector(settings_.method, detection);
   detector_->set_topology(model_.topology_ptr());
+  CRUMPLE_CHECK(settings_.fail_safe_separation >= 0 && std::isfinite(settings_.fail_safe_separation),
+                "fail_safe_separation must be finite and >= 0");
+  if (settings_.response && settings_.fail_safe) {
+    response::FailSafeOptions options;
+    options.min_separation = settings_.fail_safe_separation * settings_.detector.thickness;
+    options.query.threads = settings_.detector.threads;
+    ccd_ = std::make_unique<response::CcdFailSafe>(model_.topology_ptr(), options);
+  }
+}
+
+void Simulation::run_fail_safe(PositionsView frame_start) {
+  const auto start = Clock::now();
+  if (fail_safe_) {
+    fail_safe_(frame_start, state_);
+  } else if (ccd_) {
+    const Scalar duration = settings_.dt * settings_.substeps;
+    // The fail-safe may leave a vertex inside an obstacle: the obstacles then get their turn
+    // and the fail-safe checks their moves, up to kObstacleRounds times; the fail-safe always
+    // has the last word (self-intersection first, obstacle penetration second).
+    constexpr int kObstacleRounds = 3;
+    for (int round = 0; round < kObstacleRounds; ++round) {
+      const response::FailSafeStats s =
+          ccd_->apply(frame_start, model_.inv_mass(), duration, state_.x, state_.v);
+      ccd_stats_.queries += s.queries;
+      if (round == 0) ccd_stats_.impacts += s.impacts;
+      ccd_stats_.zone_vertices += s.zone_vertices;
+      ccd_stats_.frozen += s.frozen;
+      if (s.impacts == 0 || obstacles_.empty()) break;
+      bool inside = false;
+      for (const auto& o : obstacles_) {
+        inside = inside || response::max_penetration(o, state_.time, state_.x) > 0;
+      }
+      if (!inside) break;
+      obstacles_pass();
+    }
+  }
+  ccd_ms_ += ms_since(start);
 }
 
 void Simulation::detect_now() {
@@ -116,11 +153,7 @@ void Simulation::proximity_frame() {
     response_ms_ += ms_since(start);
     check_state(k + 1);
   }
-  if (fail_safe_) {
-    start = Clock::now();
-    fail_safe_(frame_start, state_);
-    response_ms_ += ms_since(start);
-  }
+  run_fail_safe(frame_start);
   contacts_valid_ = false;
 }
 
@@ -201,6 +234,11 @@ FrameStats Simulation::frame_stats() {
   s.integrate_ms = integrate_ms_;
   s.detect_ms = detect_ms_;
   s.response_ms = response_ms_;
+  s.ccd_ms = ccd_ms_;
+  s.ccd_impacts = ccd_stats_.impacts;
+  s.ccd_queries = ccd_stats_.queries;
+  s.ccd_zone_vertices = ccd_stats_.zone_vertices;
+  s.ccd_frozen = ccd_stats_.frozen;
   const ContactSet& seen = per_frame() ? close_ : contacts_;
   s.vf = seen.vf.size();
   s.ee = seen.ee.size();
@@ -218,7 +256,8 @@ FrameStats Simulation::frame_stats() {
   s.energy = compute_energy(model_, field_, state_).total();
   for (const Vec3& v : state_.v) s.max_speed = std::max(s.max_speed, v.norm());
   if (!state_.x.empty()) s.bounds = compute_bounds(state_.x);
-  integrate_ms_ = detect_ms_ = response_ms_ = 0;
+  integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = 0;
+  ccd_stats_ = {};
   cg_iterations_ = 0;
   detections_ = 0;
   corrections_ = 0;
@@ -237,11 +276,16 @@ FrameStats Simulation::advance_frame() {
         step();
         check_state(k + 1);
       }
+      if (settings_.response) {
+        run_fail_safe(start.x);
+        contacts_valid_ = false;
+      }
     }
   } catch (const DivergenceError&) {  // the frame is undone: the state stays the last good one
     state_ = start;
     contacts_valid_ = false;
-    integrate_ms_ = detect_ms_ = response_ms_ = 0;
+    integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = 0;
+    ccd_stats_ = {};
     cg_iterations_ = 0;
     corrections_ = 0;
     throw;

@@ -14,12 +14,18 @@
 /// Contacts are detected once per step with response on (the detection at a frame's end serves
 /// the next step), once per frame with it off. Deterministic: the same inputs give the same bits.
 ///
+/// With response on and `Settings::fail_safe` (the default), every frame ends with the
+/// continuous fail-safe (`response::CcdFailSafe`) over the frame's motion, from its start
+/// positions to the proposed end: **a frame that starts intersection-free ends
+/// intersection-free** (no two triangles sharing no vertex intersect), whatever the speed.
+///
 /// After every step the state is checked (`DivergenceError`): a diverging run stops at once
 /// instead of producing frames of huge or NaN coordinates.
 
 #include <crumple/core/error.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/response/contact_response.hpp>
+#include <crumple/response/fail_safe.hpp>
 #include <crumple/response/obstacle.hpp>
 #include <crumple/sim/integrator.hpp>
 
@@ -63,14 +69,13 @@ class DivergenceError : public Error {
 ///    frame: after each, the pairs whose gap fell below h_c get proximity impulses with
 ///    friction (`response::resolve_proximity`). A pair that was farther than 2 h_c at the
 ///    frame's start and closes in within the frame is not seen: the continuous (CCD) fail-safe
-///    (`Simulation::set_fail_safe`) is what catches it. Frame statistics count the contacts
+///    (`Settings::fail_safe`) is what catches it. Frame statistics count the contacts
 ///    closer than h_c at the frame's end (the same detection serves the next frame).
 enum class ResponseModel { AnnexB, Proximity };
 
 /// Called at the end of every frame with the positions at the frame's start and the state at
-/// its end (after the response), before the frame's closing detection: the hook for a
-/// continuous-collision fail-safe (CCD impulses, impact zones) that must leave the frame free of
-/// intersections. It may change positions and velocities.
+/// its end (after the response), before the frame's closing detection: a custom replacement
+/// for the built-in continuous fail-safe. It may change positions and velocities.
 using FailSafe = std::function<void(PositionsView frame_start, State& state)>;
 
 /// How a simulation steps, detects and responds.
@@ -91,6 +96,11 @@ struct Settings {
   /// Largest spread of the particles, as a multiple of the initial one, before the run counts
   /// as diverged (see `DivergenceError`). A cloth's springs keep it near its own size.
   Scalar max_spread_growth = 10;
+  /// With `response` on: the continuous fail-safe (`response/fail_safe.hpp`) at every frame's
+  /// end, so that a frame that starts intersection-free ends intersection-free.
+  bool fail_safe = true;
+  /// The fail-safe's minimum separation δ as a fraction of the thickness h_c (>= 0).
+  Scalar fail_safe_separation = 0.1;
 };
 
 /// Figures of one frame (timings summed over its steps).
@@ -100,6 +110,11 @@ struct FrameStats {
   double integrate_ms = 0;
   double detect_ms = 0;
   double response_ms = 0;  ///< obstacles and self-collision response
+  double ccd_ms = 0;       ///< the continuous fail-safe (its queries and corrections)
+  std::size_t ccd_impacts = 0;  ///< live impacts of the frame's proposed motion (fail-safe)
+  int ccd_queries = 0;          ///< continuous queries run by the fail-safe
+  std::size_t ccd_zone_vertices = 0;  ///< vertices the fail-safe put in impact zones
+  std::size_t ccd_frozen = 0;   ///< vertices the fail-safe's fallback kept at their start
   std::size_t vf = 0, ee = 0, tt = 0;  ///< contacts at the frame's end positions
   Scalar collision_share = 0;          ///< see `collision_share`
   /// Smallest VF/EE distance at the frame's end (infinity when there is no contact).
@@ -147,7 +162,8 @@ class Simulation {
   std::string detector_state() const { return detector_->save_state(); }
   /// Restores it; the next detection, on the same positions, replays the last one.
   void restore_detector_state(std::string_view text);
-  /// Installs the end-of-frame fail-safe (see `FailSafe`); empty = none.
+  /// Installs a custom end-of-frame fail-safe (see `FailSafe`) in place of the built-in one
+  /// (`Settings::fail_safe`); empty = back to the built-in one, if on.
   void set_fail_safe(FailSafe fail_safe) { fail_safe_ = std::move(fail_safe); }
 
  private:
@@ -160,6 +176,8 @@ class Simulation {
   /// The contacts closer than h_c among the (wider) detected ones.
   void filter_contacts();
   void obstacles_pass();
+  /// The custom or built-in fail-safe from `frame_start` to the current state.
+  void run_fail_safe(PositionsView frame_start);
   /// Throws `DivergenceError` (frame being computed, step) when the state is not sane.
   void check_state(int step) const;
   FrameStats frame_stats();
@@ -178,9 +196,11 @@ class Simulation {
   ContactSet close_;  ///< Proximity model: the detected contacts closer than h_c
   bool contacts_valid_ = false;
   FailSafe fail_safe_;
+  std::unique_ptr<response::CcdFailSafe> ccd_;  ///< built-in fail-safe (response and fail_safe on)
+  response::FailSafeStats ccd_stats_;           ///< summed over the current frame
   std::vector<response::Stencil> stencils_;
   // Accumulated over the current frame.
-  double integrate_ms_ = 0, detect_ms_ = 0, response_ms_ = 0;
+  double integrate_ms_ = 0, detect_ms_ = 0, response_ms_ = 0, ccd_ms_ = 0;
   int cg_iterations_ = 0;
   int detections_ = 0;
   std::size_t corrections_ = 0;

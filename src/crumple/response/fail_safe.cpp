@@ -1,0 +1,247 @@
+#include <crumple/core/error.hpp>
+#include <crumple/geometry/ccd.hpp>
+#include <crumple/response/fail_safe.hpp>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+
+namespace crumple::response {
+
+namespace {
+inline std::size_t at(Index i) { return static_cast<std::size_t>(i); }
+
+Stencil stencil_of(const VertexFaceImpact& c, const Face& f) {
+  Stencil s;
+  s.count = 4;
+  s.vertex = {c.vertex, f[0], f[1], f[2]};
+  s.weight = {1, -c.barycentric[0], -c.barycentric[1], -c.barycentric[2]};
+  s.normal = c.normal;
+  return s;
+}
+
+Stencil stencil_of(const EdgeEdgeImpact& c) {
+  Stencil s;
+  s.count = 4;
+  s.vertex = {c.a[0], c.a[1], c.b[0], c.b[1]};
+  s.weight = {-(1 - c.s), -c.s, 1 - c.t, c.t};
+  s.normal = c.normal;
+  s.edge_edge = true;
+  return s;
+}
+
+/// Union–find root with path halving.
+Index root(std::vector<Index>& parent, Index i) {
+  while (parent[at(i)] != i) {
+    parent[at(i)] = parent[at(parent[at(i)])];
+    i = parent[at(i)];
+  }
+  return i;
+}
+
+/// Moves the zone `members` rigidly (see the file comment); pinned members keep their
+/// displacement and the others translate with the pinned ones' mean.
+void rigidify(std::span<const Index> members, PositionsView start, std::span<const Scalar> inv_mass,
+              std::span<Vec3> u) {
+  Vec3 pinned_sum = Vec3::Zero();
+  int pinned = 0;
+  Scalar mass = 0;
+  Vec3 centre = Vec3::Zero(), mean = Vec3::Zero();
+  for (Index i : members) {
+    if (inv_mass[at(i)] > 0) {
+      const Scalar m = 1 / inv_mass[at(i)];
+      mass += m;
+      centre += m * start[at(i)];
+      mean += m * u[at(i)];
+    } else {
+      pinned_sum += u[at(i)];
+      ++pinned;
+    }
+  }
+  if (pinned > 0) {
+    const Vec3 shift = pinned_sum / pinned;
+    for (Index i : members) {
+      if (inv_mass[at(i)] > 0) u[at(i)] = shift;
+    }
+    return;
+  }
+  if (!(mass > 0)) return;
+  centre /= mass;
+  mean /= mass;
+  Vec3 momentum = Vec3::Zero();
+  Eigen::Matrix<Scalar, 3, 3> inertia = Eigen::Matrix<Scalar, 3, 3>::Zero();
+  for (Index i : members) {
+    const Scalar m = 1 / inv_mass[at(i)];
+    const Vec3 r = start[at(i)] - centre;
+    momentum += m * r.cross(u[at(i)] - mean);
+    inertia += m * (r.squaredNorm() * Eigen::Matrix<Scalar, 3, 3>::Identity() - r * r.transpose());
+  }
+  // θ = I⁺ L: the pseudo-inverse, since a zone on a line has no inertia about that line.
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<Scalar, 3, 3>> eigen(inertia);
+  const Vec3 lambda = eigen.eigenvalues();
+  const Scalar cutoff = 1e-12 * lambda.cwiseAbs().maxCoeff();
+  Vec3 coords = eigen.eigenvectors().transpose() * momentum;
+  for (int k = 0; k < 3; ++k) coords[k] = lambda[k] > cutoff ? coords[k] / lambda[k] : 0;
+  const Vec3 theta = eigen.eigenvectors() * coords;
+  const Scalar angle = theta.norm();
+  const Eigen::Matrix<Scalar, 3, 3> rotation =
+      angle > 0 ? Eigen::AngleAxis<Scalar>(angle, theta / angle).toRotationMatrix()
+                : Eigen::Matrix<Scalar, 3, 3>::Identity();
+  for (Index i : members) {
+    const Vec3 r = start[at(i)] - centre;
+    u[at(i)] = centre + mean + rotation * r - start[at(i)];
+  }
+}
+}  // namespace
+
+namespace {
+/// `options` with the query's δ set to the fail-safe's (checked first).
+FailSafeOptions checked(FailSafeOptions options) {
+  CRUMPLE_CHECK(options.impulse_rounds >= 0 && options.zone_rounds >= 0, "fail-safe rounds must be >= 0");
+  if (!(options.min_separation >= 0) || !std::isfinite(options.min_separation)) {
+    throw InputError("fail-safe minimum separation must be finite and >= 0");
+  }
+  options.query.min_separation = options.min_separation;
+  return options;
+}
+}  // namespace
+
+CcdFailSafe::CcdFailSafe(std::shared_ptr<const Topology> topology, FailSafeOptions options)
+    : topology_(topology), options_(checked(std::move(options))), query_(topology, options_.query) {}
+
+std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> positions, FailSafeStats& stats) {
+  query_.query(start, PositionsView(positions.data(), positions.size()), impacts_);
+  ++stats.queries;
+  live_.clear();
+  const Scalar delta = options_.min_separation;
+  geometry::CcdOptions touching = options_.query.narrow;
+  touching.min_separation = 0;
+  // A pair within δ at the frame's start is live only if it may touch during the frame.
+  const auto touches = [&](geometry::CcdPair kind, const std::array<Index, 4>& v) {
+    geometry::CcdPoints p0, p1;
+    for (std::size_t k = 0; k < 4; ++k) {
+      p0[k] = start[at(v[k])];
+      p1[k] = positions[at(v[k])];
+    }
+    return geometry::ccd(kind, p0, p1, touching).hit;
+  };
+  const auto faces = topology_->faces();
+  for (const VertexFaceImpact& c : impacts_.vf) {
+    Stencil s = stencil_of(c, faces[at(c.face)]);
+    if (c.toi == 0 && c.distance <= delta && !touches(geometry::CcdPair::kVertexFace, s.vertex)) continue;
+    live_.push_back(s);
+  }
+  for (const EdgeEdgeImpact& c : impacts_.ee) {
+    Stencil s = stencil_of(c);
+    if (c.toi == 0 && c.distance <= delta && !touches(geometry::CcdPair::kEdgeEdge, s.vertex)) continue;
+    live_.push_back(s);
+  }
+  return live_.size();
+}
+
+FailSafeStats CcdFailSafe::apply(PositionsView start, std::span<const Scalar> inv_mass, Scalar duration,
+                                 std::span<Vec3> positions, std::span<Vec3> velocities) {
+  const std::size_t n = start.size();
+  CRUMPLE_CHECK(n == at(topology_->num_vertices()) && positions.size() == n && velocities.size() == n &&
+                    inv_mass.size() == n,
+                "fail-safe: start, positions, velocities and inverse masses must have #V entries");
+  CRUMPLE_CHECK(duration > 0, "fail-safe: the frame's duration must be > 0");
+  FailSafeStats stats;
+  if (detect(start, positions, stats) == 0) return stats;
+  stats.impacts = live_.size();
+
+  std::vector<Vec3> u(n), original(n);
+  for (std::size_t i = 0; i < n; ++i) original[i] = u[i] = positions[i] - start[i];
+  std::vector<char> changed(n, 0), frozen(n, 0);
+  const auto mark = [&](const Stencil& s) {
+    for (int k = 0; k < s.count; ++k) changed[at(s.vertex[static_cast<std::size_t>(k)])] = 1;
+  };
+  const auto move = [&] {
+    for (std::size_t i = 0; i < n; ++i) {
+      if (changed[i] && !frozen[i]) positions[i] = start[i] + u[i];
+    }
+  };
+  const auto finish = [&] {
+    const Scalar rate = 1 / duration;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (frozen[i]) {
+        velocities[i] = Vec3::Zero();
+      } else if (changed[i]) {
+        velocities[i] = rate * u[i];
+      }
+    }
+    return stats;
+  };
+
+  // 1. CCD impulses on the relative normal displacement.
+  for (int r = 0; r < options_.impulse_rounds; ++r) {
+    ++stats.impulse_rounds;
+    for (const Stencil& s : live_) {
+      if (s.normal.squaredNorm() > 0 && correct_velocity(s, inv_mass, u) > 0) mark(s);
+    }
+    move();
+    if (detect(start, positions, stats) == 0) return finish();
+  }
+
+  // 2. Impact zones: merged, each moved rigidly.
+  std::vector<Index> parent(n, -1);
+  for (int r = 0; r < options_.zone_rounds; ++r) {
+    ++stats.zone_rounds;
+    for (const Stencil& s : live_) {
+      for (int k = 0; k < s.count; ++k) {
+        const Index v = s.vertex[static_cast<std::size_t>(k)];
+        if (parent[at(v)] < 0) {
+          parent[at(v)] = v;
+          ++stats.zone_vertices;
+        }
+      }
+      const Index first = root(parent, s.vertex[0]);
+      for (int k = 1; k < s.count; ++k) {
+        const Index other = root(parent, s.vertex[static_cast<std::size_t>(k)]);
+        if (other != first) parent[at(other)] = first;
+      }
+      mark(s);
+    }
+    std::vector<std::pair<Index, Index>> by_zone;  // (root, member)
+    for (std::size_t i = 0; i < n; ++i) {
+      if (parent[i] >= 0) by_zone.emplace_back(root(parent, static_cast<Index>(i)), static_cast<Index>(i));
+    }
+    std::sort(by_zone.begin(), by_zone.end());
+    std::vector<Index> members;
+    for (std::size_t b = 0; b < by_zone.size();) {
+      std::size_t e = b;
+      members.clear();
+      while (e < by_zone.size() && by_zone[e].first == by_zone[b].first) members.push_back(by_zone[e++].second);
+      rigidify(members, start, inv_mass, u);
+      b = e;
+    }
+    move();
+    if (detect(start, positions, stats) == 0) return finish();
+  }
+
+  // 3. The fallback: the vertices of live impacts keep their start positions.
+  for (;;) {
+    std::size_t added = 0;
+    for (const Stencil& s : live_) {
+      for (int k = 0; k < s.count; ++k) {
+        const std::size_t v = at(s.vertex[static_cast<std::size_t>(k)]);
+        if (frozen[v]) continue;
+        frozen[v] = 1;
+        u[v] = Vec3::Zero();
+        positions[v] = start[v];
+        ++added;
+      }
+    }
+    if (added == 0) {  // only static pairs left: none can touch (see the file comment)
+      stats.static_left = live_.size();
+      break;
+    }
+    stats.frozen += added;
+    if (detect(start, positions, stats) == 0) break;
+  }
+  return finish();
+}
+
+}  // namespace crumple::response

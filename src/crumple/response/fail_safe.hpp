@@ -1,0 +1,93 @@
+#pragma once
+/// \file
+/// The continuous-collision fail-safe of a frame: given the positions x⁰ at the frame's start
+/// and the proposed positions x¹ at its end (after integration and the proximity response), it
+/// changes x¹ (and the end velocities) so that the linear motion x(t) = x⁰ + t (x¹ − x⁰),
+/// t ∈ [0, 1], brings no vertex–face or edge–edge pair into contact. Hence
+/// **if x⁰ is intersection-free, so is x¹** (no two triangles sharing no vertex intersect):
+/// two such triangles can only start to intersect by touching, and the first touch is a VF or
+/// an EE contact, which the continuous query never misses (detect/continuous.hpp).
+///
+/// Stages, each ending as soon as the query (with minimum separation δ) reports no live impact
+/// (see `CcdFailSafe::apply` for "live"); the motion is handled as the frame's displacements
+/// uᵢ = x¹ᵢ − x⁰ᵢ:
+///  1. CCD impulses (Bridson, Fedkiw, Anderson, SIGGRAPH 2002, §7.2): for each impact, an
+///     inelastic impulse in the stencil form of `contact_response.hpp` (weights and normal at
+///     the time of impact) removes the pair's approaching relative normal displacement,
+///     Gauss–Seidel, for `impulse_rounds` rounds;
+///  2. impact zones (Provot 1997; Bridson et al. 2002, §7.4): the vertices of impacting pairs
+///     are merged into zones (union–find, zones only grow), and each zone moves rigidly with the
+///     mass-weighted mean displacement and the rotation of its angular momentum
+///     (θ = I⁻¹ Σ mᵢ rᵢ × (uᵢ − ū), x¹ᵢ = x_c + ū + R(θ) rᵢ), for `zone_rounds` rounds;
+///  3. the fallback that cannot fail: every vertex of a live impact keeps its start position
+///     (uᵢ = 0), repeated until no live impact has a moving vertex. The frozen set grows every
+///     round, so this ends within #V rounds; a live impact left has all its vertices frozen,
+///     so it is a static pair at its start distance, which cannot touch if x⁰ was
+///     intersection-free (docs/simulation.md gives the whole argument).
+/// Velocities follow the positions: a vertex whose displacement changed by Δu gets
+/// v += Δu / H (H the frame's duration); a frozen vertex gets v = 0.
+/// Pinned vertices (m⁻¹ = 0) are not moved by impulses; a zone holding pinned vertices only
+/// translates with their mean displacement; the fallback freezes them like any other vertex
+/// (the guarantee comes first; the scene's kinematics set them again at the next step).
+
+#include <crumple/core/types.hpp>
+#include <crumple/detect/continuous.hpp>
+#include <crumple/response/contact_response.hpp>
+
+#include <cstddef>
+#include <memory>
+#include <span>
+#include <vector>
+
+namespace crumple::response {
+
+struct FailSafeOptions {
+  /// δ ≥ 0 (scene units): impacts are pairs that come within δ during the frame.
+  Scalar min_separation = 0;
+  int impulse_rounds = 3;  ///< rounds of CCD impulses (>= 0)
+  int zone_rounds = 8;     ///< rounds of impact zones (>= 0)
+  /// The continuous query's broad phase, threads and narrow-phase options.
+  ContinuousOptions query{};
+};
+
+/// What one `apply` did.
+struct FailSafeStats {
+  int queries = 0;             ///< continuous queries run (1 when the frame was clean)
+  std::size_t impacts = 0;     ///< live impacts of the proposed motion (first query)
+  int impulse_rounds = 0;      ///< impulse rounds run
+  int zone_rounds = 0;         ///< zone rounds run
+  std::size_t zone_vertices = 0;  ///< vertices in impact zones
+  std::size_t frozen = 0;      ///< vertices kept at their start positions by the fallback
+  std::size_t static_left = 0;  ///< live impacts left between frozen vertices (false positives)
+};
+
+/// A fail-safe over one topology, kept across frames (the query's structures are refitted).
+class CcdFailSafe {
+ public:
+  /// Throws `InputError` for bad query options or negative round counts.
+  CcdFailSafe(std::shared_ptr<const Topology> topology, FailSafeOptions options);
+
+  /// Makes the motion from `start` to `positions` free of VF/EE contact (see the file
+  /// comment); `inv_mass`, `start`, `positions`, `velocities` have #V entries, `duration` > 0
+  /// is the frame's length H (s). Impacts are *live* unless the pair is within δ already at
+  /// the frame's start and never touches during the frame (certified by the narrow phase with
+  /// δ = 0): those pairs the proximity response handles, and freezing them would glue them.
+  FailSafeStats apply(PositionsView start, std::span<const Scalar> inv_mass, Scalar duration,
+                      std::span<Vec3> positions, std::span<Vec3> velocities);
+
+  const FailSafeOptions& options() const { return options_; }
+  /// The continuous query (its statistics of the last query).
+  const ContinuousQuery& query() const { return query_; }
+
+ private:
+  /// Runs the query from `start` to `positions` and fills `live_` with the live impacts.
+  std::size_t detect(PositionsView start, std::span<const Vec3> positions, FailSafeStats& stats);
+
+  std::shared_ptr<const Topology> topology_;
+  FailSafeOptions options_;
+  ContinuousQuery query_;
+  ImpactSet impacts_;
+  std::vector<Stencil> live_;
+};
+
+}  // namespace crumple::response

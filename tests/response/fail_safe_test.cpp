@@ -1,0 +1,164 @@
+// The continuous fail-safe alone (`CcdFailSafe`): a frame whose proposed motion passes
+// triangles through each other ends intersection-free, by each stage and by the whole.
+#include <crumple/core/error.hpp>
+#include <crumple/detect/detector.hpp>
+#include <crumple/mesh/shapes.hpp>
+#include <crumple/response/fail_safe.hpp>
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace crumple::response {
+namespace {
+
+/// Intersecting triangle pairs (sharing no vertex) by the exact kdop detector.
+std::size_t intersecting_pairs(std::shared_ptr<const Topology> topology, PositionsView x) {
+  DetectorOptions options;
+  options.kinds = ContactKinds::parse("tt");
+  options.threads = 1;
+  auto detector = make_detector(MethodSpec::parse("kdop"), options);
+  detector->set_topology(std::move(topology));
+  ContactSet contacts;
+  detector->update(x, contacts);
+  return contacts.tt.size();
+}
+
+/// VF/EE pairs that touch (δ = 0) during the linear motion from `x0` to `x1`.
+std::size_t touching_pairs(std::shared_ptr<const Topology> topology, PositionsView x0, PositionsView x1) {
+  ContinuousOptions options;
+  options.threads = 1;
+  return continuous_impacts(std::move(topology), x0, x1, options).size();
+}
+
+/// Triangle A lies in z = 0; triangle B stands upright above it and is moved 1.25 down in one
+/// frame of 0.1 s, ending half through A.
+struct Crossing {
+  std::shared_ptr<const Topology> topology;
+  Positions start{Vec3(0, 0, 0),     Vec3(1, 0, 0),     Vec3(0, 1, 0),
+                  Vec3(0.2, 0.2, 1), Vec3(0.4, 0.2, 1), Vec3(0.3, 0.2, 1.5)};
+  Positions end;
+  Positions velocity;
+  std::vector<Scalar> inv_mass{1, 1, 1, 1, 1, 1};
+  Crossing() {
+    topology = TriMesh::create(start, {Face{0, 1, 2}, Face{3, 4, 5}}).topology_ptr();
+    end = start;
+    for (int i = 3; i < 6; ++i) end[static_cast<std::size_t>(i)].z() -= 1.25;
+    for (std::size_t i = 0; i < 6; ++i) velocity.push_back((end[i] - start[i]) / 0.1);
+  }
+};
+
+FailSafeOptions options(int impulse_rounds, int zone_rounds) {
+  FailSafeOptions o;
+  o.min_separation = 1e-3;
+  o.impulse_rounds = impulse_rounds;
+  o.zone_rounds = zone_rounds;
+  o.query.threads = 1;
+  return o;
+}
+
+TEST(FailSafe, TwoTrianglesMovingThroughEachOtherEndApart) {
+  for (const auto& [impulses, zones] : {std::pair{3, 8}, std::pair{0, 8}, std::pair{0, 0}}) {
+    SCOPED_TRACE(testing::Message() << impulses << " impulse rounds, " << zones << " zone rounds");
+    Crossing c;
+    ASSERT_EQ(intersecting_pairs(c.topology, c.start), 0u);
+    ASSERT_GT(intersecting_pairs(c.topology, c.end), 0u) << "the proposed end intersects";
+    CcdFailSafe safe(c.topology, options(impulses, zones));
+    const FailSafeStats stats = safe.apply(c.start, c.inv_mass, 0.1, c.end, c.velocity);
+    EXPECT_GT(stats.impacts, 0u);
+    EXPECT_EQ(intersecting_pairs(c.topology, c.end), 0u);
+    EXPECT_EQ(touching_pairs(c.topology, c.start, c.end), 0u) << "no pair touches during the corrected motion";
+    // Velocities follow the corrected positions: the frame's mean velocity, or 0 when frozen.
+    for (std::size_t i = 0; i < 6; ++i) {
+      const Vec3 mean = (c.end[i] - c.start[i]) / 0.1;
+      EXPECT_LT((c.velocity[i] - mean).norm(), 1e-9) << "vertex " << i;
+    }
+    if (impulses > 0) {
+      // An inelastic impulse splits the approach: B stops, A moves down to meet it halfway
+      // in momentum (B's vertex on A's face or A's edge on B's), no freezing needed.
+      EXPECT_EQ(stats.frozen, 0u);
+    }
+    if (impulses == 0 && zones == 0) {
+      EXPECT_GT(stats.frozen, 0u) << "only the fallback ran";
+    }
+  }
+}
+
+TEST(FailSafe, FallbackAloneKeepsFrozenVerticesAtTheirStart) {
+  Crossing c;
+  CcdFailSafe safe(c.topology, options(0, 0));
+  const FailSafeStats stats = safe.apply(c.start, c.inv_mass, 0.1, c.end, c.velocity);
+  ASSERT_GT(stats.frozen, 0u);
+  std::size_t still = 0, b_still = 0;
+  for (std::size_t i = 0; i < 6; ++i) {
+    if (c.end[i] == c.start[i]) {
+      ++still;
+      if (i >= 3) ++b_still;
+      EXPECT_EQ(c.velocity[i], Vec3::Zero()) << "vertex " << i;
+    }
+  }
+  EXPECT_GE(still, stats.frozen) << "every frozen vertex is exactly at its start";
+  EXPECT_GT(b_still, 0u) << "B, the moving triangle, was stopped";
+}
+
+// A lattice thrown into a random tangle in one frame: every stage may run; the end is
+// intersection-free and no pair touches on the way.
+TEST(FailSafe, RandomTangleOfALatticeEndsIntersectionFree) {
+#ifdef CRUMPLE_SANITIZED
+  const int kSeeds = 1;
+#else
+  const int kSeeds = 2;
+#endif
+  for (const auto& [impulses, zones] : {std::pair{3, 8}, std::pair{0, 8}, std::pair{0, 0}}) {
+    for (int seed = 1; seed <= kSeeds; ++seed) {
+      SCOPED_TRACE(testing::Message() << "seed " << seed << ", " << impulses << " impulse rounds, " << zones
+                                      << " zone rounds");
+      const TriMesh lattice = shapes::lattice(8, 8);
+      const auto topology = lattice.topology_ptr();
+      const Positions start = lattice.positions();
+      std::mt19937_64 rng(static_cast<std::uint64_t>(seed));
+      std::uniform_real_distribution<Scalar> d(-0.3, 0.3);
+      Positions end = start, velocity(start.size(), Vec3::Zero());
+      for (Vec3& p : end) p += Vec3(d(rng), d(rng), d(rng));
+      ASSERT_GT(intersecting_pairs(topology, end), 0u) << "the proposed end is tangled";
+      std::vector<Scalar> inv_mass(start.size(), 1);
+      inv_mass[0] = 0;  // a pinned corner
+      CcdFailSafe safe(topology, options(impulses, zones));
+      const FailSafeStats stats = safe.apply(start, inv_mass, 1.0 / 60, end, velocity);
+      EXPECT_GT(stats.impacts, 0u);
+      EXPECT_EQ(stats.static_left, 0u);
+      EXPECT_EQ(intersecting_pairs(topology, end), 0u);
+      EXPECT_EQ(touching_pairs(topology, start, end), 0u);
+      if (impulses == 0 && zones > 0) {
+        EXPECT_GT(stats.zone_vertices, 0u);
+      }
+      if (impulses == 0 && zones == 0) {
+        EXPECT_GT(stats.frozen, 0u);
+      }
+    }
+  }
+}
+
+TEST(FailSafe, CleanFrameIsLeftBitForBit) {
+  Crossing c;
+  for (int i = 3; i < 6; ++i) c.end[static_cast<std::size_t>(i)].z() = c.start[static_cast<std::size_t>(i)].z() - 0.5;
+  const Positions before = c.end, v_before = c.velocity;
+  CcdFailSafe safe(c.topology, options(3, 8));
+  const FailSafeStats stats = safe.apply(c.start, c.inv_mass, 0.1, c.end, c.velocity);
+  EXPECT_EQ(stats.queries, 1);
+  EXPECT_EQ(stats.impacts, 0u);
+  EXPECT_EQ(c.end, before);
+  EXPECT_EQ(c.velocity, v_before);
+}
+
+TEST(FailSafe, RejectsBadOptions) {
+  Crossing c;
+  FailSafeOptions o = options(3, 8);
+  o.min_separation = -1;
+  EXPECT_THROW(CcdFailSafe(c.topology, o), Error);
+  o = options(-1, 8);
+  EXPECT_THROW(CcdFailSafe(c.topology, o), Error);
+}
+
+}  // namespace
+}  // namespace crumple::response
