@@ -4,14 +4,17 @@
 // `frame/SCENE/N`: whole frames of the built-in scenes with their defaults (projective dynamics,
 // one detection per frame with kdop, proximity response), after a warm-up of 30 frames (0.5 s,
 // the cloth in contact), reporting ms per frame by part, contacts (VF + EE closer than the
-// thickness), intersecting triangle pairs at the last frame (exact: kdop with kinds tt) and
-// frames per second (docs/benchmarks/simulation.md):
+// thickness), the CCD fail-safe's ms, impacts and frozen vertices, intersecting triangle pairs
+// counted at every frame (exact: kdop with kinds tt; frames with any, the most, the mean) and
+// frames per second; `frame-no-fail-safe/...` the same without the fail-safe, at n <= 64
+// (docs/benchmarks/simulation.md):
 //   ./build/release/bench/sim_bench --benchmark_filter=frame/ --benchmark_out=sim.json
 //   ./build/release/bench/sim_bench --benchmark_format=json
 #include <crumple/sim/scene.hpp>
 
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <map>
 #include <memory>
 
@@ -80,35 +83,60 @@ void BM_Response(benchmark::State& bench, int n) {
   bench.counters["contacts"] = static_cast<double>(contacts.size());
 }
 
-/// Whole frames of a built-in scene with its default settings.
-void BM_Frame(benchmark::State& bench, const std::string& spec) {
+/// Whole frames of a built-in scene with its default settings (`fail_safe` off: the baseline).
+/// Intersecting triangle pairs are counted at every frame, warm-up included, outside the timing.
+void BM_Frame(benchmark::State& bench, const std::string& spec, bool fail_safe) {
   Scene s = make_scene(SceneSpec::parse(spec), 1);
   Settings settings = s.settings;
   settings.method = MethodSpec::parse("kdop");
+  settings.fail_safe = fail_safe;
   Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
                  settings);
-  sim.current_stats();
-  for (int f = 0; f < 30; ++f) sim.advance_frame();
-  double integrate = 0, detect = 0, response = 0, contacts = 0, frames = 0;
-  for (auto _ : bench) {
-    const FrameStats st = sim.advance_frame();
-    integrate += st.integrate_ms;
-    detect += st.detect_ms;
-    response += st.response_ms;
-    contacts += static_cast<double>(st.vf + st.ee);
-    frames += 1;
-  }
   DetectorOptions tt_options;
   tt_options.kinds = ContactKinds::parse("tt");
   auto tt = make_detector(MethodSpec::parse("kdop"), tt_options);
   tt->set_topology(sim.model().topology_ptr());
   ContactSet intersections;
-  tt->update(sim.state().x, intersections);
+  double tt_frames = 0, tt_max = 0, tt_sum = 0, counted = 0;
+  const auto count_intersections = [&] {
+    tt->update(sim.state().x, intersections);
+    const auto pairs = static_cast<double>(intersections.tt.size());
+    tt_frames += pairs > 0 ? 1 : 0;
+    tt_max = std::max(tt_max, pairs);
+    tt_sum += pairs;
+    counted += 1;
+  };
+  sim.current_stats();
+  for (int f = 0; f < 30; ++f) {
+    sim.advance_frame();
+    count_intersections();
+  }
+  double integrate = 0, detect = 0, response = 0, ccd = 0, contacts = 0, impacts = 0, frozen = 0, frames = 0;
+  for (auto _ : bench) {
+    const FrameStats st = sim.advance_frame();
+    integrate += st.integrate_ms;
+    detect += st.detect_ms;
+    response += st.response_ms;
+    ccd += st.ccd_ms;
+    contacts += static_cast<double>(st.vf + st.ee);
+    impacts += static_cast<double>(st.ccd_impacts);
+    frozen += static_cast<double>(st.ccd_frozen);
+    frames += 1;
+    bench.PauseTiming();
+    count_intersections();
+    bench.ResumeTiming();
+  }
   bench.counters["integrate_ms"] = integrate / frames;
   bench.counters["detect_ms"] = detect / frames;
   bench.counters["response_ms"] = response / frames;
+  bench.counters["ccd_ms"] = ccd / frames;
   bench.counters["contacts"] = contacts / frames;
-  bench.counters["tt_pairs_last_frame"] = static_cast<double>(intersections.tt.size());
+  bench.counters["ccd_impacts"] = impacts / frames;
+  bench.counters["ccd_frozen"] = frozen / frames;
+  bench.counters["tt_frames"] = tt_frames;
+  bench.counters["tt_max"] = tt_max;
+  bench.counters["tt_mean"] = tt_sum / counted;
+  bench.counters["frames_counted"] = counted;
   bench.counters["vertices"] = sim.model().num_particles();
   bench.counters["fps"] = benchmark::Counter(frames, benchmark::Counter::kIsRate);
 }
@@ -117,10 +145,16 @@ void register_all() {
   for (const char* scene : {"cloth-on-sphere", "crumple"}) {
     for (int n : {32, 64, 100}) {
       const std::string spec = std::string(scene) + ":n=" + std::to_string(n);
-      benchmark::RegisterBenchmark(("frame/" + spec).c_str(), BM_Frame, spec)
+      benchmark::RegisterBenchmark(("frame/" + spec).c_str(), BM_Frame, spec, true)
           ->Unit(benchmark::kMillisecond)
           ->Iterations(20)
           ->UseRealTime();
+      if (n <= 64) {
+        benchmark::RegisterBenchmark(("frame-no-fail-safe/" + spec).c_str(), BM_Frame, spec, false)
+            ->Unit(benchmark::kMillisecond)
+            ->Iterations(20)
+            ->UseRealTime();
+      }
     }
   }
   for (int n : {10, 100}) {

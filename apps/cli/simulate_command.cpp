@@ -47,6 +47,7 @@ struct SimulateArgs {
   DetectionArgs detection;
   std::optional<std::string> response;
   std::optional<int> passes;
+  std::optional<std::string> fail_safe;
   std::optional<std::uint64_t> seed;
   std::optional<std::string> out;  ///< default: the resumed state's folder, else kDefaultOut
   std::string format = "obj";
@@ -61,7 +62,7 @@ constexpr const char* kDefaultOut = "crumple-out";
 constexpr const char* kStatsHeader =
     "frame,time,integrate_ms,detect_ms,response_ms,vf,ee,tt,collision_share,min_distance,"
     "obstacle_penetration,cg_iterations,corrections,energy,max_speed,min_x,min_y,min_z,max_x,"
-    "max_y,max_z";
+    "max_y,max_z,ccd_ms,ccd_impacts,ccd_frozen";
 
 std::string scenes_help() {
   std::string out = "Built-in scene SPEC, NAME[:key=value,...], or a file (.x3d .obj .ply .off). Scenes:";
@@ -141,10 +142,10 @@ Start load(const SimulateArgs& args, std::optional<SideFile>& side) {
   return start;
 }
 
-bool parse_on_off(const std::string& value) {
+bool parse_on_off(const std::string& value, const char* flag) {
   if (value == "on") return true;
   if (value == "off") return false;
-  throw InputError("--response expects on or off, got '" + value + "'");
+  throw InputError(std::string(flag) + " expects on or off, got '" + value + "'");
 }
 
 std::string frame_name(std::int64_t frame, const std::string& ext) {
@@ -162,7 +163,7 @@ std::string csv_number(double v) {
 
 struct Summary {
   long long frames = 0;
-  double integrate_ms = 0, detect_ms = 0, response_ms = 0;
+  double integrate_ms = 0, detect_ms = 0, response_ms = 0, ccd_ms = 0;
   double share_min = 1, share_max = 0;
   bool hit0 = false, hit30 = false, hit50 = false, hit80 = false;
   long long close_frames = 0;  // frames with a VF/EE pair closer than half the thickness
@@ -173,6 +174,7 @@ struct Summary {
     integrate_ms += s.integrate_ms;
     detect_ms += s.detect_ms;
     response_ms += s.response_ms;
+    ccd_ms += s.ccd_ms;
     share_min = std::min<double>(share_min, s.collision_share);
     share_max = std::max<double>(share_max, s.collision_share);
     hit0 |= s.collision_share == 0;
@@ -246,6 +248,7 @@ void save_state(const std::filesystem::path& out, const sim::Simulation& simulat
                                     .add("kinds", settings.detector.kinds.to_string())
                                     .add("response", settings.response)
                                     .add("passes", settings.passes)
+                                    .add("fail_safe", settings.fail_safe)
                                     .add("detector_state", simulation.detector_state())
                                     .str();
   write_file_atomically(out / "state.json", [&](std::ostream& os) { os << side_json << "\n"; });
@@ -260,9 +263,9 @@ void print_summary(const Summary& summary, const sim::Simulation& simulation,
   std::printf("\n  %-28s %lld (%lld written to %s)\n", "frames simulated", summary.frames - 1, summary.frames,
               frames_dir.string().c_str());
   std::printf("  %-28s %.4g s\n", "simulated time", simulation.state().time);
-  std::printf("  %-28s %.3f / %.3f / %.3f\n", "ms per frame: integrate/detect/response", summary.integrate_ms / n,
-              summary.detect_ms / n, summary.response_ms / n);
-  const double compute_ms = summary.integrate_ms + summary.detect_ms + summary.response_ms;
+  std::printf("  %-28s %.3f / %.3f / %.3f / %.3f\n", "ms per frame: integrate/detect/response/ccd",
+              summary.integrate_ms / n, summary.detect_ms / n, summary.response_ms / n, summary.ccd_ms / n);
+  const double compute_ms = summary.integrate_ms + summary.detect_ms + summary.response_ms + summary.ccd_ms;
   if (summary.frames > 1 && compute_ms > 0 && summary.wall_ms > 0) {
     std::printf("  %-28s %.1f (simulation only: %.1f)\n", "frames per second", 1000 * n / summary.wall_ms,
                 1000 * n / compute_ms);
@@ -377,6 +380,8 @@ int run_simulate(const SimulateArgs& args) {
     settings.detector.kinds = ContactKinds::parse(side->text("kinds", side_path));
     settings.response = side->text("response", side_path) == "true";
     settings.passes = static_cast<int>(side->number("passes", side_path));
+    // Absent from states saved before the fail-safe existed: the default (on).
+    if (side->values.count("fail_safe")) settings.fail_safe = side->text("fail_safe", side_path) == "true";
   }
   if (args.dt) settings.dt = *args.dt;
   if (args.substeps) settings.substeps = *args.substeps;
@@ -384,8 +389,9 @@ int run_simulate(const SimulateArgs& args) {
   settings.method = method_of(args.detection, settings.method);
   settings.detector.thickness = thickness_of(args.detection, scene.state.x, settings.detector.thickness);
   if (args.detection.kinds) settings.detector.kinds = ContactKinds::parse(*args.detection.kinds);
-  if (args.response) settings.response = parse_on_off(*args.response);
+  if (args.response) settings.response = parse_on_off(*args.response, "--response");
   if (args.passes) settings.passes = *args.passes;
+  if (args.fail_safe) settings.fail_safe = parse_on_off(*args.fail_safe, "--fail-safe");
   settings.detector.threads = args.detection.threads;
   if (!(settings.dt > 0 && std::isfinite(settings.dt))) throw InputError("--dt must be > 0");
   if (settings.substeps < 1) throw InputError("--substeps must be >= 1");
@@ -450,7 +456,8 @@ int run_simulate(const SimulateArgs& args) {
         csv_number(s.energy) + "," + csv_number(s.max_speed) + "," + csv_number(s.bounds.min.x()) + "," +
         csv_number(s.bounds.min.y()) + "," + csv_number(s.bounds.min.z()) + "," +
         csv_number(s.bounds.max.x()) + "," + csv_number(s.bounds.max.y()) + "," +
-        csv_number(s.bounds.max.z()) + "\n";
+        csv_number(s.bounds.max.z()) + "," + csv_number(s.ccd_ms) + "," + std::to_string(s.ccd_impacts) + "," +
+        std::to_string(s.ccd_frozen) + "\n";
     write_csv(line);
     if ((s.frame - start.frame) % args.every == 0) {
       io::write_mesh(frames_dir / frame_name(s.frame, args.format), simulation.state().x, faces);
@@ -548,6 +555,9 @@ Run add_simulate_command(CLI::App& app) {
                          .thickness_default = "the scene's"});
   app.add_option("--response", args->response, "Self-collision response on|off; default: the scene's");
   app.add_option("--passes", args->passes, "Response sweeps per step; default 4");
+  app.add_option("--fail-safe", args->fail_safe,
+                 "on|off: with response on, the continuous (CCD) fail-safe that keeps every frame "
+                 "intersection-free; default on");
   app.add_option("-s,--seed", args->seed, "Seed of the scene's random perturbation; default 1");
   app.add_option("-o,--out", args->out,
                  std::string("Output folder; default: the resumed state's folder (the run goes "

@@ -10,6 +10,7 @@
 #include <csignal>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -158,6 +159,21 @@ TEST(Simulate, BadInputIsAOneLineError) {
   EXPECT_EQ(r.status, 0);
   EXPECT_NE(r.out.find("cloth-on-sphere"), std::string::npos);
   EXPECT_NE(r.out.find("twisted-ribbon"), std::string::npos);
+}
+
+TEST(Simulate, FailSafeFlagIsSavedAndChecked) {
+  const testing::TempDir dir;
+  auto r = run_cli("simulate cloth-on-sphere:n=4 --frames 2 -q --fail-safe off -o " + (dir / "off").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  std::ifstream in(dir / "off" / "state.json");
+  const std::string json((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(json.find("\"fail_safe\":false"), std::string::npos) << json;
+  const auto lines = read_lines(dir / "off" / "stats.csv");
+  ASSERT_FALSE(lines.empty());
+  EXPECT_NE(lines[0].find(",ccd_ms,ccd_impacts,ccd_frozen"), std::string::npos) << lines[0];
+  r = run_cli("simulate cloth-on-sphere:n=4 --frames 1 -q --fail-safe maybe -o " + (dir / "bad").string());
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("--fail-safe expects on or off, got 'maybe'"), std::string::npos) << r.out;
 }
 
 }  // namespace
