@@ -80,7 +80,7 @@ constexpr std::array<SceneParamInfo, 17> kRibbon{{
     {"self-friction", "0.2", "Coulomb friction between touching parts of the cloth"},
 }};
 
-constexpr std::array<SceneParamInfo, 16> kCrumple{{
+constexpr std::array<SceneParamInfo, 17> kCrumple{{
     {"n", "20", "quads along each side"},
     {"size", "1", "side of the square cloth (m)"},
     {"final", "0.3", "final gap between the two walls, fraction of size"},
@@ -88,6 +88,9 @@ constexpr std::array<SceneParamInfo, 16> kCrumple{{
     {"friction", "0.2", "Coulomb friction on the floor and the walls"},
     {"jitter", "0.05", "seeded random displacement of the initial vertices, fraction of an edge"},
     {"wall-height", "0.5", "height of the walls (m)"},
+    {"ridge", "2",
+     "height of a low ridge across the floor under the cloth's middle (parallel to the walls), in "
+     "thicknesses: the out-of-plane cue that starts the folds; 0 = a flat floor"},
     CRUMPLE_MATERIAL_KEYS("0.1", "400", "0", "2e-4", "0.01", "9.81", "0.5", "0.3"),
     {"self-friction", "0.2", "Coulomb friction between touching parts of the cloth"},
 }};
@@ -333,7 +336,8 @@ Scene crumple_scene(const SceneSpec& spec, std::uint64_t seed) {
   const Index n = lattice_count(spec, "n");
   const Scalar size = spec.get_double("size");
   const Scalar thickness_guess = spec.get_double("thickness") * size / static_cast<Scalar>(n);
-  const TriMesh mesh = horizontal_lattice(n, n, size, size, thickness_guess);
+  // Above the ridge (below) and its margin.
+  const TriMesh mesh = horizontal_lattice(n, n, size, size, (1 + spec.get_double("ridge")) * thickness_guess);
   Scene s = finish(spec, make_cloth(mesh, material(spec)), spec.get_double("jitter"), seed);
   const Scalar friction = spec.get_double("friction");
   const Scalar margin = 0.5 * s.settings.detector.thickness;
@@ -354,6 +358,16 @@ Scene crumple_scene(const SceneSpec& spec, std::uint64_t seed) {
   }
   s.obstacles.push_back(make_obstacle(response::Plane{Vec3::Zero(), Vec3::UnitY()}, Vec3::Zero(), kForever,
                                       friction, margin));
+  // A flat cloth pressed in its plane on a flat floor has no reason to leave it: without a cue it
+  // stays flat under compression (the fail-safe forbids the in-plane pass-throughs that used to
+  // start the folds). The ridge lifts the middle a little, and the folds start there.
+  if (const Scalar ridge = spec.get_double("ridge"); ridge != 0) {
+    if (!(ridge > 0) || !std::isfinite(ridge)) throw InputError("scene key 'ridge' must be >= 0");
+    const Scalar top = ridge * s.settings.detector.thickness;
+    s.obstacles.push_back(make_obstacle(response::Box{Vec3(0.5 * size, top - below, 0.5 * size),
+                                                      Vec3(0.5 * s.edge_length, below, size)},
+                                        Vec3::Zero(), kForever, friction, margin));
+  }
   s.settings.response = true;
   fast_settings(s, spec);
   // The closing walls squeeze the pile: twice the steps keep its layers apart (tested).

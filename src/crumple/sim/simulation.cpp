@@ -93,7 +93,7 @@ void Simulation::run_fail_safe(PositionsView frame_start) {
       if (round == 0) ccd_stats_.impacts += s.impacts;
       ccd_stats_.zone_vertices += s.zone_vertices;
       ccd_stats_.frozen += s.frozen;
-      if (s.impacts == 0 || obstacles_.empty()) break;
+      if (s.impacts == 0 || obstacles_.empty() || round + 1 == kObstacleRounds) break;
       bool inside = false;
       for (const auto& o : obstacles_) {
         inside = inside || response::max_penetration(o, state_.time, state_.x) > 0;
