@@ -90,11 +90,12 @@ TEST(FailSafe, WithoutItTheClothOnTheSphereIntersects) {
   EXPECT_GT(off.frames_with_intersections, 0) << "the baseline the fail-safe is tested against";
 }
 
-// A second sphere plowing through the cloth's skirt at 5 m/s from frame 24 on (issue 43's fast
-// obstacle).
+// A second sphere plowing through the cloth's skirt at 5 m/s (issue 43's fast obstacle): it
+// reaches the cloth at frame ~57 (speeds up to ~10 m/s, where the fall alone gives at most
+// 5.4 m/s). The same frame count under the sanitizers, so that it still hits.
 TEST(FailSafe, FastSweepingSphereLeavesNoIntersection) {
-  const Outcome on = run("cloth-on-sphere:n=32,sweep-speed=5", 70 / kScale, true);
-  EXPECT_GT(on.max_speed, 4) << "the sphere hits the cloth";
+  const Outcome on = run("cloth-on-sphere:n=32,sweep-speed=5", 70, true);
+  EXPECT_GT(on.max_speed, 6) << "the sphere hits the cloth";
   EXPECT_EQ(on.frames_with_intersections, 0) << "first at frame " << on.first_bad << ", up to " << on.max_pairs
                                              << " pairs";
   EXPECT_GT(on.impacts, 0u);

@@ -62,7 +62,7 @@ constexpr std::array<SceneParamInfo, 17> kSphere{{
     {"sphere-speed", "0", "speed of the sphere along +x (m/s): a kinematic, moving obstacle"},
     {"sweep-speed", "0",
      "speed (m/s) of a second sphere (radius 0.1 x size, lowest point r/3 above the floor, z = size/6) "
-     "sweeping along +x through the cloth's skirt, reaching the cloth's side at t = 0.4 s; 0 = none"},
+     "sweeping along +x through the cloth's skirt, reaching the cloth's side at t = 0.8 s; 0 = none"},
     CRUMPLE_MATERIAL_KEYS("0.1", "400", "0", "2e-4", "0.01", "9.81", "0.2", "0.3"),
     {"self-friction", "0.2", "Coulomb friction between touching parts of the cloth"},
 }};
@@ -286,7 +286,7 @@ Scene cloth_on_sphere(const SceneSpec& spec, std::uint64_t seed) {
   if (const Scalar sweep = spec.get_double("sweep-speed"); sweep != 0) {
     if (!(sweep > 0) || !std::isfinite(sweep)) throw InputError("scene key 'sweep-speed' must be >= 0");
     const Scalar r = 0.1 * size;
-    s.obstacles.push_back(make_obstacle(response::Sphere{Vec3(-r - 0.4 * sweep, 4 * r / 3, size / 6), r},
+    s.obstacles.push_back(make_obstacle(response::Sphere{Vec3(-r - 0.8 * sweep, 4 * r / 3, size / 6), r},
                                         Vec3(sweep, 0, 0), kForever, friction, margin));
   }
   s.settings.response = true;
