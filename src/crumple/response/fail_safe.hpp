@@ -24,8 +24,10 @@
 ///     round, so this ends within #V rounds; a live impact left has all its vertices frozen,
 ///     so it is a static pair at its start distance, which cannot touch if x⁰ was
 ///     intersection-free (docs/simulation.md gives the whole argument).
-/// Velocities follow the positions: a vertex whose displacement changed by Δu gets
-/// v += Δu / H (H the frame's duration); a frozen vertex gets v = 0.
+/// Velocities follow the positions: a vertex the fail-safe moved gets the frame's mean velocity
+/// v = uᵢ / H (H the frame's duration; adding the change to the integrator's end velocity
+/// instead pumps energy into a cloth pressed against walls); a frozen vertex gets v = 0; the others keep
+/// theirs.
 /// Pinned vertices (m⁻¹ = 0) are not moved by impulses; a zone holding pinned vertices only
 /// translates with their mean displacement; the fallback freezes them like any other vertex
 /// (the guarantee comes first; the scene's kinematics set them again at the next step).
