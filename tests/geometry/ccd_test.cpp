@@ -192,11 +192,24 @@ TEST(Ccd, NearParallelEdgesAreSeparatedByADirection) {
 TEST(Ccd, BudgetGivesAConservativeHit) {
   CcdOptions o;
   o.max_boxes = 1;
+  o.max_advance_steps = 0;  // bisection alone
   const CcdResult r = vf(Vec3(0.25, 0.25, 1), Vec3(0.25, 0.25, -1), o);
   ASSERT_TRUE(r.hit);
   EXPECT_EQ(r.outcome, CcdOutcome::kHitBudget);
   EXPECT_LE(r.toi, 0.5);
   EXPECT_EQ(r.boxes, 1);
+}
+
+TEST(Ccd, AdvancementFindsTranslationalContactsWithoutBisection) {
+  // A pure translation towards the triangle: the closest-point direction's bound is exact, so
+  // one step lands on the contact and the next finds the witness.
+  const CcdResult r = vf(Vec3(0.25, 0.25, 1), Vec3(0.25, 0.25, -1));
+  ASSERT_TRUE(r.hit);
+  EXPECT_EQ(r.outcome, CcdOutcome::kHitTolerance);
+  EXPECT_EQ(r.boxes, 0);
+  EXPECT_LE(r.advance_steps, 2);
+  EXPECT_LE(r.toi, 0.5);
+  EXPECT_GE(r.toi, 0.5 - 1e-9);
 }
 
 TEST(Ccd, NonFiniteOrHugeInputIsAConservativeHit) {

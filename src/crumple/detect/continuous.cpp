@@ -40,7 +40,7 @@ struct OwnedFace {
 /// Counters of one chunk of work, summed into the query's stats under a lock.
 struct Counts {
   double vf_box_rejected = 0, ee_box_rejected = 0, vf_tests = 0, ee_tests = 0, boxes = 0;
-  std::array<double, 8> outcomes{};  ///< narrow-phase tests per `CcdOutcome`
+  std::array<double, geometry::kCcdOutcomeCount> outcomes{};  ///< narrow-phase tests per `CcdOutcome`
   void add(const Counts& o) {
     for (std::size_t k = 0; k < outcomes.size(); ++k) outcomes[k] += o.outcomes[k];
     vf_box_rejected += o.vf_box_rejected;
@@ -235,10 +235,10 @@ ContinuousQuery::ContinuousQuery(std::shared_ptr<const Topology> topology, Conti
   }
   const geometry::CcdOptions& n = options_.narrow;
   if (!(n.time_tolerance > 0 && n.distance_tolerance >= 0 && n.separation_tolerance >= 0 && n.max_boxes >= 1 &&
-        std::isfinite(n.distance_tolerance) && std::isfinite(n.separation_tolerance))) {
+        n.max_advance_steps >= 0 && std::isfinite(n.distance_tolerance) && std::isfinite(n.separation_tolerance))) {
     throw InputError(
         "continuous query: narrow-phase options need time_tolerance > 0, finite distance and separation "
-        "tolerances >= 0 and max_boxes >= 1");
+        "tolerances >= 0, max_boxes >= 1 and max_advance_steps >= 0");
   }
   options_.narrow.min_separation = delta;
   State& s = *state_;
