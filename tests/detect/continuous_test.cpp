@@ -145,6 +145,9 @@ std::size_t check_all(const std::string& name, const std::shared_ptr<const Topol
       // rejections never exceed the brute-force pair count.
       const DetectorStats& st = query.stats();
       EXPECT_EQ(st.get("vf_impacts") + st.get("ee_impacts"), static_cast<double>(impacts.size()));
+      // The step alone (the narrow phase searching only before the running minimum) is the
+      // same number, bit for bit.
+      EXPECT_EQ(query.collision_free_step(x0, x1), earliest(expected)) << name << " " << spec << " step only";
     }
   }
   return expected.size();
@@ -397,6 +400,7 @@ TEST(Continuous, FunnelStepAtZeroSeparationIsPositive) {
   const Scalar step = collision_free_step(impacts);
   EXPECT_GT(step, 0.01);
   EXPECT_LT(step, 1.0);
+  EXPECT_EQ(query.collision_free_step(m0.positions(), m1.positions()), step);
   for (const auto& i : impacts.vf) EXPECT_GT(i.toi, 0) << "vf " << i.vertex << ' ' << i.face;
   for (const auto& i : impacts.ee) EXPECT_GT(i.toi, 0) << "ee " << i.edge0 << ' ' << i.edge1;
 }

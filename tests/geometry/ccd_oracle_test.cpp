@@ -474,6 +474,36 @@ TEST(CcdOracle, GenericSmallMotions) {
 }
 
 
+TEST(CcdOracle, MaxTimeKeepsEveryEarlierHitExactly) {
+  // CcdOptions::max_time: a hit before it is reported exactly as without it (same toi, outcome,
+  // work); anything else reports no hit. No oracle needed: the reference is max_time = 1.
+  Gen g(77, 1);
+  int kept = 0, pruned = 0;
+  const std::function<Case(Gen&)> makers[] = {vf_contact, ee_contact, generic};
+  for (int i = 0; i < 600; ++i) {
+    Gen gi(g.rng()(), 1);
+    const Case c = makers[i % 3](gi);
+    const CcdResult full = ccd(c.pair, c.start, c.end);
+    for (const Scalar m : {0.0, 0.125, full.toi, std::nextafter(full.toi, 2.0), 0.5, 1.0}) {
+      if (m > 1) continue;
+      CcdOptions o;
+      o.max_time = m;
+      const CcdResult r = ccd(c.pair, c.start, c.end, o);
+      if (full.hit && full.toi < m) {
+        ++kept;
+        EXPECT_TRUE(r.hit && r.toi == full.toi && r.outcome == full.outcome && r.boxes == full.boxes &&
+                    r.advance_steps == full.advance_steps)
+            << "max_time " << m << ": " << hex(c);
+      } else {
+        pruned += !r.hit;
+        EXPECT_FALSE(r.hit) << "max_time " << m << " toi " << r.toi << ": " << hex(c);
+      }
+    }
+  }
+  EXPECT_GT(kept, 100);
+  EXPECT_GT(pruned, 100);
+}
+
 // Real queries on which bisection alone spent its whole budget and reported a TOI of 0 although
 // the pairs start well apart (so `collision_free_step` was 0): cloth-funnel 227->228 and
 // rod-twist 3036->3037 at δ = 0, from `CCD_BENCH_DUMP=1 ccd_bench`. One query a line: vf or

@@ -72,11 +72,36 @@ Vec3 at(PositionsView x0, PositionsView x1, Index v, Scalar t) {
   return p + t * (x1[static_cast<std::size_t>(v)] - p);
 }
 
-/// Tests sub-pairs and keeps the impacts (one per thread and chunk).
+/// Lowers an atomic running minimum to `t`.
+void lower_to(std::atomic<Scalar>& bound, Scalar t) {
+  Scalar current = bound.load(std::memory_order_relaxed);
+  while (t < current && !bound.compare_exchange_weak(current, t, std::memory_order_relaxed)) {
+  }
+}
+
+/// Tests sub-pairs and keeps the impacts (one per thread and chunk). With `earliest`, only
+/// the collision-free step is wanted: each test searches only before the running minimum
+/// (`CcdOptions::max_time`), hits lower it and no impact is kept.
 struct Tester {
   const Step& step;
   ImpactSet found;
   Counts counts;
+  std::atomic<Scalar>* earliest = nullptr;
+
+  geometry::CcdOptions narrow_options() const {
+    geometry::CcdOptions o = step.narrow;
+    if (earliest != nullptr) o.max_time = earliest->load(std::memory_order_relaxed);
+    return o;
+  }
+  /// Counts a result; true when its impact is wanted.
+  bool keep(const geometry::CcdResult& r) {
+    counts.boxes += static_cast<double>(r.boxes);
+    ++counts.outcomes[static_cast<std::size_t>(r.outcome)];
+    if (!r.hit) return false;
+    if (earliest == nullptr) return true;
+    lower_to(*earliest, r.toi);
+    return false;
+  }
 
   void vertex_face(Index v, Index f) {
     const Face& t = step.topo.face(f);
@@ -91,11 +116,9 @@ struct Tester {
     ++counts.vf_tests;
     const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
     const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
-    const geometry::CcdResult r =
-        geometry::vertex_face_ccd({s(v), s(t[0]), s(t[1]), s(t[2])}, {e(v), e(t[0]), e(t[1]), e(t[2])}, step.narrow);
-    counts.boxes += static_cast<double>(r.boxes);
-    ++counts.outcomes[static_cast<std::size_t>(r.outcome)];
-    if (!r.hit) return;
+    const geometry::CcdResult r = geometry::vertex_face_ccd({s(v), s(t[0]), s(t[1]), s(t[2])},
+                                                            {e(v), e(t[0]), e(t[1]), e(t[2])}, narrow_options());
+    if (!keep(r)) return;
     VertexFaceImpact impact;
     impact.vertex = v;
     impact.face = f;
@@ -133,11 +156,9 @@ struct Tester {
     ++counts.ee_tests;
     const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
     const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
-    const geometry::CcdResult r =
-        geometry::edge_edge_ccd({s(a[0]), s(a[1]), s(b[0]), s(b[1])}, {e(a[0]), e(a[1]), e(b[0]), e(b[1])}, step.narrow);
-    counts.boxes += static_cast<double>(r.boxes);
-    ++counts.outcomes[static_cast<std::size_t>(r.outcome)];
-    if (!r.hit) return;
+    const geometry::CcdResult r = geometry::edge_edge_ccd({s(a[0]), s(a[1]), s(b[0]), s(b[1])},
+                                                          {e(a[0]), e(a[1]), e(b[0]), e(b[1])}, narrow_options());
+    if (!keep(r)) return;
     EdgeEdgeImpact impact;
     impact.edge0 = e0;
     impact.edge1 = e1;
@@ -329,6 +350,19 @@ std::size_t ContinuousQuery::count_candidates(PositionsView previous, PositionsV
 }
 
 void ContinuousQuery::query(PositionsView previous, PositionsView current, ImpactSet& out) {
+  run(previous, current, out, nullptr);
+}
+
+Scalar ContinuousQuery::collision_free_step(PositionsView previous, PositionsView current) {
+  std::atomic<Scalar> earliest{1};
+  ImpactSet none;
+  run(previous, current, none, &earliest);
+  stats_.set("collision_free_step", earliest.load());
+  return earliest.load();
+}
+
+void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactSet& out,
+                          std::atomic<Scalar>* earliest) {
   out.clear();
   State& s = *state_;
   const Topology& topo = *topology_;
@@ -351,7 +385,7 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
   s.candidates.clear();
   s.candidates.set_consumer([&](std::span<const FacePair> chunk) {
     const auto c0 = std::chrono::steady_clock::now();
-    Tester tester{step, {}, {}};
+    Tester tester{step, {}, {}, earliest};
     for (const FacePair& p : chunk) {
       tester.face_pair(s.faces[static_cast<std::size_t>(p[0])], p[0], s.faces[static_cast<std::size_t>(p[1])], p[1]);
     }
@@ -374,13 +408,13 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
   const auto t2 = std::chrono::steady_clock::now();
   const auto& ovf = s.orphans.vf;
   parallel_for_chunks(ovf.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    Tester tester{step, {}, {}};
+    Tester tester{step, {}, {}, earliest};
     for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[i][0], ovf[i][1]);
     sink.take(tester, 0);
   });
   const auto& oee = s.orphans.ee;
   parallel_for_chunks(oee.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    Tester tester{step, {}, {}};
+    Tester tester{step, {}, {}, earliest};
     for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[i].e[0], oee[i].e[1]);
     sink.take(tester, 0);
   });
@@ -396,7 +430,7 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
   };
   std::atomic<std::size_t> star_pairs{0};
   parallel_for_chunks(s.orphans.stars.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
-    Tester tester{step, {}, {}};
+    Tester tester{step, {}, {}, earliest};
     exact::StarScratch scratch;
     for (std::size_t i = begin; i < end; ++i) {
       const Index v = s.orphans.stars[i];
@@ -417,7 +451,7 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
     exact::BoxTree tree;
     tree.build(boxes);
     parallel_for_chunks(isolated.size(), threads, 64, [&](std::size_t begin, std::size_t end) {
-      Tester tester{step, {}, {}};
+      Tester tester{step, {}, {}, earliest};
       for (std::size_t i = begin; i < end; ++i) {
         Box near = swept_box(isolated[i]);
         near.inflate(half);
@@ -507,7 +541,8 @@ ImpactSet continuous_impacts(std::shared_ptr<const Topology> topology, Positions
 
 Scalar collision_free_step(std::shared_ptr<const Topology> topology, PositionsView previous, PositionsView current,
                            const ContinuousOptions& options) {
-  return collision_free_step(continuous_impacts(std::move(topology), previous, current, options));
+  ContinuousQuery query(std::move(topology), options);
+  return query.collision_free_step(previous, current);
 }
 
 }  // namespace crumple

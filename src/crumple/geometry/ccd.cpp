@@ -64,8 +64,18 @@ bool in_range(const CcdPoints& start, const CcdPoints& end) {
   return true;
 }
 
-Prepared prepare(CcdPair pair, const CcdPoints& start, const CcdPoints& end, Scalar delta) {
-  Prepared p;
+/// err and the hull bound from the largest |coordinate| per axis `m`.
+void set_bounds(Prepared& p, const Vec3& m, Scalar delta) {
+  for (int k = 0; k < 3; ++k) {
+    p.err[k] = kCornerErrorFactor * m[k] + kUnderflowSlack;
+    p.bound[k] = round_up(p.err[k] + delta);
+  }
+  p.delta = delta;
+  p.delta2_up = round_up(delta * delta);
+}
+
+/// The differences a, b, c at t = 0 and t = 1 (after set_bounds).
+void prepare(Prepared& p, CcdPair pair, const CcdPoints& start, const CcdPoints& end) {
   p.face = pair == CcdPair::kVertexFace;
   for (int tau = 0; tau < 2; ++tau) {
     const CcdPoints& x = tau == 0 ? start : end;
@@ -79,14 +89,6 @@ Prepared prepare(CcdPair pair, const CcdPoints& start, const CcdPoints& end, Sca
       p.c[tau] = x[2] - x[3];  // -(b1 - b0)
     }
   }
-  const Vec3 m = max_abs_coordinates(start, end);
-  for (int k = 0; k < 3; ++k) {
-    p.err[k] = kCornerErrorFactor * m[k] + kUnderflowSlack;
-    p.bound[k] = round_up(p.err[k] + delta);
-  }
-  p.delta = delta;
-  p.delta2_up = round_up(delta * delta);
-  return p;
 }
 
 /// Filter 1: F over the whole domain lies in the convex hull of the difference points at
@@ -208,11 +210,15 @@ struct Advance {
 /// own rounding does not matter (any n is valid). Stops after `max_steps` steps, or when a step
 /// gains less than 2^-30 or cannot be certified.
 Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Prepared& p, const Hull& hull,
-                Scalar reach2, std::int64_t max_steps) {
+                Scalar reach2, std::int64_t max_steps, Scalar max_time) {
   Advance r;
   const int half = hull.count / 2;  // the points at t = 0, then the same at t = 1
   Scalar t = 0, progress = 1;
   for (std::int64_t step = 0;; ++step) {
+    if (t >= max_time) {  // no contact before t ≥ max_time
+      r.state = Advance::kSeparated;
+      break;
+    }
     // Closest points at t in plain floating point: they only choose n and a witness candidate.
     CcdPoints x;
     for (int i = 0; i < 4; ++i) x[i] = start[i] + t * (end[i] - start[i]);
@@ -280,12 +286,12 @@ Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, cons
     }
     ++r.steps;
     if (!verified) break;
-    if (next == 1) {
+    progress = next - t;
+    t = next;
+    if (t == 1) {
       r.state = Advance::kSeparated;
       break;
     }
-    progress = next - t;
-    t = next;
   }
   r.t = t;
   return r;
@@ -357,8 +363,10 @@ struct LaterFirst {
   }
 };
 
-/// Bisection of [t_begin, 1] × [0, 1]² (no contact before t_begin is already certified).
-CcdResult bisect(const Prepared& p, Scalar reach2, Scalar tol_t, std::int64_t max_boxes, Scalar t_begin) {
+/// Bisection of [t_begin, 1] × [0, 1]² (no contact before t_begin is already certified); stops
+/// without a hit once the earliest live box starts at or after max_time.
+CcdResult bisect(const Prepared& p, Scalar reach2, Scalar tol_t, std::int64_t max_boxes, Scalar t_begin,
+                 Scalar max_time) {
   std::vector<Box> storage;
   storage.reserve(64);
   std::priority_queue<Box, std::vector<Box>, LaterFirst> queue(LaterFirst{}, std::move(storage));
@@ -367,6 +375,7 @@ CcdResult bisect(const Prepared& p, Scalar reach2, Scalar tol_t, std::int64_t ma
   while (!queue.empty()) {
     const Box box = queue.top();
     queue.pop();
+    if (box.t0 >= max_time) break;  // every live box starts at or after max_time
     if (result.boxes >= max_boxes) {
       // The popped box has the smallest t0 of every box not yet ruled out.
       result.hit = true;
@@ -510,6 +519,7 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   CRUMPLE_CHECK(delta >= 0 && delta <= kMaxMagnitude, "ccd: min_separation must be finite and >= 0");
   CRUMPLE_CHECK(options.max_boxes >= 1, "ccd: max_boxes must be >= 1");
   CRUMPLE_CHECK(options.max_advance_steps >= 0, "ccd: max_advance_steps must be >= 0");
+  CRUMPLE_CHECK(options.max_time >= 0 && options.max_time <= 1, "ccd: max_time must be in [0, 1]");
   CRUMPLE_CHECK(options.distance_tolerance >= 0 && options.time_tolerance >= 0 && options.separation_tolerance >= 0,
                 "ccd: tolerances must be >= 0");
   CcdResult result;
@@ -519,14 +529,17 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
     result.outcome = CcdOutcome::kHitOutOfRange;
     return result;
   }
-  const Prepared p = prepare(pair, start, end, delta);
+  const Vec3 m = max_abs_coordinates(start, end);
+  Prepared p;
+  set_bounds(p, m, delta);
   Scalar extent = 0;
   Hull hull;
   if (!hull_may_touch(pair, start, end, p.bound, extent, hull)) {
     result.outcome = CcdOutcome::kSeparatedHull;
     return result;
   }
-  const Scalar magnitude = max_abs_coordinates(start, end).maxCoeff();
+  prepare(p, pair, start, end);
+  const Scalar magnitude = m.maxCoeff();
   if (delta == 0 && magnitude <= kMaxSignFilterMagnitude && never_coplanar(start, end)) {
     result.outcome = CcdOutcome::kSeparatedCoplanarity;
     return result;
@@ -545,7 +558,7 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   if (magnitude <= kMaxSignFilterMagnitude && options.max_advance_steps > 0) {
     // The closest-point kernels need squared lengths that do not overflow; they only choose
     // directions and witness candidates, so any finite result is safe.
-    const Advance a = advance(pair, start, end, p, hull, reach2, options.max_advance_steps);
+    const Advance a = advance(pair, start, end, p, hull, reach2, options.max_advance_steps, options.max_time);
     steps = a.steps;
     result.advance_steps = steps;
     if (a.state == Advance::kSeparated) {
@@ -560,7 +573,7 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
     }
     t_begin = a.t;
   }
-  result = bisect(p, reach2, tol_t, options.max_boxes, t_begin);
+  result = bisect(p, reach2, tol_t, options.max_boxes, t_begin, options.max_time);
   result.advance_steps = steps;
   return result;
 }

@@ -82,6 +82,11 @@ struct CcdOptions {
   std::int64_t max_boxes = 10000;
   /// Most conservative-advancement steps before bisection takes over (≥ 0; 0: bisection only).
   std::int64_t max_advance_steps = 4096;
+  /// Only contacts before this time are wanted (for a running minimum of TOIs). A hit with
+  /// `toi` < max_time is reported exactly as with max_time = 1; any other query may stop as
+  /// soon as no contact before max_time remains possible and report no hit (outcome
+  /// `kSeparatedAdvancement` or `kSeparatedBisection`). In [0, 1].
+  Scalar max_time = 1;
 };
 
 struct CcdResult {
