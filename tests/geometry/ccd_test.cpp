@@ -212,6 +212,20 @@ TEST(Ccd, AdvancementFindsTranslationalContactsWithoutBisection) {
   EXPECT_GE(r.toi, 0.5 - 1e-9);
 }
 
+TEST(Ccd, ApartAtTheStartButWithinTheToleranceGetsAPositiveTime) {
+  // 1e-9 above the triangle: within the distance tolerance (1e-6 × extent) at t = 0, but apart.
+  // Moving away: no contact at all (it used to be a near-contact hit at t = 0).
+  const CcdResult away = vf(Vec3(0.25, 0.25, 1e-9), Vec3(0.25, 0.25, 1));
+  EXPECT_FALSE(away.hit) << to_string(away.outcome);
+  // Moving through: the TOI is positive and not after the contact at 1e-9 / (1 + 1e-9).
+  const CcdResult through = vf(Vec3(0.25, 0.25, 1e-9), Vec3(0.25, 0.25, -1));
+  ASSERT_TRUE(through.hit);
+  EXPECT_GT(through.toi, 0);
+  EXPECT_LE(through.toi, 1e-9 / (1 + 1e-9));
+  // Touching at t = 0 stays a hit at 0.
+  EXPECT_EQ(vf(Vec3(0.25, 0.25, 0), Vec3(0.25, 0.25, 1)).toi, 0);
+}
+
 TEST(Ccd, NonFiniteOrHugeInputIsAConservativeHit) {
   const Scalar nan = std::numeric_limits<Scalar>::quiet_NaN();
   const CcdResult r = vf(Vec3(nan, 0, 0), Vec3(0, 0, 0));

@@ -237,18 +237,31 @@ Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, cons
     }
     // A witness as the bisection's: a point of the domain (u, v on the 2^-40 grid, so that the
     // VF test u + v ≤ 1 is exact) whose computed F is within reach.
+    // At t = 0 the witness is taken only if no step can be certified: a pair apart at t = 0 by
+    // more than δ and the rounding band gets a TOI > 0 even when it is within reach.
     u = std::floor(std::clamp(u, Scalar(0), Scalar(1)) * 0x1p40) * 0x1p-40;  // NaN compares false: kept
     v = std::floor(std::clamp(v, Scalar(0), Scalar(1)) * 0x1p40) * 0x1p-40;
+    bool witness = false;
     if (u >= 0 && u <= 1 && v >= 0 && v <= 1) {
       if (p.face && u + v > 1) v = 1 - u;
-      if (evaluate(p, t, u, v).squaredNorm() <= reach2) {
-        r.state = Advance::kWitness;
-        break;
-      }
+      witness = evaluate(p, t, u, v).squaredNorm() <= reach2;
     }
-    if (step == max_steps || progress < 0x1p-30) break;
+    const auto stop = [&] {
+      if (witness) r.state = Advance::kWitness;
+    };
+    if (witness && step > 0) {
+      stop();
+      break;
+    }
+    if (step == max_steps || progress < 0x1p-30) {
+      stop();
+      break;
+    }
     const Scalar len = n.norm();
-    if (!(len > 0) || !std::isfinite(len)) break;
+    if (!(len > 0) || !std::isfinite(len)) {
+      stop();
+      break;
+    }
     n /= len;
     std::array<Scalar, 4> s0{}, s1{};
     Scalar mag = 0;
@@ -270,7 +283,10 @@ Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, cons
       }
       return true;
     };
-    if (!above_at(t)) break;
+    if (!above_at(t)) {
+      stop();
+      break;
+    }
     // Earliest time a line falls to the threshold plus a margin; verified below.
     Scalar next = 1;
     for (int i = 0; i < half; ++i) {
@@ -285,7 +301,10 @@ Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, cons
       next = t + (next - t) / 2;
     }
     ++r.steps;
-    if (!verified) break;
+    if (!verified) {
+      stop();
+      break;
+    }
     progress = next - t;
     t = next;
     if (t == 1) {
