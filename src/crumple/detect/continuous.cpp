@@ -88,6 +88,9 @@ struct Tester {
   Counts counts;
   std::atomic<Scalar>* earliest = nullptr;
 
+  /// True when only the step is wanted and it is already 0: no test can lower it.
+  bool done() const { return earliest != nullptr && earliest->load(std::memory_order_relaxed) == 0; }
+
   geometry::CcdOptions narrow_options() const {
     geometry::CcdOptions o = step.narrow;
     if (earliest != nullptr) o.max_time = earliest->load(std::memory_order_relaxed);
@@ -104,6 +107,7 @@ struct Tester {
   }
 
   void vertex_face(Index v, Index f) {
+    if (done()) return;
     const Face& t = step.topo.face(f);
     const auto& vb = step.vertex_box;
     Box fb = vb[static_cast<std::size_t>(t[0])];
@@ -140,6 +144,7 @@ struct Tester {
   }
 
   void edge_edge(Index e0, Index e1) {
+    if (done()) return;
     Edge a = step.topo.edge(e0), b = step.topo.edge(e1);
     if (b < a) {
       std::swap(a, b);
