@@ -19,6 +19,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <functional>
+#include <iterator>
 #include <map>
 #include <optional>
 #include <random>
@@ -562,7 +563,13 @@ TEST(CcdOracle, BudgetLimitedQueriesStartingApartReportAPositiveTime) {
   // With conservative advancement, any budget (even a single box, or 2 advancement steps)
   // reports a TOI > 0 for pairs apart at t = 0, and never later than a contact.
   Tally tally;
-  for (const char* line : kBudgetQueries) {
+#ifdef CRUMPLE_SANITIZED
+  const std::size_t stride = 3;  // the oracle dominates and gains nothing from the sanitizers
+#else
+  const std::size_t stride = 1;
+#endif
+  for (std::size_t i = 0; i < std::size(kBudgetQueries); i += stride) {
+    const char* line = kBudgetQueries[i];
     const Case c = parse_query(line);
     const co::Query q = co::make_query(c.pair == CcdPair::kVertexFace, c.start, c.end, 0);
     ASSERT_GT(co::exact_distance2(q, co::Q(0)), 0) << line;
