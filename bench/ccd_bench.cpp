@@ -7,6 +7,11 @@
 // many the exact GMP oracle (tests/support/ccd_oracle.hpp) certifies as false positives.
 //
 //   ccd_bench [--data DIR] [--max-queries N] [--oracle-sample K] [--scene NAME] [--json]
+//             [--threads 1,2] [--max-boxes N] [--max-advance-steps N] [--profile]
+//
+// Threads claim chunks of 1024 queries dynamically. --max-advance-steps 0 runs bisection alone
+// (the narrow phase before conservative advancement). --profile times each query alone on the
+// 1-thread run and prints, per outcome, its share of the time, ns, steps and boxes per query.
 //
 // δ is 0 and 1e-3 × the first frame's bounding-box diagonal.
 #include <crumple/geometry/ccd.hpp>
@@ -16,12 +21,15 @@
 #include "support/ccd_oracle.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <numeric>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -130,30 +138,47 @@ struct Run {
   double ns_per_query = 0;
   std::array<long long, 16> outcomes{};
   std::vector<std::size_t> hits;
-  long long boxes = 0;
+  long long boxes = 0, steps = 0;
+  // --profile: per outcome, thread ns (each query timed alone), advancement steps and boxes.
+  std::array<double, 16> outcome_ns{};
+  std::array<long long, 16> outcome_steps{}, outcome_boxes{};
 };
 
-Run run(const std::vector<Query>& queries, const Positions& x0, const Positions& x1, Scalar delta, int threads) {
-  geometry::CcdOptions options;
+Run run(const std::vector<Query>& queries, const Positions& x0, const Positions& x1, Scalar delta, int threads,
+        const geometry::CcdOptions& base, bool profile) {
+  geometry::CcdOptions options = base;
   options.min_separation = delta;
+  const bool dump = std::getenv("CCD_BENCH_DUMP") != nullptr;
   std::vector<Run> parts(threads);
+  // Chunks of 1024 queries claimed dynamically: the expensive queries cluster.
+  std::atomic<std::size_t> next{0};
   const auto work = [&](int k) {
     Run& part = parts[k];
-    const std::size_t begin = queries.size() * k / threads, end = queries.size() * (k + 1) / threads;
-    for (std::size_t i = begin; i < end; ++i) {
-      const Query& q = queries[i];
-      const CcdPoints s = {x0[q.v[0]], x0[q.v[1]], x0[q.v[2]], x0[q.v[3]]};
-      const CcdPoints e = {x1[q.v[0]], x1[q.v[1]], x1[q.v[2]], x1[q.v[3]]};
-      const geometry::CcdResult r = geometry::ccd(q.pair, s, e, options);
-      ++part.outcomes[static_cast<int>(r.outcome)];
-      part.boxes += r.boxes;
-      if (r.hit) part.hits.push_back(i);
-      if (std::getenv("CCD_BENCH_DUMP") && r.outcome == CcdOutcome::kHitBudget) {
-        std::fprintf(stderr, "%s", q.pair == CcdPair::kVertexFace ? "vf" : "ee");
-        for (const CcdPoints* x : {&s, &e}) {
-          for (const Vec3& p : *x) std::fprintf(stderr, " %a %a %a", p.x(), p.y(), p.z());
+    for (std::size_t begin; (begin = next.fetch_add(1024)) < queries.size();) {
+      const std::size_t end = std::min(queries.size(), begin + 1024);
+      for (std::size_t i = begin; i < end; ++i) {
+        const Query& q = queries[i];
+        const CcdPoints s = {x0[q.v[0]], x0[q.v[1]], x0[q.v[2]], x0[q.v[3]]};
+        const CcdPoints e = {x1[q.v[0]], x1[q.v[1]], x1[q.v[2]], x1[q.v[3]]};
+        const auto c0 = profile ? std::chrono::steady_clock::now() : std::chrono::steady_clock::time_point{};
+        const geometry::CcdResult r = geometry::ccd(q.pair, s, e, options);
+        const int o = static_cast<int>(r.outcome);
+        if (profile) {
+          part.outcome_ns[o] += std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - c0).count();
+          part.outcome_steps[o] += r.advance_steps;
+          part.outcome_boxes[o] += r.boxes;
         }
-        std::fprintf(stderr, "\n");
+        ++part.outcomes[o];
+        part.boxes += r.boxes;
+        part.steps += r.advance_steps;
+        if (r.hit) part.hits.push_back(i);
+        if (dump && r.outcome == CcdOutcome::kHitBudget) {
+          std::fprintf(stderr, "%s", q.pair == CcdPair::kVertexFace ? "vf" : "ee");
+          for (const CcdPoints* x : {&s, &e}) {
+            for (const Vec3& p : *x) std::fprintf(stderr, " %a %a %a", p.x(), p.y(), p.z());
+          }
+          std::fprintf(stderr, "\n");
+        }
       }
     }
   };
@@ -166,8 +191,14 @@ Run run(const std::vector<Query>& queries, const Positions& x0, const Positions&
   Run total;
   total.ns_per_query = queries.empty() ? 0 : ns / static_cast<double>(queries.size());
   for (const Run& p : parts) {
-    for (int i = 0; i < 16; ++i) total.outcomes[i] += p.outcomes[i];
+    for (int i = 0; i < 16; ++i) {
+      total.outcomes[i] += p.outcomes[i];
+      total.outcome_ns[i] += p.outcome_ns[i];
+      total.outcome_steps[i] += p.outcome_steps[i];
+      total.outcome_boxes[i] += p.outcome_boxes[i];
+    }
     total.boxes += p.boxes;
+    total.steps += p.steps;
     total.hits.insert(total.hits.end(), p.hits.begin(), p.hits.end());
   }
   return total;
@@ -180,7 +211,9 @@ int main(int argc, char** argv) {
   std::size_t max_queries = 1000000;
   int oracle_sample = 100;
   std::string only;
-  bool json = false;
+  bool json = false, profile = false;
+  std::vector<int> thread_counts{1, 2};
+  geometry::CcdOptions base;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const auto value = [&]() -> std::string {
@@ -195,15 +228,26 @@ int main(int argc, char** argv) {
     else if (a == "--oracle-sample") oracle_sample = std::stoi(value());
     else if (a == "--scene") only = value();
     else if (a == "--json") json = true;
-    else {
-      std::fprintf(stderr, "usage: ccd_bench [--data DIR] [--max-queries N] [--oracle-sample K] [--scene NAME] [--json]\n");
+    else if (a == "--profile") profile = true;
+    else if (a == "--max-boxes") base.max_boxes = std::stoll(value());
+    else if (a == "--max-advance-steps") base.max_advance_steps = std::stoll(value());
+    else if (a == "--threads") {
+      thread_counts.clear();
+      std::stringstream list(value());
+      for (std::string item; std::getline(list, item, ',');) thread_counts.push_back(std::max(1, std::stoi(item)));
+    } else {
+      std::fprintf(stderr,
+                   "usage: ccd_bench [--data DIR] [--max-queries N] [--oracle-sample K] [--scene NAME] [--json]\n"
+                   "                 [--threads 1,2] [--max-boxes N] [--max-advance-steps N] [--profile]\n");
       return 2;
     }
   }
   if (!json) {
-    std::printf("| scene | delta | queries | threads | ns/query | hull | coplanar | direction | bisection-no | hits | budget hits | boxes/query | oracle sample: FP / yes / undecided |\n");
-    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    std::printf("| scene | delta | queries | threads | ns/query | hull | coplanar | direction | advancement-no | bisection-no "
+                "| hits | budget hits | steps/query | boxes/query | oracle sample: FP / yes / undecided |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   }
+  std::string profile_table;
   for (const Scene& scene : kScenes) {
     if (!only.empty() && only != scene.name) continue;
     const std::filesystem::path dir = std::filesystem::path(data) / "sample-scalable-ccd";
@@ -228,9 +272,23 @@ int main(int argc, char** argv) {
     for (const Scalar delta : {0.0, 1e-3 * diag}) {
       const std::vector<Query> queries = candidates(m0.positions, m1.positions, m0.faces, edges, delta, max_queries);
       Run one, last;
-      for (const int threads : {1, 2}) {
-        last = run(queries, m0.positions, m1.positions, delta, threads);
+      for (const int threads : thread_counts) {
+        last = run(queries, m0.positions, m1.positions, delta, threads, base, profile && threads == 1);
         if (threads == 1) one = last;
+        if (profile && threads == 1) {
+          char row[256];
+          for (int k = 0; k < geometry::kCcdOutcomeCount; ++k) {
+            const long long count = last.outcomes[k];
+            if (count == 0) continue;
+            const double ns = last.outcome_ns[k];
+            std::snprintf(row, sizeof row, "| %s | %.3g | %s | %lld | %.1f%% | %.0f | %.1f | %.1f |\n", scene.name, delta,
+                          std::string(geometry::to_string(static_cast<CcdOutcome>(k))).c_str(), count,
+                          100.0 * ns / std::max(1.0, std::accumulate(last.outcome_ns.begin(), last.outcome_ns.end(), 0.0)),
+                          ns / static_cast<double>(count), static_cast<double>(last.outcome_steps[k]) / static_cast<double>(count),
+                          static_cast<double>(last.outcome_boxes[k]) / static_cast<double>(count));
+            profile_table += row;
+          }
+        }
         // Oracle sample on the single-thread hits (same set for any thread count).
         int fp = 0, yes = 0, undecided = 0;
         if (threads == 1 && oracle_sample > 0 && !one.hits.empty()) {
@@ -256,27 +314,35 @@ int main(int argc, char** argv) {
         const auto pct = [&](CcdOutcome x) { return 100.0 * static_cast<double>(o[static_cast<int>(x)]) / n; };
         if (json) {
           std::printf("{\"scene\":\"%s\",\"delta\":%.6g,\"queries\":%zu,\"threads\":%d,\"ns_per_query\":%.1f,"
-                      "\"hull_pct\":%.2f,\"coplanarity_pct\":%.2f,\"direction_pct\":%.2f,\"bisection_no_pct\":%.2f,\"hits\":%lld,"
-                      "\"budget_hits\":%lld,\"boxes_per_query\":%.3f,\"oracle_fp\":%d,\"oracle_yes\":%d,"
-                      "\"oracle_undecided\":%d}\n",
+                      "\"hull_pct\":%.2f,\"coplanarity_pct\":%.2f,\"direction_pct\":%.2f,\"advancement_no_pct\":%.2f,"
+                      "\"bisection_no_pct\":%.2f,\"hits\":%lld,\"budget_hits\":%lld,\"steps_per_query\":%.3f,"
+                      "\"boxes_per_query\":%.3f,\"oracle_fp\":%d,\"oracle_yes\":%d,\"oracle_undecided\":%d}\n",
                       scene.name, delta, queries.size(), threads, last.ns_per_query, pct(CcdOutcome::kSeparatedHull),
-                      pct(CcdOutcome::kSeparatedCoplanarity), pct(CcdOutcome::kSeparatedDirection), pct(CcdOutcome::kSeparatedBisection), hits,
-                      o[static_cast<int>(CcdOutcome::kHitBudget)], static_cast<double>(last.boxes) / n, fp, yes, undecided);
-        } else {
-          std::printf("| %s | %.3g | %zu | %d | %.1f | %.1f%% | %.1f%% | %.1f%% | %.1f%% | %lld | %lld | %.2f | %s |\n", scene.name,
-                      delta, queries.size(), threads, last.ns_per_query, pct(CcdOutcome::kSeparatedHull),
                       pct(CcdOutcome::kSeparatedCoplanarity), pct(CcdOutcome::kSeparatedDirection),
-                      pct(CcdOutcome::kSeparatedBisection), hits,
-                      o[static_cast<int>(CcdOutcome::kHitBudget)], static_cast<double>(last.boxes) / n,
+                      pct(CcdOutcome::kSeparatedAdvancement), pct(CcdOutcome::kSeparatedBisection), hits,
+                      o[static_cast<int>(CcdOutcome::kHitBudget)], static_cast<double>(last.steps) / n,
+                      static_cast<double>(last.boxes) / n, fp, yes, undecided);
+        } else {
+          std::printf("| %s | %.3g | %zu | %d | %.1f | %.1f%% | %.1f%% | %.1f%% | %.1f%% | %.1f%% | %lld | %lld | %.2f | %.2f | %s |\n",
+                      scene.name, delta, queries.size(), threads, last.ns_per_query, pct(CcdOutcome::kSeparatedHull),
+                      pct(CcdOutcome::kSeparatedCoplanarity), pct(CcdOutcome::kSeparatedDirection),
+                      pct(CcdOutcome::kSeparatedAdvancement), pct(CcdOutcome::kSeparatedBisection), hits,
+                      o[static_cast<int>(CcdOutcome::kHitBudget)], static_cast<double>(last.steps) / n,
+                      static_cast<double>(last.boxes) / n,
                       threads == 1 ? (std::to_string(fp) + " / " + std::to_string(yes) + " / " + std::to_string(undecided)).c_str() : "");
         }
         std::fflush(stdout);
       }
-      if (one.hits.size() != last.hits.size()) {
+      if (thread_counts.size() > 1 && one.hits.size() != last.hits.size()) {
         std::fprintf(stderr, "ccd_bench: %s: hit counts differ between 1 and 2 threads\n", scene.name);
         return 1;
       }
     }
+  }
+  if (profile && !json) {
+    std::printf("\nPer outcome, 1 thread, each query timed alone (the clock adds ~20 ns a query):\n\n");
+    std::printf("| scene | delta | outcome | queries | share of time | ns/query | steps/query | boxes/query |\n");
+    std::printf("|---|---|---|---|---|---|---|---|\n%s", profile_table.c_str());
   }
   return 0;
 }

@@ -145,6 +145,9 @@ std::size_t check_all(const std::string& name, const std::shared_ptr<const Topol
       // rejections never exceed the brute-force pair count.
       const DetectorStats& st = query.stats();
       EXPECT_EQ(st.get("vf_impacts") + st.get("ee_impacts"), static_cast<double>(impacts.size()));
+      // The step alone (the narrow phase searching only before the running minimum) is the
+      // same number, bit for bit.
+      EXPECT_EQ(query.collision_free_step(x0, x1), earliest(expected)) << name << " " << spec << " step only";
     }
   }
   return expected.size();
@@ -382,6 +385,24 @@ TEST(Continuous, WithinDeltaAtTheStartGivesAZeroStep) {
   ContinuousOptions options;
   options.min_separation = 0.1;  // more than the fold's gap: pairs are within δ at t = 0
   EXPECT_EQ(collision_free_step(mesh.topology_ptr(), mesh.positions(), mesh.positions(), options), 0.0);
+}
+
+TEST(Continuous, FunnelStepAtZeroSeparationIsPositive) {
+  // cloth-funnel 227->228 at δ = 0: no pair touches at t = 0, but bisection alone ended some
+  // queries at its box budget with a TOI of 0, so the collision-free step was 0. The
+  // narrow phase's conservative advancement starts every such search later than 0.
+  const TriMesh m0 = io::read_mesh(testing::data_path("sample-scalable-ccd/cloth-funnel/frames/227.ply"));
+  const TriMesh m1 = io::read_mesh(testing::data_path("sample-scalable-ccd/cloth-funnel/frames/228.ply"));
+  ContinuousQuery query(m0.topology_ptr(), {});
+  ImpactSet impacts;
+  query.query(m0.positions(), m1.positions(), impacts);
+  ASSERT_FALSE(impacts.empty());
+  const Scalar step = collision_free_step(impacts);
+  EXPECT_GT(step, 0.01);
+  EXPECT_LT(step, 1.0);
+  EXPECT_EQ(query.collision_free_step(m0.positions(), m1.positions()), step);
+  for (const auto& i : impacts.vf) EXPECT_GT(i.toi, 0) << "vf " << i.vertex << ' ' << i.face;
+  for (const auto& i : impacts.ee) EXPECT_GT(i.toi, 0) << "ee " << i.edge0 << ' ' << i.edge1;
 }
 
 TEST(Continuous, BadInputThrowsInputError) {

@@ -192,11 +192,38 @@ TEST(Ccd, NearParallelEdgesAreSeparatedByADirection) {
 TEST(Ccd, BudgetGivesAConservativeHit) {
   CcdOptions o;
   o.max_boxes = 1;
+  o.max_advance_steps = 0;  // bisection alone
   const CcdResult r = vf(Vec3(0.25, 0.25, 1), Vec3(0.25, 0.25, -1), o);
   ASSERT_TRUE(r.hit);
   EXPECT_EQ(r.outcome, CcdOutcome::kHitBudget);
   EXPECT_LE(r.toi, 0.5);
   EXPECT_EQ(r.boxes, 1);
+}
+
+TEST(Ccd, AdvancementFindsTranslationalContactsWithoutBisection) {
+  // A pure translation towards the triangle: the closest-point direction's bound is exact, so
+  // one step lands on the contact and the next finds the witness.
+  const CcdResult r = vf(Vec3(0.25, 0.25, 1), Vec3(0.25, 0.25, -1));
+  ASSERT_TRUE(r.hit);
+  EXPECT_EQ(r.outcome, CcdOutcome::kHitTolerance);
+  EXPECT_EQ(r.boxes, 0);
+  EXPECT_LE(r.advance_steps, 2);
+  EXPECT_LE(r.toi, 0.5);
+  EXPECT_GE(r.toi, 0.5 - 1e-9);
+}
+
+TEST(Ccd, ApartAtTheStartButWithinTheToleranceGetsAPositiveTime) {
+  // 1e-9 above the triangle: within the distance tolerance (1e-6 × extent) at t = 0, but apart.
+  // Moving away: no contact at all (it used to be a near-contact hit at t = 0).
+  const CcdResult away = vf(Vec3(0.25, 0.25, 1e-9), Vec3(0.25, 0.25, 1));
+  EXPECT_FALSE(away.hit) << to_string(away.outcome);
+  // Moving through: the TOI is positive and not after the contact at 1e-9 / (1 + 1e-9).
+  const CcdResult through = vf(Vec3(0.25, 0.25, 1e-9), Vec3(0.25, 0.25, -1));
+  ASSERT_TRUE(through.hit);
+  EXPECT_GT(through.toi, 0);
+  EXPECT_LE(through.toi, 1e-9 / (1 + 1e-9));
+  // Touching at t = 0 stays a hit at 0.
+  EXPECT_EQ(vf(Vec3(0.25, 0.25, 0), Vec3(0.25, 0.25, 1)).toi, 0);
 }
 
 TEST(Ccd, NonFiniteOrHugeInputIsAConservativeHit) {

@@ -40,7 +40,7 @@ struct OwnedFace {
 /// Counters of one chunk of work, summed into the query's stats under a lock.
 struct Counts {
   double vf_box_rejected = 0, ee_box_rejected = 0, vf_tests = 0, ee_tests = 0, boxes = 0;
-  std::array<double, 8> outcomes{};  ///< narrow-phase tests per `CcdOutcome`
+  std::array<double, geometry::kCcdOutcomeCount> outcomes{};  ///< narrow-phase tests per `CcdOutcome`
   void add(const Counts& o) {
     for (std::size_t k = 0; k < outcomes.size(); ++k) outcomes[k] += o.outcomes[k];
     vf_box_rejected += o.vf_box_rejected;
@@ -72,13 +72,42 @@ Vec3 at(PositionsView x0, PositionsView x1, Index v, Scalar t) {
   return p + t * (x1[static_cast<std::size_t>(v)] - p);
 }
 
-/// Tests sub-pairs and keeps the impacts (one per thread and chunk).
+/// Lowers an atomic running minimum to `t`.
+void lower_to(std::atomic<Scalar>& bound, Scalar t) {
+  Scalar current = bound.load(std::memory_order_relaxed);
+  while (t < current && !bound.compare_exchange_weak(current, t, std::memory_order_relaxed)) {
+  }
+}
+
+/// Tests sub-pairs and keeps the impacts (one per thread and chunk). With `earliest`, only
+/// the collision-free step is wanted: each test searches only before the running minimum
+/// (`CcdOptions::max_time`), hits lower it and no impact is kept.
 struct Tester {
   const Step& step;
   ImpactSet found;
   Counts counts;
+  std::atomic<Scalar>* earliest = nullptr;
+
+  /// True when only the step is wanted and it is already 0: no test can lower it.
+  bool done() const { return earliest != nullptr && earliest->load(std::memory_order_relaxed) == 0; }
+
+  geometry::CcdOptions narrow_options() const {
+    geometry::CcdOptions o = step.narrow;
+    if (earliest != nullptr) o.max_time = earliest->load(std::memory_order_relaxed);
+    return o;
+  }
+  /// Counts a result; true when its impact is wanted.
+  bool keep(const geometry::CcdResult& r) {
+    counts.boxes += static_cast<double>(r.boxes);
+    ++counts.outcomes[static_cast<std::size_t>(r.outcome)];
+    if (!r.hit) return false;
+    if (earliest == nullptr) return true;
+    lower_to(*earliest, r.toi);
+    return false;
+  }
 
   void vertex_face(Index v, Index f) {
+    if (done()) return;
     const Face& t = step.topo.face(f);
     const auto& vb = step.vertex_box;
     Box fb = vb[static_cast<std::size_t>(t[0])];
@@ -91,11 +120,9 @@ struct Tester {
     ++counts.vf_tests;
     const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
     const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
-    const geometry::CcdResult r =
-        geometry::vertex_face_ccd({s(v), s(t[0]), s(t[1]), s(t[2])}, {e(v), e(t[0]), e(t[1]), e(t[2])}, step.narrow);
-    counts.boxes += static_cast<double>(r.boxes);
-    ++counts.outcomes[static_cast<std::size_t>(r.outcome)];
-    if (!r.hit) return;
+    const geometry::CcdResult r = geometry::vertex_face_ccd({s(v), s(t[0]), s(t[1]), s(t[2])},
+                                                            {e(v), e(t[0]), e(t[1]), e(t[2])}, narrow_options());
+    if (!keep(r)) return;
     VertexFaceImpact impact;
     impact.vertex = v;
     impact.face = f;
@@ -117,6 +144,7 @@ struct Tester {
   }
 
   void edge_edge(Index e0, Index e1) {
+    if (done()) return;
     Edge a = step.topo.edge(e0), b = step.topo.edge(e1);
     if (b < a) {
       std::swap(a, b);
@@ -133,11 +161,9 @@ struct Tester {
     ++counts.ee_tests;
     const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
     const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
-    const geometry::CcdResult r =
-        geometry::edge_edge_ccd({s(a[0]), s(a[1]), s(b[0]), s(b[1])}, {e(a[0]), e(a[1]), e(b[0]), e(b[1])}, step.narrow);
-    counts.boxes += static_cast<double>(r.boxes);
-    ++counts.outcomes[static_cast<std::size_t>(r.outcome)];
-    if (!r.hit) return;
+    const geometry::CcdResult r = geometry::edge_edge_ccd({s(a[0]), s(a[1]), s(b[0]), s(b[1])},
+                                                          {e(a[0]), e(a[1]), e(b[0]), e(b[1])}, narrow_options());
+    if (!keep(r)) return;
     EdgeEdgeImpact impact;
     impact.edge0 = e0;
     impact.edge1 = e1;
@@ -235,10 +261,10 @@ ContinuousQuery::ContinuousQuery(std::shared_ptr<const Topology> topology, Conti
   }
   const geometry::CcdOptions& n = options_.narrow;
   if (!(n.time_tolerance > 0 && n.distance_tolerance >= 0 && n.separation_tolerance >= 0 && n.max_boxes >= 1 &&
-        std::isfinite(n.distance_tolerance) && std::isfinite(n.separation_tolerance))) {
+        n.max_advance_steps >= 0 && std::isfinite(n.distance_tolerance) && std::isfinite(n.separation_tolerance))) {
     throw InputError(
         "continuous query: narrow-phase options need time_tolerance > 0, finite distance and separation "
-        "tolerances >= 0 and max_boxes >= 1");
+        "tolerances >= 0, max_boxes >= 1 and max_advance_steps >= 0");
   }
   options_.narrow.min_separation = delta;
   State& s = *state_;
@@ -329,6 +355,19 @@ std::size_t ContinuousQuery::count_candidates(PositionsView previous, PositionsV
 }
 
 void ContinuousQuery::query(PositionsView previous, PositionsView current, ImpactSet& out) {
+  run(previous, current, out, nullptr);
+}
+
+Scalar ContinuousQuery::collision_free_step(PositionsView previous, PositionsView current) {
+  std::atomic<Scalar> earliest{1};
+  ImpactSet none;
+  run(previous, current, none, &earliest);
+  stats_.set("collision_free_step", earliest.load());
+  return earliest.load();
+}
+
+void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactSet& out,
+                          std::atomic<Scalar>* earliest) {
   out.clear();
   State& s = *state_;
   const Topology& topo = *topology_;
@@ -351,7 +390,7 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
   s.candidates.clear();
   s.candidates.set_consumer([&](std::span<const FacePair> chunk) {
     const auto c0 = std::chrono::steady_clock::now();
-    Tester tester{step, {}, {}};
+    Tester tester{step, {}, {}, earliest};
     for (const FacePair& p : chunk) {
       tester.face_pair(s.faces[static_cast<std::size_t>(p[0])], p[0], s.faces[static_cast<std::size_t>(p[1])], p[1]);
     }
@@ -374,13 +413,13 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
   const auto t2 = std::chrono::steady_clock::now();
   const auto& ovf = s.orphans.vf;
   parallel_for_chunks(ovf.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    Tester tester{step, {}, {}};
+    Tester tester{step, {}, {}, earliest};
     for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[i][0], ovf[i][1]);
     sink.take(tester, 0);
   });
   const auto& oee = s.orphans.ee;
   parallel_for_chunks(oee.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    Tester tester{step, {}, {}};
+    Tester tester{step, {}, {}, earliest};
     for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[i].e[0], oee[i].e[1]);
     sink.take(tester, 0);
   });
@@ -396,7 +435,7 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
   };
   std::atomic<std::size_t> star_pairs{0};
   parallel_for_chunks(s.orphans.stars.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
-    Tester tester{step, {}, {}};
+    Tester tester{step, {}, {}, earliest};
     exact::StarScratch scratch;
     for (std::size_t i = begin; i < end; ++i) {
       const Index v = s.orphans.stars[i];
@@ -417,7 +456,7 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
     exact::BoxTree tree;
     tree.build(boxes);
     parallel_for_chunks(isolated.size(), threads, 64, [&](std::size_t begin, std::size_t end) {
-      Tester tester{step, {}, {}};
+      Tester tester{step, {}, {}, earliest};
       for (std::size_t i = begin; i < end; ++i) {
         Box near = swept_box(isolated[i]);
         near.inflate(half);
@@ -507,7 +546,8 @@ ImpactSet continuous_impacts(std::shared_ptr<const Topology> topology, Positions
 
 Scalar collision_free_step(std::shared_ptr<const Topology> topology, PositionsView previous, PositionsView current,
                            const ContinuousOptions& options) {
-  return collision_free_step(continuous_impacts(std::move(topology), previous, current, options));
+  ContinuousQuery query(std::move(topology), options);
+  return query.collision_free_step(previous, current);
 }
 
 }  // namespace crumple

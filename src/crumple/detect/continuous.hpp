@@ -30,6 +30,7 @@
 #include <crumple/geometry/ccd.hpp>
 #include <crumple/mesh/mesh.hpp>
 
+#include <atomic>
 #include <cstddef>
 #include <filesystem>
 #include <memory>
@@ -140,6 +141,13 @@ class ContinuousQuery {
   /// phase's own counters.
   const DetectorStats& stats() const { return stats_; }
 
+  /// The collision-free step of the step from `previous` to `current`: exactly
+  /// `crumple::collision_free_step` of `query`'s impacts, for every method and thread count,
+  /// but faster: each narrow-phase test searches only before the running minimum of the TOIs
+  /// found so far (`CcdOptions::max_time`; a hit before it is found exactly as without it),
+  /// and no impact is stored. Same errors and stats as `query` (the impact counts are 0).
+  Scalar collision_free_step(PositionsView previous, PositionsView current);
+
   /// The broad phase alone over this step (for benchmarks): its candidates are counted and
   /// dropped. Returns the count; sets `update_ms` and `stream_ms` in `stats()`.
   std::size_t count_candidates(PositionsView previous, PositionsView current);
@@ -147,6 +155,8 @@ class ContinuousQuery {
   struct State;
 
  private:
+  void run(PositionsView previous, PositionsView current, ImpactSet& out, std::atomic<Scalar>* earliest);
+
   std::shared_ptr<const Topology> topology_;
   ContinuousOptions options_;
   DetectorStats stats_;

@@ -1,6 +1,7 @@
 #include <crumple/geometry/ccd.hpp>
 
 #include <crumple/core/error.hpp>
+#include <crumple/geometry/distance.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -24,8 +25,9 @@ constexpr Scalar kUnderflowSlack = 0x1p-1000;
 constexpr Scalar kMaxMagnitude = 0x1p1000;
 /// The coplanarity filter multiplies three differences: it runs only below this magnitude.
 constexpr Scalar kMaxSignFilterMagnitude = 0x1p300;
-/// Smallest box width that is split again. Keeps every box bound a dyadic rational with at
-/// most 40 fractional bits, so 1 - t, midpoints and u + v are exact in binary64.
+/// Smallest box width that is split again. Keeps every u and v bound a dyadic rational with at
+/// most 40 fractional bits, so midpoints and u + v are exact in binary64. (t bounds start at the
+/// advancement's time, any double: 1 - t and the t midpoints may round; docs/ccd.md.)
 constexpr Scalar kMinWidth = 0x1p-40;
 
 /// F(t, u, v) = (1 - t) G⁰(u, v) + t G¹(u, v) with G^τ(u, v) = a^τ + u b^τ + v c^τ: for VF the
@@ -62,8 +64,18 @@ bool in_range(const CcdPoints& start, const CcdPoints& end) {
   return true;
 }
 
-Prepared prepare(CcdPair pair, const CcdPoints& start, const CcdPoints& end, Scalar delta) {
-  Prepared p;
+/// err and the hull bound from the largest |coordinate| per axis `m`.
+void set_bounds(Prepared& p, const Vec3& m, Scalar delta) {
+  for (int k = 0; k < 3; ++k) {
+    p.err[k] = kCornerErrorFactor * m[k] + kUnderflowSlack;
+    p.bound[k] = round_up(p.err[k] + delta);
+  }
+  p.delta = delta;
+  p.delta2_up = round_up(delta * delta);
+}
+
+/// The differences a, b, c at t = 0 and t = 1 (after set_bounds).
+void prepare(Prepared& p, CcdPair pair, const CcdPoints& start, const CcdPoints& end) {
   p.face = pair == CcdPair::kVertexFace;
   for (int tau = 0; tau < 2; ++tau) {
     const CcdPoints& x = tau == 0 ? start : end;
@@ -77,14 +89,6 @@ Prepared prepare(CcdPair pair, const CcdPoints& start, const CcdPoints& end, Sca
       p.c[tau] = x[2] - x[3];  // -(b1 - b0)
     }
   }
-  const Vec3 m = max_abs_coordinates(start, end);
-  for (int k = 0; k < 3; ++k) {
-    p.err[k] = kCornerErrorFactor * m[k] + kUnderflowSlack;
-    p.bound[k] = round_up(p.err[k] + delta);
-  }
-  p.delta = delta;
-  p.delta2_up = round_up(delta * delta);
-  return p;
 }
 
 /// Filter 1: F over the whole domain lies in the convex hull of the difference points at
@@ -167,6 +171,151 @@ bool separated_by_a_direction(CcdPair pair, const CcdPoints& start, const CcdPoi
   return false;
 }
 
+/// F(t, u, v) in the evaluation order docs/ccd.md's error bound assumes: each coordinate within
+/// err of the exact value for t, u, v ∈ [0, 1] (1 - t may round; u, v are used as given).
+Vec3 evaluate(const Prepared& p, Scalar t, Scalar u, Scalar v) {
+  const Scalar w0 = 1 - t;
+  Vec3 f;
+  for (int k = 0; k < 3; ++k) {
+    const Scalar g0 = (p.a[0][k] + u * p.b[0][k]) + v * p.c[0][k];
+    const Scalar g1 = (p.a[1][k] + u * p.b[1][k]) + v * p.c[1][k];
+    f[k] = w0 * g0 + t * g1;
+  }
+  return f;
+}
+
+/// Certified: (1 - t) s0 + t s1 > threshold, for the exact values of the doubles given
+/// (t ∈ [0, 1]). The evaluation errs by at most 3.01 u (|s0| + |s1|) (1 - t, two products and
+/// a sum, each rounded once) plus underflow; 4 u and round_up cover it.
+bool line_above(Scalar s0, Scalar s1, Scalar t, Scalar threshold) {
+  const Scalar value = (1 - t) * s0 + t * s1;
+  return value > round_up(threshold + 4 * kU * (std::abs(s0) + std::abs(s1)));
+}
+
+/// Result of conservative advancement: no contact before `t` (certified); `kSeparated`: none at
+/// all; `kWitness`: a point of the domain at `t` is within the tolerance's reach.
+struct Advance {
+  enum State : std::uint8_t { kOpen, kSeparated, kWitness };
+  State state = kOpen;
+  Scalar t = 0;
+  std::int64_t steps = 0;
+};
+
+/// Conservative advancement along directions (docs/ccd.md). At time t the difference points
+/// d_i(t) = (1 - t) d_i⁰ + t d_i¹ span a hull that holds F(t, ·, ·), so for any n,
+/// n·F(t, u, v) ≥ min_i n·d_i(t), and each n·d_i(t) is linear in t. With s_i^τ the computed
+/// projections of the hull points and `threshold` ≥ δ‖n‖ + their error (separated_along's
+/// bound), every line certified above the threshold at t_k and at t_{k+1} keeps ‖F‖ > δ on
+/// [t_k, t_{k+1}]. n is the closest-point direction at t_k, for which the bound is tight; its
+/// own rounding does not matter (any n is valid). Stops after `max_steps` steps, or when a step
+/// gains less than 2^-30 or cannot be certified.
+Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Prepared& p, const Hull& hull,
+                Scalar reach2, std::int64_t max_steps, Scalar max_time) {
+  Advance r;
+  const int half = hull.count / 2;  // the points at t = 0, then the same at t = 1
+  Scalar t = 0, progress = 1;
+  for (std::int64_t step = 0;; ++step) {
+    if (t >= max_time) {  // no contact before t ≥ max_time
+      r.state = Advance::kSeparated;
+      break;
+    }
+    // Closest points at t in plain floating point: they only choose n and a witness candidate.
+    CcdPoints x;
+    for (int i = 0; i < 4; ++i) x[i] = start[i] + t * (end[i] - start[i]);
+    Vec3 n;
+    Scalar u, v;
+    if (pair == CcdPair::kVertexFace) {
+      const PointTriangleResult q = point_triangle(x[0], x[1], x[2], x[3]);
+      n = x[0] - q.closest;
+      u = q.barycentric[1];
+      v = q.barycentric[2];
+    } else {
+      const SegmentSegmentResult q = segment_segment(x[0], x[1], x[2], x[3]);
+      n = q.closest0 - q.closest1;
+      u = q.s;
+      v = q.t;
+    }
+    // A witness as the bisection's: a point of the domain (u, v on the 2^-40 grid, so that the
+    // VF test u + v ≤ 1 is exact) whose computed F is within reach.
+    // At t = 0 the witness is taken only if no step can be certified: a pair apart at t = 0 by
+    // more than δ and the rounding band gets a TOI > 0 even when it is within reach.
+    u = std::floor(std::clamp(u, Scalar(0), Scalar(1)) * 0x1p40) * 0x1p-40;  // NaN compares false: kept
+    v = std::floor(std::clamp(v, Scalar(0), Scalar(1)) * 0x1p40) * 0x1p-40;
+    bool witness = false;
+    if (u >= 0 && u <= 1 && v >= 0 && v <= 1) {
+      if (p.face && u + v > 1) v = 1 - u;
+      witness = evaluate(p, t, u, v).squaredNorm() <= reach2;
+    }
+    const auto stop = [&] {
+      if (witness) r.state = Advance::kWitness;
+    };
+    if (witness && step > 0) {
+      stop();
+      break;
+    }
+    if (step == max_steps || progress < 0x1p-30) {
+      stop();
+      break;
+    }
+    const Scalar len = n.norm();
+    if (!(len > 0) || !std::isfinite(len)) {
+      stop();
+      break;
+    }
+    n /= len;
+    std::array<Scalar, 4> s0{}, s1{};
+    Scalar mag = 0;
+    for (int i = 0; i < half; ++i) {
+      for (int tau = 0; tau < 2; ++tau) {
+        const Vec3& d = hull.points[i + tau * half];
+        const Scalar a = d.x() * n.x(), b = d.y() * n.y(), c = d.z() * n.z();
+        (tau == 0 ? s0 : s1)[i] = (a + b) + c;
+        mag = std::max(mag, std::abs(a) + std::abs(b) + std::abs(c));
+      }
+    }
+    // separated_along's bound: computed projections within Σ|n_k| err_k + γ3 mag of the exact.
+    const Scalar nn = n.x() * n.x() + n.y() * n.y() + n.z() * n.z();
+    const Scalar slack = std::abs(n.x()) * p.err.x() + std::abs(n.y()) * p.err.y() + std::abs(n.z()) * p.err.z();
+    const Scalar threshold = (p.delta * std::sqrt(nn) + slack + 4 * kU * mag) * (1 + 16 * kU) + kUnderflowSlack;
+    const auto above_at = [&](Scalar time) {
+      for (int i = 0; i < half; ++i) {
+        if (!line_above(s0[i], s1[i], time, threshold)) return false;
+      }
+      return true;
+    };
+    if (!above_at(t)) {
+      stop();
+      break;
+    }
+    // Earliest time a line falls to the threshold plus a margin; verified below.
+    Scalar next = 1;
+    for (int i = 0; i < half; ++i) {
+      if (!(s1[i] < s0[i])) continue;
+      const Scalar margin = threshold + 16 * kU * (std::abs(s0[i]) + std::abs(s1[i])) + kUnderflowSlack;
+      next = std::min(next, (s0[i] - margin) / (s0[i] - s1[i]));
+    }
+    next = std::clamp(next, t, Scalar(1));
+    bool verified = false;
+    for (int attempt = 0; attempt < 3 && next > t; ++attempt) {
+      if ((verified = above_at(next))) break;
+      next = t + (next - t) / 2;
+    }
+    ++r.steps;
+    if (!verified) {
+      stop();
+      break;
+    }
+    progress = next - t;
+    t = next;
+    if (t == 1) {
+      r.state = Advance::kSeparated;
+      break;
+    }
+  }
+  r.t = t;
+  return r;
+}
+
 /// det[a; b; c] of three vectors whose entries are each one rounded difference of inputs,
 /// evaluated in the order of Shewchuk's orient3d, with his a-priori bound
 /// |fl(det) - det| ≤ (7 u + 56 u²) · permanent; we use 8 u · permanent.
@@ -233,17 +382,19 @@ struct LaterFirst {
   }
 };
 
-CcdResult bisect(const Prepared& p, Scalar eps, Scalar sigma, Scalar tol_t, std::int64_t max_boxes) {
-  const Scalar reach = p.delta * (1 + sigma) + eps + p.err.norm();
-  const Scalar reach2 = reach * reach;
+/// Bisection of [t_begin, 1] × [0, 1]² (no contact before t_begin is already certified); stops
+/// without a hit once the earliest live box starts at or after max_time.
+CcdResult bisect(const Prepared& p, Scalar reach2, Scalar tol_t, std::int64_t max_boxes, Scalar t_begin,
+                 Scalar max_time) {
   std::vector<Box> storage;
   storage.reserve(64);
   std::priority_queue<Box, std::vector<Box>, LaterFirst> queue(LaterFirst{}, std::move(storage));
-  queue.push({0, 1, 0, 1, 0, 1, 0});
+  queue.push({t_begin, 1, 0, 1, 0, 1, 0});
   CcdResult result;
   while (!queue.empty()) {
     const Box box = queue.top();
     queue.pop();
+    if (box.t0 >= max_time) break;  // every live box starts at or after max_time
     if (result.boxes >= max_boxes) {
       // The popped box has the smallest t0 of every box not yet ruled out.
       result.hit = true;
@@ -267,7 +418,7 @@ CcdResult bisect(const Prepared& p, Scalar eps, Scalar sigma, Scalar tol_t, std:
         }
         for (int it = 0; it < 2; ++it) {
           const Scalar w1 = ts[it];
-          const Scalar w0 = 1 - w1;  // exact: t has at most 40 fractional bits
+          const Scalar w0 = 1 - w1;  // may round (docs/ccd.md's bound allows it)
           for (int k = 0; k < 3; ++k) f[it * 4 + iu * 2 + iv][k] = w0 * g[0][k] + w1 * g[1][k];
         }
       }
@@ -366,6 +517,7 @@ std::string_view to_string(CcdOutcome outcome) {
     case CcdOutcome::kSeparatedCoplanarity: return "separated-coplanarity";
     case CcdOutcome::kSeparatedDirection: return "separated-direction";
     case CcdOutcome::kSeparatedBisection: return "separated-bisection";
+    case CcdOutcome::kSeparatedAdvancement: return "separated-advancement";
     case CcdOutcome::kHitTolerance: return "hit-tolerance";
     case CcdOutcome::kHitPrecision: return "hit-precision";
     case CcdOutcome::kHitBudget: return "hit-budget";
@@ -385,6 +537,8 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   const Scalar delta = options.min_separation;
   CRUMPLE_CHECK(delta >= 0 && delta <= kMaxMagnitude, "ccd: min_separation must be finite and >= 0");
   CRUMPLE_CHECK(options.max_boxes >= 1, "ccd: max_boxes must be >= 1");
+  CRUMPLE_CHECK(options.max_advance_steps >= 0, "ccd: max_advance_steps must be >= 0");
+  CRUMPLE_CHECK(options.max_time >= 0 && options.max_time <= 1, "ccd: max_time must be in [0, 1]");
   CRUMPLE_CHECK(options.distance_tolerance >= 0 && options.time_tolerance >= 0 && options.separation_tolerance >= 0,
                 "ccd: tolerances must be >= 0");
   CcdResult result;
@@ -394,15 +548,18 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
     result.outcome = CcdOutcome::kHitOutOfRange;
     return result;
   }
-  const Prepared p = prepare(pair, start, end, delta);
+  const Vec3 m = max_abs_coordinates(start, end);
+  Prepared p;
+  set_bounds(p, m, delta);
   Scalar extent = 0;
   Hull hull;
   if (!hull_may_touch(pair, start, end, p.bound, extent, hull)) {
     result.outcome = CcdOutcome::kSeparatedHull;
     return result;
   }
-  if (delta == 0 && max_abs_coordinates(start, end).maxCoeff() <= kMaxSignFilterMagnitude &&
-      never_coplanar(start, end)) {
+  prepare(p, pair, start, end);
+  const Scalar magnitude = m.maxCoeff();
+  if (delta == 0 && magnitude <= kMaxSignFilterMagnitude && never_coplanar(start, end)) {
     result.outcome = CcdOutcome::kSeparatedCoplanarity;
     return result;
   }
@@ -412,7 +569,32 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   }
   const Scalar eps = std::max(options.distance_tolerance * extent, 4 * p.err.maxCoeff());
   const Scalar tol_t = std::clamp(options.time_tolerance, kMinWidth, Scalar(1));
-  return bisect(p, eps, options.separation_tolerance, tol_t, options.max_boxes);
+  // Witnesses: computed ‖F‖ ≤ reach, so the exact point is within reach + ‖err‖.
+  const Scalar reach = delta * (1 + options.separation_tolerance) + eps + p.err.norm();
+  const Scalar reach2 = reach * reach;
+  Scalar t_begin = 0;
+  std::int64_t steps = 0;
+  if (magnitude <= kMaxSignFilterMagnitude && options.max_advance_steps > 0) {
+    // The closest-point kernels need squared lengths that do not overflow; they only choose
+    // directions and witness candidates, so any finite result is safe.
+    const Advance a = advance(pair, start, end, p, hull, reach2, options.max_advance_steps, options.max_time);
+    steps = a.steps;
+    result.advance_steps = steps;
+    if (a.state == Advance::kSeparated) {
+      result.outcome = CcdOutcome::kSeparatedAdvancement;
+      return result;
+    }
+    if (a.state == Advance::kWitness) {
+      result.hit = true;
+      result.toi = a.t;
+      result.outcome = CcdOutcome::kHitTolerance;
+      return result;
+    }
+    t_begin = a.t;
+  }
+  result = bisect(p, reach2, tol_t, options.max_boxes, t_begin, options.max_time);
+  result.advance_steps = steps;
+  return result;
 }
 
 CcdResult vertex_face_ccd(const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {

@@ -9,9 +9,12 @@
 /// Method: inclusion-based bisection of the parameter box (t, u, v) ∈ [0, 1]³ after
 /// Wang, Ferguson, Panozzo, Zorin, Schneider, "A Large-Scale Benchmark and an Inclusion-Based
 /// Algorithm for Continuous Collision Detection", ACM TOG 40(5), 2021 (Tight-Inclusion), with
-/// our own forward rounding-error bound (docs/ccd.md derives it), preceded by two certified
-/// filters: the hull of the difference points and, for δ = 0, the Bernstein signs of the
-/// coplanarity cubic (Shewchuk's orient3d error bound per mixed determinant).
+/// our own forward rounding-error bound (docs/ccd.md derives it), preceded by certified
+/// filters (the hull of the difference points; for δ = 0, the Bernstein signs of the
+/// coplanarity cubic with Shewchuk's orient3d error bound per mixed determinant; fixed
+/// separating directions) and by certified conservative advancement along the closest-point
+/// direction, which proves most pairs apart or lands on the contact, and otherwise leaves the
+/// bisection only [t_k, 1].
 ///
 /// Guarantees (for finite inputs of magnitude ≤ 2^1000, IEEE binary64 round-to-nearest, no
 /// fused multiply-add contraction — the library is built with -ffp-contract=off):
@@ -27,8 +30,10 @@
 ///    `separation_tolerance`).
 ///  - Other hit outcomes (`kHitBudget`, `kHitPrecision`, `kHitOutOfRange`) are conservative
 ///    only: the time is still a lower bound of the first contact, but no contact is claimed.
-///  - Bounded work: at most `max_boxes` boxes are examined, then a hit is reported at the
-///    earliest time not yet ruled out.
+///  - Bounded work: at most `max_advance_steps` advancement steps and `max_boxes` boxes, then
+///    a hit is reported at the earliest time not yet ruled out, which is never before the
+///    advancement's certified time: a pair apart by more than δ (and the rounding band) at
+///    t = 0 never gets a TOI of 0.
 
 #include <crumple/core/types.hpp>
 
@@ -42,17 +47,21 @@ namespace crumple::geometry {
 /// endpoints then edge b's.
 enum class CcdPair : std::uint8_t { kVertexFace, kEdgeEdge };
 
-/// How a query was decided; the first four are "no hit".
+/// How a query was decided; the first five are "no hit".
 enum class CcdOutcome : std::uint8_t {
   kSeparatedHull,         ///< the difference points' hull misses the δ box on some axis
   kSeparatedCoplanarity,  ///< δ = 0 and the 4 points are never coplanar (Bernstein signs)
   kSeparatedDirection,    ///< the difference points project beyond δ along a normal direction
   kSeparatedBisection,    ///< every box of the bisection was rejected
+  kSeparatedAdvancement,  ///< conservative advancement along directions reached t = 1
   kHitTolerance,          ///< a box corner at t ≤ t0 + time_tolerance is within δ(1+σ) + ε + 2‖err‖
   kHitPrecision,          ///< a box could not be split further (dyadic depth limit)
   kHitBudget,             ///< `max_boxes` reached; reported at the earliest live time
   kHitOutOfRange,         ///< non-finite input or magnitude > 2^1000; reported at t = 0
 };
+
+/// Number of `CcdOutcome` values (for per-outcome counters).
+inline constexpr int kCcdOutcomeCount = 9;
 
 /// Name of an outcome, e.g. "separated-hull".
 std::string_view to_string(CcdOutcome outcome);
@@ -71,6 +80,13 @@ struct CcdOptions {
   Scalar separation_tolerance = 0.01;
   /// Most boxes examined before a conservative hit (≥ 1).
   std::int64_t max_boxes = 10000;
+  /// Most conservative-advancement steps before bisection takes over (≥ 0; 0: bisection only).
+  std::int64_t max_advance_steps = 4096;
+  /// Only contacts before this time are wanted (for a running minimum of TOIs). A hit with
+  /// `toi` < max_time is reported exactly as with max_time = 1; any other query may stop as
+  /// soon as no contact before max_time remains possible and report no hit (outcome
+  /// `kSeparatedAdvancement` or `kSeparatedBisection`). In [0, 1].
+  Scalar max_time = 1;
 };
 
 struct CcdResult {
@@ -78,8 +94,10 @@ struct CcdResult {
   /// Conservative time of impact in [0, 1] when `hit`; 1 otherwise.
   Scalar toi = 1;
   CcdOutcome outcome = CcdOutcome::kSeparatedHull;
-  /// Boxes examined by the bisection (0 when a filter decided).
+  /// Boxes examined by the bisection (0 when a filter or the advancement decided).
   std::int64_t boxes = 0;
+  /// Conservative-advancement steps taken.
+  std::int64_t advance_steps = 0;
 };
 
 /// The 4 points of a query at t = 0 (`start`) and t = 1 (`end`), in the order of `CcdPair`.
