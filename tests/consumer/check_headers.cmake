@@ -4,7 +4,8 @@
 get_filename_component(PREFIX "${PREFIX}" ABSOLUTE)
 file(GLOB_RECURSE _installed RELATIVE "${PREFIX}" "${PREFIX}/*.hpp")
 foreach(_internal detect/gather.hpp detect/stochastic_engine.hpp detect/narrow_phase.hpp
-                  detect/exact/narrow_frame.hpp io/io_detail.hpp)
+                  detect/exact/narrow_frame.hpp io/io_detail.hpp io/ply_detail.hpp
+                  detect/hybrid_detail.hpp detect/broad_phase/kdop_tree_detail.hpp)
   if(_installed MATCHES "crumple/${_internal}")
     message(FATAL_ERROR "internal header crumple/${_internal} was installed")
   endif()

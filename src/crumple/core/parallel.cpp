@@ -39,8 +39,8 @@ void cpu_relax() {
 }
 
 /// Read once: `std::thread::hardware_concurrency` reads /sys/devices/system/cpu on every call
-/// (glibc), and the team asked it at the start of every loop: a two-thread loop with an empty
-/// body took 10.7 us from start to join instead of 0.4 (bench/parallel_bench, 2-vCPU VM).
+/// (glibc), a file read that would dominate a small loop if the team asked it at the start of
+/// every loop (bench/parallel_bench.cpp).
 int hardware_threads() {
   static const int count = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   return count;
@@ -170,9 +170,9 @@ Team& team() {
 }
 
 #ifdef CRUMPLE_HAVE_TBB
-/// One arena per thread count, made on first use and kept: making one for every loop cost 12-94
-/// us a call in a loop of small calls (0.5-1.7 us with the arena kept; an exact detector's frame
-/// makes about ten such calls). Never destroyed, so that no loop can outlive its arena at exit.
+/// One arena per thread count, made on first use and kept: making one costs far more than a
+/// small loop's work, and an exact detector's frame makes about ten such calls. Never
+/// destroyed, so that no loop can outlive its arena at exit.
 tbb::task_arena& arena(int threads) {
   static std::mutex mutex;
   static auto* arenas = new std::map<int, std::unique_ptr<tbb::task_arena>>;

@@ -4,12 +4,11 @@
 /// loops (the default), or on oneTBB when crumple is built with it; a plain serial loop
 /// otherwise. Callers must not depend on the order in which chunks run.
 ///
-/// Why a team of its own: an exact detector's frame is some twenty parallel loops of 0.05-5 ms
+/// Why a team of its own: an exact detector's frame is some twenty short parallel loops
 /// separated by short serial steps, and oneTBB's workers go to sleep in those steps; waking them
-/// costs tens of microseconds a loop on a virtual machine. The team's workers spin for
+/// costs more than a small loop's work on a virtual machine. The team's workers spin for
 /// `kTeamSpin` after each loop before they sleep, so the next loop of the frame finds them awake
-/// (docs/benchmarks/exact.md: 3-8% less time for the small meshes' frames on two threads,
-/// within the measurement's noise for the large ones).
+/// (bench/parallel_bench.cpp times both).
 
 #include <crumple/core/types.hpp>
 

@@ -1,8 +1,8 @@
 #pragma once
 /// \file
 /// The generic engine of the stochastic detector (thesis §3.2.2.6: "only the distance functions
-/// between primitives are specialised"). Internal header: used by stochastic.cpp, hybrid.cpp
-/// and their tests.
+/// between primitives are specialised"). Internal header: used by stochastic.cpp, the hybrid
+/// (hybrid_detail.hpp) and their tests.
 ///
 /// `PairEngine<Traits>` runs Algorithm 3 for one primitive pair type. A traits class supplies:
 ///   static constexpr PairType kType;

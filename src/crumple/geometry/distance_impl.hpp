@@ -155,8 +155,8 @@ inline PointSegmentResult point_segment(const Vec3& p, const Vec3& a, const Vec3
 //
 // Deviation from GTE (accuracy only, same decisions in exact arithmetic): H is evaluated from
 // vectors orthogonalised against u (see below), which keeps the distance error O(eps * L) for
-// near-parallel segments; GTE's scalar evaluation loses up to ~1e-8 * L there (measured by
-// tests/geometry/distance_test.cpp before the change).
+// near-parallel segments, where GTE's scalar evaluation loses up to ~1e-8 * L
+// (tests/geometry/distance_test.cpp holds the near-parallel cases).
 // ---------------------------------------------------------------------------------------------
 inline SegmentSegmentResult segment_segment(const Vec3& p0, const Vec3& p1, const Vec3& q0,
                                             const Vec3& q1) {
@@ -285,9 +285,9 @@ inline SegmentSegmentResult segment_segment(const Vec3& p0, const Vec3& p1, cons
 //
 // Frame. Eberly forms the normal equations [a00 a01; a01 a11] (s, t) = -(b0, b1), whose
 // determinant |e0 x e1|^2 cancels catastrophically for thin triangles: the foot is then off by
-// ~eps*L/sin^2(angle) and the region signs become noise near sin^2 ~ eps (measured: errors of
-// order L). Here the frame is local to the first corner of the *longest* side (P0 -> P1, third
-// corner P2; the longest side keeps |x_r| <= 1 below), and is orthogonalised explicitly:
+// ~eps*L/sin^2(angle) and the region signs become noise near sin^2 ~ eps (errors of order L).
+// Here the frame is local to the first corner of the *longest* side (P0 -> P1, third corner
+// P2; the longest side keeps |x_r| <= 1 below), and is orthogonalised explicitly:
 //   e = P1 - P0, r = P2 - P0, q = p - P0,
 //   x_r = r.e/|e|^2, x_q = q.e/|e|^2      (coordinates along the base side)
 //   r_perp = r - x_r e, q_perp = q - x_q e   (parts orthogonal to it; |r_perp| = height H)

@@ -25,9 +25,8 @@
 /// outside `inflate(d)` by ~1 ulp of its coordinates. Where a rigorous broad phase matters
 /// at that level, inflate by d plus a few ulps of the scene size.
 ///
-/// Layout: two arrays of K/2 doubles; every member is inline and unrolled at compile time.
-/// Measured (bench/kernels_bench.cpp) at a few ns for `overlaps` and ~10 ns for an 18-DOP
-/// `from_triangle`.
+/// Layout: two arrays of K/2 doubles; every member is inline and unrolled at compile time
+/// (bench/kernels_bench.cpp times `overlaps` and `from_triangle`).
 
 #include <crumple/core/types.hpp>
 
@@ -147,7 +146,7 @@ class Kdop {
 
   /// Smallest k-DOP holding the triangle (a,b,c) (a convex hull: its corners suffice). The same
   /// slabs as `from_points` of the three, bit for bit: a NaN projection is skipped, as `extend`
-  /// skips it (`lo(u, lo(v, w))` took u alone when v was NaN, and then left out c).
+  /// skips it (a nested `lo(u, lo(v, w))` would take u alone when v is NaN, leaving out c).
   static Kdop from_triangle(const Vec3& a, const Vec3& b, const Vec3& c) {
     Kdop k{Uninitialized{}};
     constexpr Scalar inf = std::numeric_limits<Scalar>::infinity();
@@ -212,9 +211,9 @@ class Kdop {
 
   /// True when every slab pair intersects (closed: touching slabs overlap). Conservative:
   /// may report overlap for disjoint sets, never the reverse. False if either is empty.
-  /// Early exit on the first separating slab, coordinate axes first: measured faster than a
-  /// branch-free loop over all slabs both for disjoint and for overlapping pairs
-  /// (bench/kernels_bench.cpp).
+  /// Early exit on the first separating slab, coordinate axes first: cheaper than a
+  /// branch-free loop over all slabs for disjoint and overlapping pairs alike
+  /// (bench/kernels_bench.cpp compares the two).
   bool overlaps(const Kdop& o) const {
     for (int j = 0; j < kAxes; ++j) {
       if (min_[j] > o.max_[j] || o.min_[j] > max_[j]) return false;

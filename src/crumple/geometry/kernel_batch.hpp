@@ -4,16 +4,16 @@
 /// (`segment_segment`) and point-triangle (`point_triangle`) distances, with what a contact
 /// needs of them.
 ///
-/// The narrow phase of the exact detectors calls the edge-edge kernel about 0.7 million times a
-/// frame on cloth-ball (the vertex-face one 0.2 million), and the scalar kernels spend most of
-/// their ~40 ns a call on branches whose outcome depends on the configuration. A batch
+/// The narrow phase of the exact detectors calls these kernels hundreds of thousands of times a
+/// frame, and the scalar kernels spend most of each call on branches whose outcome depends on
+/// the configuration. A batch
 /// evaluates every branch of the same method for four pairs in vector lanes and selects each
 /// lane's outcome. Every lane performs the scalar kernel's operations, in its order, with no
 /// contraction into fused multiply-adds, so the results are the scalar kernel's bits
 /// (tests/geometry/segment_batch_test.cpp and point_triangle_batch_test.cpp compare them on
 /// random, degenerate and adversarial inputs). The lanes are one AVX2 register, so the batches
 /// run only on a CPU with AVX2 (`has_avx2()`, asked at run time); elsewhere callers use the
-/// scalar kernels (two 128-bit halves measured slower than the scalar segment kernel).
+/// scalar kernels (on two 128-bit halves the segment batch is slower than the scalar kernel).
 ///
 /// The triangle-triangle intersection test (`triangles_intersect`) is exact, so its batch
 /// (`triangles_intersect_x4`) gives the same answers by deciding only what its filters certify

@@ -19,9 +19,9 @@
 ///  - Inputs must be finite, with non-zero coordinates of magnitude within ~[1e-60, 1e60]:
 ///    outside, the products of three coordinates and their rounding errors may underflow
 ///    or overflow and the returned sign may be wrong. NaN gives an unspecified sign.
-///  - Cost of the exact stage (CPU time measured on the development machine): nil when two
-///    points coincide (tested first), ~0.13 us when the coordinate differences are exact in
-///    double (nearby points, Sterbenz), ~1.4 us otherwise.
+///  - Cost of the exact stage: none when two points coincide (tested first); short
+///    expansions when the coordinate differences are exact in double (nearby points,
+///    Sterbenz); expansions about ten times as costly otherwise.
 
 #include <crumple/core/types.hpp>
 

@@ -22,7 +22,7 @@
 ///     their three edges are tested against the other triangle (segment-segment tests
 ///     exactly, in all three coordinate projections when coplanar).
 /// Cost: ~6 filtered orient3d for separated pairs, up to ~24 when they intersect; the exact
-/// fallback (~1 us) only runs on (near-)degenerate configurations. `triangles_intersect`, which
+/// fallback (expansion arithmetic) only runs on (near-)degenerate configurations. `triangles_intersect`, which
 /// need not say how, decides pairs that strictly straddle each other's planes with 2 more
 /// (Guigue & Devillers 2003) and sends the others through steps 2-4.
 

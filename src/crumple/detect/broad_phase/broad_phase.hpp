@@ -173,13 +173,17 @@ struct Box {
   std::array<Scalar, 3> lo;
   std::array<Scalar, 3> hi;
   /// Closed intervals: touching boxes overlap. False when either box has a NaN side.
+  /// Branch-free on purpose: the six comparisons as ints, ANDed bitwise (whether boxes overlap
+  /// is unpredictable in the broad phases' loops).
   bool overlaps(const Box& o) const {
-    return (lo[0] <= o.hi[0]) & (o.lo[0] <= hi[0]) & (lo[1] <= o.hi[1]) & (o.lo[1] <= hi[1]) &
-           (lo[2] <= o.hi[2]) & (o.lo[2] <= hi[2]);
+    return (int(lo[0] <= o.hi[0]) & int(o.lo[0] <= hi[0]) & int(lo[1] <= o.hi[1]) & int(o.lo[1] <= hi[1]) &
+            int(lo[2] <= o.hi[2]) & int(o.lo[2] <= hi[2])) != 0;
   }
+  /// Closed: a point on the boundary is inside. False for a NaN coordinate. Branch-free, as
+  /// `overlaps`.
   bool contains(const Vec3& p) const {
-    return (lo[0] <= p.x()) & (p.x() <= hi[0]) & (lo[1] <= p.y()) & (p.y() <= hi[1]) &
-           (lo[2] <= p.z()) & (p.z() <= hi[2]);
+    return (int(lo[0] <= p.x()) & int(p.x() <= hi[0]) & int(lo[1] <= p.y()) & int(p.y() <= hi[1]) &
+            int(lo[2] <= p.z()) & int(p.z() <= hi[2])) != 0;
   }
   /// The empty box (lo = +inf, hi = -inf): `grow` and `merge` start from it, and keep a side as
   /// it is for a NaN coordinate.

@@ -47,7 +47,7 @@
 ///    k-DOPs by a slack s more and records the candidates of each unit (the first self-test of a
 ///    node of at most 512 faces, or pair test of two such nodes, that the traversal reaches); on
 ///    later frames a unit whose vertices' displacements since then differ by at most s emits
-///    those candidates without being traversed. Exact (the argument is in kdop_tree.cpp). When
+///    those candidates without being traversed. Exact (the argument is in kdop_tree_detail.hpp). When
 ///    more than a quarter of a sample of leaves have moved beyond s the cache is refreshed, and
 ///    when that happens right after a refresh it waits 1, 2, 4, ... 64 frames (deforming cloth
 ///    pays only the sample).
@@ -74,7 +74,7 @@ struct KdopParams {
   /// keeps every pair whose swept k-DOPs overlap.
   bool sweep = false;
   /// Normal-cone culling of self-tests for intersection-only queries (see the file comment).
-  /// Off by default: on the real meshes it skips under 1% of the candidates and costs more
+  /// Off by default: on the real meshes it skips few candidates and costs more
   /// than it saves (docs/exact-detectors.md).
   bool cones = false;
   /// Temporal coherence of the self-traversal for proximity queries (see the file comment):

@@ -113,7 +113,9 @@ void SweepPrune::self_pairs(CandidateBuffer& out, DetectorStats& stats) {
       const Scalar hi = bi.hi[static_cast<std::size_t>(ax)];
       for (std::size_t j = i + 1; j < nf && keys_[j] <= hi; ++j) {
         const Box& bj = sorted_boxes_[j];
-        if ((bi.lo[a1] > bj.hi[a1]) | (bj.lo[a1] > bi.hi[a1]) | (bi.lo[a2] > bj.hi[a2]) | (bj.lo[a2] > bi.hi[a2]))
+        // Branch-free on purpose: the four comparisons as ints, ORed bitwise.
+        if (int(bi.lo[a1] > bj.hi[a1]) | int(bj.lo[a1] > bi.hi[a1]) | int(bi.lo[a2] > bj.hi[a2]) |
+            int(bj.lo[a2] > bi.hi[a2]))
           continue;
         if (faces_share_vertex(sorted_faces_[i], sorted_faces_[j])) continue;
         const Index f = order_[i], g = order_[j];

@@ -205,7 +205,7 @@ struct NarrowFrame {
     const Vec3 &a = corner(t, 0), &b = corner(t, 1), &c = corner(t, 2);
     bool outside = false;
     for (int i = 0; i < 3; ++i) {
-      outside |= !(std::min({a[i], b[i], c[i]}) - pad <= p[i]) | !(p[i] <= std::max({a[i], b[i], c[i]}) + pad);
+      outside |= int(!(std::min({a[i], b[i], c[i]}) - pad <= p[i])) | int(!(p[i] <= std::max({a[i], b[i], c[i]}) + pad));
     }
     return !outside;
   }
