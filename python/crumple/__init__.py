@@ -8,6 +8,11 @@ Five lines, what ``crumple detect`` does::
     det.set_topology(mesh)
     contacts = det.update(mesh.vertices)                # contacts.vf.distance, contacts.ee.normal, ...
 
+Continuous collision detection (the CLI's ``ccd``)::
+
+    impacts = crumple.continuous_impacts(mesh, x0, x1, min_separation=1e-3)   # or ContinuousQuery
+    impacts.vf.toi, impacts.ee.edges, impacts.collision_free_step
+
 Simulation and pictures (the CLI's ``simulate`` and ``render``)::
 
     sim = crumple.Simulation("cloth-on-sphere:n=32")    # crumple.scenes() lists the scenes
@@ -23,10 +28,13 @@ ValueError. The GIL is released while detecting, stepping and drawing. See docs/
 
 from ._crumple import (  # noqa: F401
     Contacts,
+    ContinuousQuery,
     Detector,
     DivergenceError,
     EdgeEdgeContacts,
+    EdgeEdgeImpacts,
     Error,
+    Impacts,
     InputError,
     ParseError,
     PreconditionError,
@@ -34,6 +42,10 @@ from ._crumple import (  # noqa: F401
     TriangleTriangleContacts,
     TriMesh,
     VertexFaceContacts,
+    VertexFaceImpacts,
+    ccd_outcomes,
+    collision_free_step,
+    continuous_impacts,
     default_thickness,
     methods,
     read_mesh,
@@ -44,10 +56,13 @@ from ._crumple import (  # noqa: F401
 
 __all__ = [
     "Contacts",
+    "ContinuousQuery",
     "Detector",
     "DivergenceError",
     "EdgeEdgeContacts",
+    "EdgeEdgeImpacts",
     "Error",
+    "Impacts",
     "InputError",
     "ParseError",
     "PreconditionError",
@@ -55,6 +70,10 @@ __all__ = [
     "TriangleTriangleContacts",
     "TriMesh",
     "VertexFaceContacts",
+    "VertexFaceImpacts",
+    "ccd_outcomes",
+    "collision_free_step",
+    "continuous_impacts",
     "default_thickness",
     "methods",
     "read_mesh",

@@ -175,6 +175,113 @@ class Detector:
     def save_state(self) -> str: ...
     def load_state(self, text: str) -> None: ...
 
+class VertexFaceImpacts:
+    """k vertex-face impacts sorted by (vertex, face); read-only views over the records."""
+    def __len__(self) -> int: ...
+    @property
+    def vertex(self) -> npt.NDArray[np.int32]:
+        """(k,)"""
+    @property
+    def face(self) -> npt.NDArray[np.int32]:
+        """(k,)"""
+    @property
+    def toi(self) -> npt.NDArray[np.float64]:
+        """(k,) conservative time of impact in [0, 1]"""
+    @property
+    def distance(self) -> npt.NDArray[np.float64]:
+        """(k,) at toi"""
+    @property
+    def barycentric(self) -> npt.NDArray[np.float64]:
+        """(k, 3) of the closest point on the face at toi"""
+    @property
+    def normal(self) -> npt.NDArray[np.float64]:
+        """(k, 3) unit, from the face's closest point towards the vertex, at toi"""
+    @property
+    def outcome(self) -> npt.NDArray[np.uint8]:
+        """(k,) index into ccd_outcomes()"""
+
+class EdgeEdgeImpacts:
+    """k edge-edge impacts sorted by vertex ids of (a, b); read-only views over the records."""
+    def __len__(self) -> int: ...
+    @property
+    def edges(self) -> npt.NDArray[np.int32]:
+        """(k, 2) mesh edge ids of a and b"""
+    @property
+    def vertices(self) -> npt.NDArray[np.int32]:
+        """(k, 2, 2): [:, 0] edge a's vertex ids (increasing), [:, 1] edge b's; a < b"""
+    @property
+    def toi(self) -> npt.NDArray[np.float64]:
+        """(k,) conservative time of impact in [0, 1]"""
+    @property
+    def distance(self) -> npt.NDArray[np.float64]:
+        """(k,) at toi"""
+    @property
+    def s(self) -> npt.NDArray[np.float64]:
+        """(k,) closest point on a at toi = (1-s) a0 + s a1"""
+    @property
+    def t(self) -> npt.NDArray[np.float64]:
+        """(k,) closest point on b at toi = (1-t) b0 + t b1"""
+    @property
+    def normal(self) -> npt.NDArray[np.float64]:
+        """(k, 3) unit, from a's closest point towards b's, at toi"""
+    @property
+    def outcome(self) -> npt.NDArray[np.uint8]:
+        """(k,) index into ccd_outcomes()"""
+
+class Impacts:
+    """One continuous query's impacts; its arrays stay valid while referenced (later queries
+    never rewrite a live result)."""
+    @property
+    def vf(self) -> VertexFaceImpacts: ...
+    @property
+    def ee(self) -> EdgeEdgeImpacts: ...
+    @property
+    def collision_free_step(self) -> float:
+        """The earliest toi, or 1 without impacts."""
+    def __len__(self) -> int: ...
+    def write(self, path: _Path) -> None:
+        """The CLI's `ccd --impacts` text format."""
+
+class ContinuousQuery:
+    """Continuous collision detection over a mesh's topology, kept across steps; vertices move
+    linearly from previous to current over t in [0, 1]."""
+    def __init__(self, mesh: TriMesh, *, min_separation: float = 0.0, method: str = "kdop",
+                 threads: int = 0, time_tolerance: float = 1e-6,
+                 distance_tolerance: float = 1e-6, separation_tolerance: float = 0.01,
+                 max_boxes: int = 10000) -> None:
+        """min_separation delta >= 0; method kdop, hash or sap with parameters; threads 0 =
+        all; the narrow phase's options. InputError on bad values."""
+    def query(self, previous: _Positions, current: _Positions) -> Impacts:
+        """(n, 3) real arrays; float64 C-contiguous read in place, others converted once.
+        GIL released. ValueError (shape, count), InputError (non-finite), RuntimeError (in
+        use by another thread)."""
+    @property
+    def stats(self) -> dict[str, float]: ...
+    @property
+    def last_positions_copied(self) -> bool: ...
+    @property
+    def min_separation(self) -> float: ...
+    @property
+    def method(self) -> str: ...
+    @property
+    def threads(self) -> int: ...
+
+def continuous_impacts(mesh: TriMesh, previous: _Positions, current: _Positions, *,
+                       min_separation: float = 0.0, method: str = "kdop", threads: int = 0,
+                       time_tolerance: float = 1e-6, distance_tolerance: float = 1e-6,
+                       separation_tolerance: float = 0.01, max_boxes: int = 10000) -> Impacts:
+    """ContinuousQuery(mesh, ...).query(previous, current) in one call."""
+
+def collision_free_step(mesh: TriMesh, previous: _Positions, current: _Positions, *,
+                        min_separation: float = 0.0, method: str = "kdop", threads: int = 0,
+                        time_tolerance: float = 1e-6, distance_tolerance: float = 1e-6,
+                        separation_tolerance: float = 0.01, max_boxes: int = 10000) -> float:
+    """The earliest conservative toi of the step (nothing comes within min_separation before
+    it), or 1."""
+
+def ccd_outcomes() -> list[str]:
+    """Outcome names by code: 'hit-tolerance' certified; other 'hit-*' conservative only."""
+
 def scenes() -> list[dict[str, Any]]:
     """Every scene: name, summary, params {key: (default, description)}; the last, 'file',
     lists the keys of Simulation.from_mesh."""

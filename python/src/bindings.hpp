@@ -56,6 +56,7 @@ struct PyContacts {
 void bind_errors(py::module_& m);
 void bind_mesh(py::module_& m);
 void bind_detect(py::module_& m);
+void bind_ccd(py::module_& m);
 void bind_sim(py::module_& m);
 
 }  // namespace crumple::python

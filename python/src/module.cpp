@@ -182,5 +182,6 @@ PYBIND11_MODULE(_crumple, m) {
   crumple::python::bind_errors(m);
   crumple::python::bind_mesh(m);
   crumple::python::bind_detect(m);
+  crumple::python::bind_ccd(m);
   crumple::python::bind_sim(m);
 }

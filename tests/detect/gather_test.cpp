@@ -14,7 +14,8 @@
 namespace crumple {
 namespace {
 
-// A record as the detectors' contacts are: ids and a payload that must travel with them.
+// A record as the detectors' contacts are: ids and a payload that must travel with them (or be
+// made again from the ids).
 struct Record {
   Index first = 0, second = 0;
   double payload = 0;
@@ -41,23 +42,35 @@ std::vector<std::vector<Record>> make_parts(std::mt19937& rng, Index keys, std::
   return out;
 }
 
-// `shared`: a scratch kept from earlier calls (else a fresh one).
+// The record that `expect_gathered` hands in by its key alone: its payload is made from the key.
+Record made_of(std::uint64_t key) {
+  const auto first = static_cast<Index>(key >> 32), second = static_cast<Index>(key & 0xFFFFFFFFu);
+  return {first, second, -static_cast<double>(key)};
+}
+void made(const std::uint64_t* keys, std::size_t n, std::vector<Record>& out) {
+  for (std::size_t i = 0; i < n; ++i) out.push_back(made_of(keys[i]));
+}
+
+// `shared`: a scratch kept from earlier calls (else a fresh one). Every third list is handed in
+// as keys alone, its records made by `made`.
 void expect_gathered(const std::vector<std::vector<Record>>& lists, Index keys, int threads,
                      detail::GatherScratch* shared = nullptr) {
   std::vector<std::vector<std::uint64_t>> keys_of(lists.size());
   std::vector<detail::KeyedList<Record>> parts;
   std::vector<Record> want;
   for (std::size_t i = 0; i < lists.size(); ++i) {
-    for (const Record& r : lists[i]) keys_of[i].push_back(r.key());
-    parts.push_back({&lists[i], &keys_of[i]});
-    want.insert(want.end(), lists[i].begin(), lists[i].end());
+    for (const Record& r : lists[i]) {
+      keys_of[i].push_back(r.key());
+      want.push_back(i % 3 == 2 ? made_of(r.key()) : r);
+    }
+    parts.push_back({i % 3 == 2 ? nullptr : &lists[i], &keys_of[i]});
   }
   std::sort(want.begin(), want.end(), [](const Record& a, const Record& b) { return a.key() < b.key(); });
   detail::GatherScratch fresh;
   detail::GatherScratch& scratch = shared != nullptr ? *shared : fresh;
   std::vector<Record> got{{7, 7, 7}};  // stale content is replaced
   for (int round = 0; round < 2; ++round) {  // the scratch is reused
-    detail::gather_sorted(got, parts, keys, threads, scratch);
+    detail::gather_sorted(got, parts, keys, threads, scratch, made);
     ASSERT_EQ(got.size(), want.size());
     for (std::size_t i = 0; i < want.size(); ++i) {
       ASSERT_EQ(got[i].key(), want[i].key()) << "place " << i << " of " << want.size();

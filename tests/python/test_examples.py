@@ -46,3 +46,10 @@ def test_simulate_cloth_writes_a_png(tmp_path):
                          "--size", "64x48", "--threads", 1, "--out", out)
     assert "frame=3" in stdout
     assert is_png(out)
+
+
+def test_ccd_toi_writes_a_png(tmp_path):
+    out = tmp_path / "t.png"
+    stdout = run_example("ccd_toi.py", "--threads", 2, "--out", out)
+    assert "Impacts(vf=" in stdout and "step=" in stdout
+    assert is_png(out)

@@ -24,6 +24,7 @@ struct ExactDetector::State {
   exact::OrphanSleep sleep;
   std::vector<std::uint8_t> face_owns;  ///< per face: bit 0 owns a vertex, bit 1 an edge
   std::vector<Index> edge_rank;         ///< each edge's rank in (first, second vertex) order
+  std::vector<Index> edge_by_rank;      ///< the edge of each rank
   std::vector<exact::PackedFace> packed;
   std::vector<std::array<Vec3, 3>> face_corners;  ///< per face, its corners (frames asking for TT)
   std::vector<std::array<float, 4>> coarse_x;     ///< per vertex, rounded to float (frames asking for VF or EE)
@@ -57,6 +58,10 @@ void ExactDetector::on_topology() {
   s.sleep = {};
   s.face_owns = own.face_owns();
   s.edge_rank = exact::edge_ranks(topo);
+  s.edge_by_rank.assign(s.edge_rank.size(), 0);
+  for (std::size_t e = 0; e < s.edge_rank.size(); ++e) {
+    s.edge_by_rank[static_cast<std::size_t>(s.edge_rank[e])] = static_cast<Index>(e);
+  }
   s.packed.assign(static_cast<std::size_t>(topo.num_faces()), exact::PackedFace{});
   for (Index f = 0; f < topo.num_faces(); ++f) {
     exact::PackedFace& pf = s.packed[static_cast<std::size_t>(f)];
@@ -153,7 +158,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
 
   // The frame's set in canonical order (`sorted_output`: the base class does not sort it again).
   const auto gather_start = std::chrono::steady_clock::now();
-  exact::gather_contacts(frame.parts, topo, threads, s.gather, s.spare_sets, out);
+  exact::gather_contacts(frame, s.edge_by_rank, s.gather, out);
   stats_.set("sort_ms", ms_since(gather_start));
   stats_.set("orphan_vf", static_cast<double>(s.orphans.vf.size()));
   stats_.set("orphan_ee", static_cast<double>(s.orphans.ee.size()));

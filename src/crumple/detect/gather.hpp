@@ -1,7 +1,9 @@
 #pragma once
 /// \file
 /// The exact detectors' last step: the contacts that the narrow phase's chunks found, in
-/// whatever order they were found, put into one list in canonical order.
+/// whatever order they were found, put into one list in canonical order. A chunk may hand in
+/// keys without their records (memory: see exact/gather_contacts.cpp): those records are made
+/// from the keys as they are placed.
 
 #include <crumple/core/error.hpp>
 #include <crumple/core/parallel.hpp>
@@ -39,6 +41,7 @@ struct GatherScratch {
   bool listed = false;              ///< the records are `items`, sorted (else counted)
   std::vector<std::size_t> starts;  ///< where the items of each of `firsts` start, then the total
   std::vector<std::size_t> bound;   ///< ranges of `firsts` that the copy's threads claim
+  std::size_t total = 0;            ///< the records placed
 };
 
 /// True when `gather_place` places `total` records on the calling thread alone, whatever the
@@ -46,7 +49,8 @@ struct GatherScratch {
 inline bool gather_places_serially(std::size_t total) { return total < (std::size_t{1} << 16); }
 
 /// One list of records to gather and their keys (keys[i]: records[i]'s place in the order, as
-/// `gather_sorted` says), listed by whoever wrote the records.
+/// `gather_sorted` says), listed by whoever wrote the records. `records` null: keys alone,
+/// whose records `gather_copy` makes.
 template <class T>
 struct KeyedList {
   const std::vector<T>* records;
@@ -55,8 +59,9 @@ struct KeyedList {
 
 /// `gather_sorted` (below) gathers the records of every list in `parts` into `dest` in the
 /// order of their keys, in two steps that a caller may also run apart: `gather_place` finds
-/// each record's place (and sizes dest), `gather_copy` copies the records there (they must
-/// still be where they were). A key
+/// each record's place, `gather_copy` sizes dest and copies the records there (they must still
+/// be where they were; the keys need not be: they may be freed between the steps, so that they
+/// and dest are never held together). A key
 /// is a record's place in that order as one integer, first criterion << 32 | second, the first
 /// in [0, keys), the second in [0, 2^31) (an `Index`); no two records may have the same key.
 ///
@@ -75,8 +80,7 @@ struct KeyedList {
 /// records than keys / 8 are sorted by key instead of counted: counting would cost more, over
 /// every key.
 template <class T>
-void gather_place(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, Index keys, int threads,
-                  GatherScratch& scratch) {
+void gather_place(const std::vector<KeyedList<T>>& parts, Index keys, int threads, GatherScratch& scratch) {
   using Item = GatherScratch::Item;
   auto& items = scratch.items;
   auto& records = scratch.records;
@@ -89,11 +93,11 @@ void gather_place(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, 
   scratch.listed = false;
   std::vector<std::size_t> offset(parts.size() + 1, 0);
   for (std::size_t i = 0; i < parts.size(); ++i) {
-    CRUMPLE_ASSERT(parts[i].keys->size() == parts[i].records->size());
-    offset[i + 1] = offset[i] + parts[i].records->size();
+    CRUMPLE_ASSERT(parts[i].records == nullptr || parts[i].keys->size() == parts[i].records->size());
+    offset[i + 1] = offset[i] + parts[i].keys->size();
   }
   const std::size_t total = offset.back();
-  dest.resize(total);
+  scratch.total = total;
   if (total == 0) return;
   // Calls f(key, record) on the items [from, to) of the parts put end to end, in order.
   const auto each_item = [&](std::size_t from, std::size_t to, const auto& f) {
@@ -101,6 +105,10 @@ void gather_place(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, 
     for (std::size_t j = from; j < to; ++i) {
       const std::size_t stop = std::min(to, offset[i + 1]);
       const std::uint64_t* key = parts[i].keys->data() + (j - offset[i]);
+      if (parts[i].records == nullptr) {
+        for (; j < stop; ++j) f(*key++, static_cast<const T*>(nullptr));
+        continue;
+      }
       const T* record = parts[i].records->data() + (j - offset[i]);
       for (; j < stop; ++j) f(*key++, record++);
     }
@@ -186,23 +194,69 @@ void gather_place(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, 
   bound.push_back(firsts.size());
 }
 
-/// Second step of `gather_sorted`: copies the records placed by `gather_place` into dest.
-template <class T>
-void gather_copy(std::vector<T>& dest, int threads, GatherScratch& scratch) {
+/// Records of keys handed in alone, made `kMadeAtOnce` at a time where they go: make(keys, n,
+/// made) appends the records of keys[0, n) to `made`.
+template <class T, class Make>
+class MadeRecords {
+ public:
+  static constexpr std::size_t kMadeAtOnce = 256;
+  MadeRecords(std::vector<T>& dest, const Make& make) : dest_(dest), make_(make) {
+    at_.reserve(kMadeAtOnce);
+    keys_.reserve(kMadeAtOnce);
+    made_.reserve(kMadeAtOnce + 4);
+  }
+  /// dest[place] = the record of key, at the latest at the next `flush`.
+  void put(std::size_t place, std::uint64_t key) {
+    at_.push_back(place);
+    keys_.push_back(key);
+    if (keys_.size() == kMadeAtOnce) flush();
+  }
+  void flush() {
+    if (keys_.empty()) return;
+    made_.clear();
+    make_(keys_.data(), keys_.size(), made_);
+    CRUMPLE_ASSERT(made_.size() == keys_.size());
+    for (std::size_t i = 0; i < at_.size(); ++i) dest_[at_[i]] = made_[i];
+    at_.clear();
+    keys_.clear();
+  }
+
+ private:
+  std::vector<T>& dest_;
+  const Make& make_;
+  std::vector<std::size_t> at_;
+  std::vector<std::uint64_t> keys_;
+  std::vector<T> made_;
+};
+
+/// Second step of `gather_sorted`: sizes dest (its storage given back first when it must grow,
+/// so that the old and the new are never held together) and copies the records placed by
+/// `gather_place` into it; make(keys, n, made) appends the records of n keys handed in alone
+/// to `made` (`MadeRecords`).
+template <class T, class Make>
+void gather_copy(std::vector<T>& dest, int threads, GatherScratch& scratch, const Make& make) {
   using Item = GatherScratch::Item;
-  const std::size_t total = dest.size();
+  const std::size_t total = scratch.total;
+  if (total > dest.capacity()) std::vector<T>().swap(dest);
+  dest.resize(total);
   if (total == 0) return;
   if (scratch.listed) {
     const Item* from = scratch.items.data();
     parallel_for_chunks(total, threads, 4096, [&](std::size_t begin, std::size_t end) {
+      MadeRecords<T, Make> made(dest, make);
       for (std::size_t j = begin; j < end; ++j) {
-        if (j + 48 < end) {  // the records are scattered: fetch ahead
+        if (j + 48 < end && from[j + 48].record != nullptr) {  // the records are scattered: fetch ahead
           const auto* ahead = static_cast<const char*>(from[j + 48].record);
           __builtin_prefetch(ahead);
           __builtin_prefetch(ahead + sizeof(T) - 1);
         }
-        dest[j] = *static_cast<const T*>(from[j].record);
+        if (from[j].record != nullptr) {
+          dest[j] = *static_cast<const T*>(from[j].record);
+        } else {
+          made.put(j, from[j].key);
+        }
       }
+      made.flush();
     });
     return;
   }
@@ -214,6 +268,7 @@ void gather_copy(std::vector<T>& dest, int threads, GatherScratch& scratch) {
   constexpr std::size_t kRanked = 128;  // more items under one first criterion: sorted, then copied
   parallel_for_chunks(ranges, threads, 1, [&](std::size_t begin, std::size_t end) {
     std::vector<std::uint64_t> order;  // a large group's (second criterion, item), sorted
+    MadeRecords<T, Make> made(dest, make);
     for (std::size_t r = begin; r < end; ++r) {
       for (std::size_t g = bound[r]; g < std::max(bound[r], bound[r + 1]); ++g) {
         const std::size_t first = starts[g];
@@ -221,11 +276,18 @@ void gather_copy(std::vector<T>& dest, int threads, GatherScratch& scratch) {
         // The records are scattered: fetch ahead.
         for (std::size_t j = first + 48; j < std::min(first + n + 48, total); ++j) {
           const auto* ahead = static_cast<const char*>(records[j]);
+          if (ahead == nullptr) continue;
           __builtin_prefetch(ahead);
           __builtin_prefetch(ahead + sizeof(T) - 1);
         }
+        const std::uint64_t high = static_cast<std::uint64_t>(scratch.firsts[g]) << 32;
         const auto put = [&](std::size_t rank, std::size_t item) {
-          dest[first + rank] = *static_cast<const T*>(records[first + item]);
+          const void* record = records[first + item];
+          if (record != nullptr) {
+            dest[first + rank] = *static_cast<const T*>(record);
+          } else {
+            made.put(first + rank, high | static_cast<std::uint32_t>(seconds[first + item]));
+          }
         };
         if (n > kRanked) {
           order.resize(n);
@@ -257,15 +319,16 @@ void gather_copy(std::vector<T>& dest, int threads, GatherScratch& scratch) {
         }
       }
     }
+    made.flush();
   });
 }
 
 /// Both steps (see `gather_place`).
-template <class T>
+template <class T, class Make>
 void gather_sorted(std::vector<T>& dest, const std::vector<KeyedList<T>>& parts, Index keys, int threads,
-                   GatherScratch& scratch) {
-  gather_place(dest, parts, keys, threads, scratch);
-  gather_copy(dest, threads, scratch);
+                   GatherScratch& scratch, const Make& make) {
+  gather_place(parts, keys, threads, scratch);
+  gather_copy(dest, threads, scratch, make);
 }
 
 }  // namespace crumple::detail

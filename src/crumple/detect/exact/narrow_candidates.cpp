@@ -183,6 +183,7 @@ void block_triangle_triangle(const NarrowFrame& frame, const std::array<Candidat
     } else {
       local.tt_batch.push(g, pb, f, pa, local.set.tt);
     }
+    frame.spill(local);
   }
 }
 

@@ -1,5 +1,7 @@
 #include <crumple/detect/exact/narrow_frame.hpp>
 
+#include <algorithm>
+
 namespace crumple::exact {
 
 NarrowFrame::NarrowFrame(const Topology& topo_, PositionsView x_, ContactKinds kinds_, int threads_,
@@ -19,7 +21,8 @@ NarrowFrame::NarrowFrame(const Topology& topo_, PositionsView x_, ContactKinds k
       face_corners(face_corners_),
       coarse_x(coarse_x_),
       edge_rank(edge_rank_),
-      spares(spares_) {
+      spares(spares_),
+      keep_budget(static_cast<std::size_t>(topo_.num_faces()) * kKeepBytesPerFace) {
   // The box rejections in float lanes, unless the coordinates or the pad are too large for
   // floats (or NaN): then infinite pads, no box rejects, and the separation tests and the
   // kernels decide alone.
@@ -33,28 +36,51 @@ NarrowFrame::NarrowFrame(const Topology& topo_, PositionsView x_, ContactKinds k
   CRUMPLE_ASSERT(!proximity || coarse_x.size() == x.size());
 }
 
-void NarrowFrame::collect(LocalContacts& local) {
-  local.vf_batch.flush(sqr_thickness, local.set.vf);
-  local.ee_batch.flush(sqr_thickness, local.set.ee);
-  local.tt_batch.flush(local.set.tt);
-  // A contact's key: its place in canonical order (`detail::gather_sorted`), listed here so that
-  // the gather reads 8 bytes a contact before the copy instead of the whole record. Edge-edge
-  // contacts are ordered by their first edge's vertices, then the second's: by the edges'
-  // ranks in that order.
+void NarrowFrame::list_keys(LocalContacts& local) const {
+  // A contact's key: its place in canonical order (`detail::gather_sorted`). Edge-edge contacts
+  // are ordered by their first edge's vertices, then the second's: by the edges' ranks in that
+  // order.
   const auto pair_key = [](Index first, Index second) {
     return static_cast<std::uint64_t>(first) << 32 | static_cast<std::uint32_t>(second);
   };
   const auto rank = [&](Index edge) { return edge_rank[static_cast<std::size_t>(edge)]; };
-  const auto list = [](const auto& records, std::vector<std::uint64_t>& keys, const auto& key) {
-    keys.resize(records.size());
-    for (std::size_t i = 0; i < records.size(); ++i) keys[i] = key(records[i]);
+  // The records go to `kept` (with their keys) while the budget allows, else only their keys
+  // to `only`.
+  const auto list = [&](auto& records, auto& kept_records, std::vector<std::uint64_t>& keys,
+                        std::vector<std::uint64_t>& only, const auto& key) {
+    if (records.empty()) return;
+    // The budget counts the storage the kept records take, growth included.
+    const std::size_t size = kept_records.size() + records.size();
+    const std::size_t capacity = size <= kept_records.capacity() ? kept_records.capacity()
+                                                                 : std::max(size, 2 * kept_records.capacity());
+    const std::size_t bytes = (capacity - kept_records.capacity()) * sizeof(records[0]);
+    if (bytes == 0 || kept.fetch_add(bytes) + bytes <= keep_budget) {
+      kept_records.reserve(capacity);
+      for (const auto& c : records) keys.push_back(key(c));
+      kept_records.insert(kept_records.end(), records.begin(), records.end());
+    } else {
+      kept.fetch_sub(bytes);
+      for (const auto& c : records) only.push_back(key(c));
+    }
+    records.clear();
   };
   KeyedContacts& part = local.keyed;
-  list(part.set.vf, part.vf_keys, [&](const VertexFaceContact& c) { return pair_key(c.vertex, c.face); });
-  list(part.set.ee, part.ee_keys, [&](const EdgeEdgeContact& c) { return pair_key(rank(c.edge0), rank(c.edge1)); });
-  list(part.set.tt, part.tt_keys, [&](const TriangleTriangleContact& c) { return pair_key(c.face0, c.face1); });
+  list(local.set.vf, part.set.vf, part.vf_keys, part.vf_only,
+       [&](const VertexFaceContact& c) { return pair_key(c.vertex, c.face); });
+  list(local.set.ee, part.set.ee, part.ee_keys, part.ee_only,
+       [&](const EdgeEdgeContact& c) { return pair_key(rank(c.edge0), rank(c.edge1)); });
+  list(local.set.tt, part.set.tt, part.tt_keys, part.tt_only,
+       [&](const TriangleTriangleContact& c) { return pair_key(c.face0, c.face1); });
+}
+
+void NarrowFrame::collect(LocalContacts& local) {
+  local.vf_batch.flush(sqr_thickness, local.set.vf);
+  local.ee_batch.flush(sqr_thickness, local.set.ee);
+  local.tt_batch.flush(local.set.tt);
+  list_keys(local);
+  KeyedContacts& part = local.keyed;
   const std::lock_guard lock(mutex);
-  if (!part.set.empty()) {
+  if (!part.empty()) {
     parts.push_back(std::move(part));
   } else {
     spares.give(std::move(part));

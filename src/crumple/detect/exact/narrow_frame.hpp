@@ -16,6 +16,7 @@
 #include <crumple/geometry/separation.hpp>
 
 #include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -41,32 +42,43 @@ inline std::size_t storage_bytes(const ContactSet& s) {
   return storage_bytes(s.vf) + storage_bytes(s.ee) + storage_bytes(s.tt);
 }
 
-/// Contacts found by one chunk of the narrow phase, each list with its records' keys (their
-/// places in canonical order, for `detail::gather_sorted`).
+/// Contacts found by one chunk of the narrow phase, each with its key (its place in canonical
+/// order, for `detail::gather_sorted`): records kept with their keys, and keys alone, whose
+/// records the gather makes again (`NarrowFrame::keep_budget`).
 struct KeyedContacts {
   ContactSet set;
-  std::vector<std::uint64_t> vf_keys, ee_keys, tt_keys;
+  std::vector<std::uint64_t> vf_keys, ee_keys, tt_keys;  ///< of set's records
+  std::vector<std::uint64_t> vf_only, ee_only, tt_only;  ///< records not kept
   void clear() {
     set.clear();
-    vf_keys.clear();
-    ee_keys.clear();
-    tt_keys.clear();
+    for (auto* keys : {&vf_keys, &ee_keys, &tt_keys, &vf_only, &ee_only, &tt_only}) keys->clear();
+  }
+  bool empty() const {
+    return set.empty() && vf_only.empty() && ee_only.empty() && tt_only.empty();
   }
 };
 inline std::size_t storage_bytes(const KeyedContacts& c) {
-  return storage_bytes(c.set) + storage_bytes(c.vf_keys) + storage_bytes(c.ee_keys) + storage_bytes(c.tt_keys);
+  return storage_bytes(c.set) + storage_bytes(c.vf_keys) + storage_bytes(c.ee_keys) + storage_bytes(c.tt_keys) +
+         storage_bytes(c.vf_only) + storage_bytes(c.ee_only) + storage_bytes(c.tt_only);
 }
 
 /// Contacts found by one chunk of work, kept until the frame's set is gathered.
 struct LocalContacts {
   explicit LocalContacts(KeyedContacts&& spare) : keyed(std::move(spare)) {}
-  KeyedContacts keyed;
-  ContactSet& set = keyed.set;
+  KeyedContacts keyed;  ///< the contacts found so far, with their keys
+  /// Contacts not listed yet: `NarrowFrame::spill` lists them every `kSpill` or so.
+  ContactSet set;
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
   narrow::VertexFaceBatch vf_batch;        ///< vertex-face pairs queued for the kernel, four at a time
   narrow::EdgeEdgeBatch ee_batch;          ///< edge pairs queued for the kernel, four at a time
   narrow::TriangleTriangleBatch tt_batch;  ///< face pairs queued for the intersection test
 };
+
+/// `LocalContacts::set` holds about this many contacts at most (plus a batch's four).
+inline constexpr std::size_t kSpill = 256;
+/// `NarrowFrame::keep_budget` per face of the mesh: records below it are copied by the gather,
+/// above it made again by their kernel (one more kernel call per contact).
+inline constexpr std::size_t kKeepBytesPerFace = 512;
 
 /// Sub-pairs are taken in blocks: the block's sub-pairs are listed (as 16-bit codes), the
 /// rejections sift the list, and the exact kernels run over what is left.
@@ -163,12 +175,26 @@ struct NarrowFrame {
   const std::vector<Index>& edge_rank;  ///< each edge's rank in (first, second vertex) order
   Spares<KeyedContacts>& spares;
 
+  /// Bytes of records the chunks may keep beside their keys (`kKeepBytesPerFace` a face); the
+  /// records of the others are made again from their keys by the gather, so that a frame
+  /// never holds its records twice beyond this.
+  std::size_t keep_budget;
+  mutable std::atomic<std::size_t> kept{0};  ///< bytes of records kept so far
+
   std::mutex mutex;  ///< guards the members below
   std::vector<KeyedContacts> parts;  ///< each chunk's contacts, gathered in order at the end
   std::size_t vf_tests = 0, ee_tests = 0, tt_tests = 0;
 
   /// Flushes a chunk's queued tests, lists its contacts' keys and hands them in.
   void collect(LocalContacts& local);
+  /// Lists the keys of the contacts in local.set, keeps their records while the frame's kept
+  /// records stay within `keep_budget`, and empties local.set.
+  void list_keys(LocalContacts& local) const;
+  /// `list_keys` once local.set holds `kSpill` contacts: past the budget, a chunk holds its
+  /// contacts' keys, not their records.
+  void spill(LocalContacts& local) const {
+    if (local.set.vf.size() + local.set.ee.size() + local.set.tt.size() >= kSpill) list_keys(local);
+  }
 
   /// Corner k of face t, at x.
   const Vec3& corner(const PackedFace& t, std::size_t k) const { return narrow::at(x, t.v[k]); }
@@ -185,6 +211,7 @@ struct NarrowFrame {
     } else if (auto contact = narrow::vertex_face(v, p, g, a, b, c, sqr_thickness, sqr_distance)) {
       local.set.vf.push_back(*contact);
     }
+    spill(local);
   }
   /// Edge e0 = (p0, p1) of vertices (u0, u1) and edge e1 = (q0, q1) of vertices (w0, w1), each
   /// in any order, past the cheap rejections: the shared kernel, which sees the edges as the
@@ -198,6 +225,7 @@ struct NarrowFrame {
     } else if (auto c = narrow::EdgePair::ordered(e0, u0, u1, p0, p1, e1, w0, w1, q0, q1).test(sqr_thickness, sqr_distance)) {
       local.set.ee.push_back(*c);
     }
+    spill(local);
   }
 
   /// The box of face t padded by `pad` holds p (branch-free; NaN: it does not).
@@ -270,10 +298,12 @@ struct GatherBuffers {
   detail::GatherScratch other;  ///< of the vertex-face and triangle contacts', placed beside them
 };
 
-/// Stage: the frame's contacts, from the chunks' `parts`, into `out` in canonical order; the
-/// parts' storage goes back to `spares`.
-void gather_contacts(std::vector<KeyedContacts>& parts, const Topology& topo, int threads, GatherBuffers& buffers,
-                     Spares<KeyedContacts>& spares, ContactSet& out);
+/// Stage: the frame's contacts, from the chunks' `frame.parts`, into `out` in canonical order:
+/// kept records copied, the others made again from their keys by the kernel that found them
+/// (the same bits). Each kind's keys are freed once its places are found, before `out` is
+/// sized; the parts' storage goes back to `frame.spares`. `edge_by_rank` inverts `edge_ranks`.
+void gather_contacts(NarrowFrame& frame, const std::vector<Index>& edge_by_rank, GatherBuffers& buffers,
+                     ContactSet& out);
 
 /// Each edge's rank in (first vertex, second vertex) order: the key of the edge-edge gather.
 std::vector<Index> edge_ranks(const Topology& topo);

@@ -154,6 +154,7 @@ std::size_t orphans_edge_edge(NarrowFrame& frame, Orphans& orphans, bool refresh
     if (sqr_distance == nullptr) {
       ++local.ee_tests;
       local.ee_batch.push_in_order(o.e[0], o.a, *p[0], *p[1], o.e[1], o.b, *p[2], *p[3], sqr_thickness, local.set.ee);
+      frame.spill(local);
     } else {
       frame.ee_kernel(*p[0], *p[1], o.a[0], o.a[1], o.e[0], *p[2], *p[3], o.b[0], o.b[1], o.e[1], local, sqr_distance);
     }
