@@ -295,10 +295,11 @@ def render(mesh: TriMesh, positions: _Positions | None = None, contacts: Contact
 
 class Simulation:
     """Mass-spring cloth with obstacles and self-collision response (the CLI's `simulate`).
-    Settings keywords (None = the scene's): method, thickness, kinds, response, passes, dt,
-    substeps, integrator, threads."""
+    Settings keywords (None = the scene's): method, thickness, kinds, response, fail_safe,
+    passes, dt, substeps, integrator, threads."""
     def __init__(self, scene: str = "cloth-on-sphere", *, seed: int = 1, method: str | None = ...,
                  thickness: float | None = ..., kinds: str | None = ..., response: bool | None = ...,
+                 fail_safe: bool | None = ...,
                  passes: int | None = ..., dt: float | None = ..., substeps: int | None = ...,
                  integrator: str | None = ..., threads: int = 0) -> None:
         """scene: NAME[:key=value,...] as the CLI's `simulate SPEC`; InputError on bad specs or
@@ -306,7 +307,8 @@ class Simulation:
     @staticmethod
     def from_mesh(mesh: TriMesh, params: str = "", *, method: str | None = ...,
                   thickness: float | None = ..., kinds: str | None = ...,
-                  response: bool | None = ..., passes: int | None = ..., dt: float | None = ...,
+                  response: bool | None = ..., fail_safe: bool | None = ...,
+                  passes: int | None = ..., dt: float | None = ...,
                   substeps: int | None = ..., integrator: str | None = ...,
                   threads: int = 0) -> Simulation:
         """A cloth from a mesh; params: the 'file' scene's keys, e.g. "pins=0;7,stiffness=500"."""
@@ -316,7 +318,8 @@ class Simulation:
         """frames frames; each current_stats key -> (frames,) int64/float64 array, plus
         bounds_min, bounds_max (frames, 3) float64. GIL released while stepping."""
     def current_stats(self) -> dict[str, float]:
-        """frame, time, integrate_ms, detect_ms, response_ms, vf, ee, tt, collision_share,
+        """frame, time, integrate_ms, detect_ms, response_ms, ccd_ms, ccd_impacts, ccd_queries,
+        ccd_zone_vertices, ccd_frozen, vf, ee, tt, collision_share,
         min_distance, obstacle_penetration, cg_iterations, corrections, energy, max_speed."""
     @property
     def positions(self) -> npt.NDArray[np.float64]:

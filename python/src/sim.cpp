@@ -32,6 +32,7 @@ struct SettingsArgs {
   std::optional<double> thickness;
   std::optional<std::string> kinds;
   std::optional<bool> response;
+  std::optional<bool> fail_safe;
   std::optional<int> passes;
   std::optional<double> dt;
   std::optional<int> substeps;
@@ -43,6 +44,7 @@ struct SettingsArgs {
     if (thickness) s.detector.thickness = *thickness;
     if (kinds) s.detector.kinds = ContactKinds::parse(*kinds);
     if (response) s.response = *response;
+    if (fail_safe) s.fail_safe = *fail_safe;
     if (passes) s.passes = *passes;
     if (dt) s.dt = *dt;
     if (substeps) s.substeps = *substeps;
@@ -115,6 +117,11 @@ py::dict stats_dict(const sim::FrameStats& s) {
   d["integrate_ms"] = s.integrate_ms;
   d["detect_ms"] = s.detect_ms;
   d["response_ms"] = s.response_ms;
+  d["ccd_ms"] = s.ccd_ms;
+  d["ccd_impacts"] = s.ccd_impacts;
+  d["ccd_queries"] = s.ccd_queries;
+  d["ccd_zone_vertices"] = s.ccd_zone_vertices;
+  d["ccd_frozen"] = s.ccd_frozen;
   d["vf"] = s.vf;
   d["ee"] = s.ee;
   d["tt"] = s.tt;
@@ -247,6 +254,7 @@ SettingsArgs settings_args(const py::kwargs& kw) {
     else if (key == "thickness") a.thickness = v.cast<double>();
     else if (key == "kinds") a.kinds = v.cast<std::string>();
     else if (key == "response") a.response = v.cast<bool>();
+    else if (key == "fail_safe") a.fail_safe = v.cast<bool>();
     else if (key == "passes") a.passes = v.cast<int>();
     else if (key == "dt") a.dt = v.cast<double>();
     else if (key == "substeps") a.substeps = v.cast<int>();
@@ -254,8 +262,8 @@ SettingsArgs settings_args(const py::kwargs& kw) {
     else if (key == "threads") a.threads = v.cast<int>();
     else {
       throw py::type_error("Simulation: unexpected keyword '" + key +
-                           "' (method, thickness, kinds, response, passes, dt, substeps, "
-                           "integrator, threads; scene options go in the spec text)");
+                           "' (method, thickness, kinds, response, fail_safe, passes, dt, "
+                           "substeps, integrator, threads; scene options go in the spec text)");
     }
   }
   return a;
@@ -269,7 +277,8 @@ PictureArgs picture_args(int width, int height, double yaw, double pitch, std::o
 constexpr const char* kSettingsDoc = R"doc(
 Run settings (keyword-only; None or absent keeps the scene's suggestion, the CLI's options):
 method (detection spec, as Detector's), thickness (contact thickness, m), kinds ("vf,ee"),
-response (bool: self-collision response), passes (>= 1), dt (step, s), substeps (steps per
+response (bool: self-collision response), fail_safe (bool, default on with response: the
+continuous fail-safe that keeps every frame intersection-free, docs/simulation.md), passes (>= 1), dt (step, s), substeps (steps per
 frame), integrator ("implicit-euler", "explicit-euler", "symplectic-euler", "rk4"), threads
 (0 = all). A dt beyond an explicit integrator's stable range is kept as given (the CLI splits it).
 Raises crumple.InputError (a ValueError) on a bad spec, key or value, TypeError on an unknown
@@ -329,7 +338,7 @@ On divergence raises crumple.DivergenceError; the frames before it stay done.
             return stats_dict(s.sim().current_stats());
           },
           "Figures of the current frame: frame, time (s), integrate_ms, detect_ms, response_ms, "
-          "vf, ee, tt (contacts), collision_share (edges in contact, 0..1), min_distance, "
+          "ccd_ms, ccd_impacts, ccd_queries, ccd_zone_vertices, ccd_frozen (the fail-safe), vf, ee, tt (contacts), collision_share (edges in contact, 0..1), min_distance, "
           "obstacle_penetration (m), cg_iterations, corrections, energy (J), max_speed (m/s).")
       .def_property_readonly(
           "positions",
@@ -428,6 +437,7 @@ The GIL is released while drawing. crumple.InputError on a bad size or camera.
             d["thickness"] = st.detector.thickness;
             d["kinds"] = st.detector.kinds.to_string();
             d["response"] = st.response;
+            d["fail_safe"] = st.fail_safe;
             d["passes"] = st.passes;
             d["threads"] = st.detector.threads;
             return d;

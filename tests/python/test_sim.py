@@ -30,7 +30,7 @@ def test_scene_run_same_positions_as_cli_simulate(tmp_path, cli):
     header = csv[0].split(",")
     last = dict(zip(header, csv[-1].split(",")))
     assert int(last["frame"]) == 3
-    for key in ("vf", "ee", "cg_iterations", "corrections"):
+    for key in ("vf", "ee", "cg_iterations", "corrections", "ccd_impacts", "ccd_frozen"):
         assert int(last[key]) == stats[key][-1], key
     assert float(last["energy"]) == pytest.approx(stats["energy"][-1], rel=1e-8)  # 9 digits
 
@@ -50,6 +50,7 @@ def test_arrays_and_settings():
     one = s.advance()
     assert one["frame"] == 1 and set(one) == set(s.current_stats())
     empty = s.run(0)
+    assert s.settings["fail_safe"] is True
     assert empty["frame"].shape == (0,) and empty["bounds_min"].shape == (0, 3)
     # Seeds perturb the scene; the same seed gives the same bits.
     a, b = crumple.Simulation(SPHERE, seed=3), crumple.Simulation(SPHERE, seed=4)
@@ -190,3 +191,14 @@ def test_scenes_lists_every_scene_and_its_keys():
     assert names[-1] == "file" and "cloth-on-sphere" in names
     sphere = next(d for d in crumple.scenes() if d["name"] == "cloth-on-sphere")
     assert sphere["params"]["n"][0] == "16" and sphere["summary"]
+
+
+def test_fail_safe_setting_and_its_figures():
+    """The continuous fail-safe is on by default with response; off, it runs no query."""
+    on = crumple.Simulation(SPHERE, threads=1)
+    off = crumple.Simulation(SPHERE, threads=1, fail_safe=False)
+    assert on.settings["fail_safe"] is True and off.settings["fail_safe"] is False
+    a, b = on.run(3), off.run(3)
+    assert (a["ccd_queries"] >= 1).all() and a["ccd_ms"].dtype == np.float64
+    assert (b["ccd_queries"] == 0).all() and (b["ccd_frozen"] == 0).all()
+    assert a["ccd_frozen"].dtype == np.int64
