@@ -13,74 +13,22 @@
 #include <crumple/mesh/mesh.hpp>
 #include <crumple/mesh/shapes.hpp>
 
-#include <malloc.h>
+#include "support/counting_new.hpp"
+#include "support/meshes.hpp"
 
-#include <algorithm>
-#include <atomic>
 #include <chrono>
-#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <exception>
 #include <fstream>
-#include <new>
-#include <random>
 #include <string>
 
 namespace {
 
-std::atomic<long long> g_live{0};
-std::atomic<long long> g_peak{0};
-
-void* counted(void* p) {
-  if (p == nullptr) throw std::bad_alloc();
-  const auto n = static_cast<long long>(malloc_usable_size(p));
-  const long long now = g_live.fetch_add(n) + n;
-  long long peak = g_peak.load();
-  while (now > peak && !g_peak.compare_exchange_weak(peak, now)) {
-  }
-  return p;
-}
-void uncounted(void* p) noexcept {
-  if (p == nullptr) return;
-  g_live.fetch_sub(static_cast<long long>(malloc_usable_size(p)));
-  std::free(p);
-}
-void* aligned(std::size_t n, std::align_val_t a) {
-  void* p = nullptr;
-  const std::size_t al = std::max(static_cast<std::size_t>(a), sizeof(void*));
-  return counted(posix_memalign(&p, al, n == 0 ? 1 : n) == 0 ? p : nullptr);
-}
-
-}  // namespace
-
-void* operator new(std::size_t n) { return counted(std::malloc(n == 0 ? 1 : n)); }
-void* operator new[](std::size_t n) { return counted(std::malloc(n == 0 ? 1 : n)); }
-void* operator new(std::size_t n, std::align_val_t a) { return aligned(n, a); }
-void* operator new[](std::size_t n, std::align_val_t a) { return aligned(n, a); }
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  try {
-    return counted(std::malloc(n == 0 ? 1 : n));
-  } catch (...) {
-    return nullptr;
-  }
-}
-void* operator new[](std::size_t n, const std::nothrow_t& t) noexcept { return operator new(n, t); }
-void operator delete(void* p) noexcept { uncounted(p); }
-void operator delete[](void* p) noexcept { uncounted(p); }
-void operator delete(void* p, std::size_t) noexcept { uncounted(p); }
-void operator delete[](void* p, std::size_t) noexcept { uncounted(p); }
-void operator delete(void* p, std::align_val_t) noexcept { uncounted(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { uncounted(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { uncounted(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { uncounted(p); }
-void operator delete(void* p, const std::nothrow_t&) noexcept { uncounted(p); }
-void operator delete[](void* p, const std::nothrow_t&) noexcept { uncounted(p); }
-
-namespace {
-
 using namespace crumple;
+using testing::counting::g_live;
+using testing::counting::g_peak;
 
 /// A field of /proc/self/status in kB (VmRSS, VmHWM).
 long long status_kb(const char* field) {
@@ -95,21 +43,6 @@ long long status_kb(const char* field) {
 double record_bytes(const ContactSet& c) {
   return static_cast<double>(c.vf.size() * sizeof(VertexFaceContact) + c.ee.size() * sizeof(EdgeEdgeContact) +
                              c.tt.size() * sizeof(TriangleTriangleContact));
-}
-
-/// The crumpled lattice of the tests (tests/support/meshes.hpp, without the jitter).
-Positions crumpled(const TriMesh& lattice, double amplitude, std::uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(0, 1);
-  const double fx = 1 + 3 * u(rng), fy = 1 + 3 * u(rng), ph = 6.28 * u(rng);
-  Positions out = lattice.positions();
-  for (Vec3& p : out) {
-    const double x = p.x(), y = p.y();
-    p.z() = amplitude * std::sin(fx * 6.28 * x + ph) * std::cos(fy * 6.28 * y);
-    p.x() = x + 0.5 * amplitude * std::sin(fy * 6.28 * y + ph);
-    p.y() = y + 0.5 * amplitude * std::cos(fx * 6.28 * x);
-  }
-  return out;
 }
 
 void run(const std::string& name, const TriMesh& mesh, const Positions& x0, const Positions& x1, Scalar h,
@@ -179,7 +112,7 @@ int main(int argc, char** argv) {
     }
     if (lattice > 0) {
       const TriMesh mesh = shapes::lattice(static_cast<Index>(lattice), static_cast<Index>(lattice));
-      const Positions x0 = crumpled(mesh, 0.15, 7);
+      const Positions x0 = testing::smooth_crumple(mesh, 0.15, 7);
       Positions x1 = x0;
       for (Vec3& p : x1) p *= 0.995;
       run("lattice-" + std::to_string(lattice), mesh, x0, x1, spacings / static_cast<double>(lattice), method, kinds,

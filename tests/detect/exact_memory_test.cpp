@@ -8,69 +8,16 @@
 #include <crumple/mesh/shapes.hpp>
 
 #include <gtest/gtest.h>
+#include "support/counting_new.hpp"
 #include "support/meshes.hpp"
 
-#include <malloc.h>
-
 #include <algorithm>
-#include <atomic>
-#include <cstdlib>
-#include <new>
-
-namespace {
-
-// Bytes held by live allocations of operator new (as malloc_usable_size counts them), and their
-// peak since the last `reset_peak`.
-std::atomic<long long> g_live{0};
-std::atomic<long long> g_peak{0};
-
-void* counted(void* p) {
-  if (p == nullptr) throw std::bad_alloc();
-  const auto n = static_cast<long long>(malloc_usable_size(p));
-  const long long now = g_live.fetch_add(n) + n;
-  long long peak = g_peak.load();
-  while (now > peak && !g_peak.compare_exchange_weak(peak, now)) {
-  }
-  return p;
-}
-void uncounted(void* p) noexcept {
-  if (p == nullptr) return;
-  g_live.fetch_sub(static_cast<long long>(malloc_usable_size(p)));
-  std::free(p);
-}
-void* aligned(std::size_t n, std::align_val_t a) {
-  void* p = nullptr;
-  const std::size_t al = std::max(static_cast<std::size_t>(a), sizeof(void*));
-  return counted(posix_memalign(&p, al, n == 0 ? 1 : n) == 0 ? p : nullptr);
-}
-
-}  // namespace
-
-void* operator new(std::size_t n) { return counted(std::malloc(n == 0 ? 1 : n)); }
-void* operator new[](std::size_t n) { return counted(std::malloc(n == 0 ? 1 : n)); }
-void* operator new(std::size_t n, std::align_val_t a) { return aligned(n, a); }
-void* operator new[](std::size_t n, std::align_val_t a) { return aligned(n, a); }
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  try {
-    return counted(std::malloc(n == 0 ? 1 : n));
-  } catch (...) {
-    return nullptr;
-  }
-}
-void* operator new[](std::size_t n, const std::nothrow_t& t) noexcept { return operator new(n, t); }
-void operator delete(void* p) noexcept { uncounted(p); }
-void operator delete[](void* p) noexcept { uncounted(p); }
-void operator delete(void* p, std::size_t) noexcept { uncounted(p); }
-void operator delete[](void* p, std::size_t) noexcept { uncounted(p); }
-void operator delete(void* p, std::align_val_t) noexcept { uncounted(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { uncounted(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { uncounted(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { uncounted(p); }
-void operator delete(void* p, const std::nothrow_t&) noexcept { uncounted(p); }
-void operator delete[](void* p, const std::nothrow_t&) noexcept { uncounted(p); }
 
 namespace crumple {
 namespace {
+
+using testing::counting::g_live;
+using testing::counting::g_peak;
 
 struct Measured {
   double records = 0;  // bytes of the larger output's records: count x sizeof(record)

@@ -57,8 +57,8 @@ inline Positions jitter(PositionsView x, double amplitude, std::uint64_t seed) {
   return out;
 }
 
-/// A lattice crumpled by a smooth seeded random displacement field plus noise: many near pairs.
-inline Positions crumple_lattice(const TriMesh& lattice, double amplitude, std::uint64_t seed) {
+/// A lattice displaced by a smooth seeded random field (folds of height `amplitude`).
+inline Positions smooth_crumple(const TriMesh& lattice, double amplitude, std::uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(0, 1);
   const double fx = 1 + 3 * u(rng), fy = 1 + 3 * u(rng), ph = 6.28 * u(rng);
@@ -69,7 +69,12 @@ inline Positions crumple_lattice(const TriMesh& lattice, double amplitude, std::
     p.x() = x + 0.5 * amplitude * std::sin(fy * 6.28 * y + ph);
     p.y() = y + 0.5 * amplitude * std::cos(fx * 6.28 * x);
   }
-  return jitter(out, amplitude * 0.05, seed + 1);
+  return out;
+}
+
+/// A lattice crumpled by a smooth seeded random displacement field plus noise: many near pairs.
+inline Positions crumple_lattice(const TriMesh& lattice, double amplitude, std::uint64_t seed) {
+  return jitter(smooth_crumple(lattice, amplitude, seed), amplitude * 0.05, seed + 1);
 }
 
 }  // namespace crumple::testing

@@ -10,26 +10,31 @@ namespace {
 inline std::size_t at(Index i) { return static_cast<std::size_t>(i); }
 }  // namespace
 
-Stencil make_stencil(const VertexFaceContact& c, std::span<const Face> faces) {
-  CRUMPLE_CHECK(c.face >= 0 && at(c.face) < faces.size(), "vertex-face contact face out of range");
-  const Face& f = faces[at(c.face)];
+Stencil vertex_face_stencil(Index vertex, const Face& f, const Vec3& w, const Vec3& normal) {
   Stencil s;
   s.count = 4;
-  s.vertex = {c.vertex, f[0], f[1], f[2]};
-  s.weight = {1, -c.barycentric[0], -c.barycentric[1], -c.barycentric[2]};
-  s.normal = c.normal;
+  s.vertex = {vertex, f[0], f[1], f[2]};
+  s.weight = {1, -w[0], -w[1], -w[2]};
+  s.normal = normal;
   return s;
 }
 
-Stencil make_stencil(const EdgeEdgeContact& c) {
+Stencil edge_edge_stencil(const Edge& a, const Edge& b, Scalar s_a, Scalar t_b, const Vec3& normal) {
   Stencil s;
   s.count = 4;
-  s.vertex = {c.a[0], c.a[1], c.b[0], c.b[1]};
-  s.weight = {-(1 - c.s), -c.s, 1 - c.t, c.t};
-  s.normal = c.normal;
+  s.vertex = {a[0], a[1], b[0], b[1]};
+  s.weight = {-(1 - s_a), -s_a, 1 - t_b, t_b};
+  s.normal = normal;
   s.edge_edge = true;
   return s;
 }
+
+Stencil make_stencil(const VertexFaceContact& c, std::span<const Face> faces) {
+  CRUMPLE_CHECK(c.face >= 0 && at(c.face) < faces.size(), "vertex-face contact face out of range");
+  return vertex_face_stencil(c.vertex, faces[at(c.face)], c.barycentric, c.normal);
+}
+
+Stencil make_stencil(const EdgeEdgeContact& c) { return edge_edge_stencil(c.a, c.b, c.s, c.t, c.normal); }
 
 std::vector<Stencil> make_stencils(const ContactSet& contacts, std::span<const Face> faces) {
   std::vector<Stencil> out;

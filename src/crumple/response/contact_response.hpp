@@ -44,6 +44,11 @@ struct Stencil {
 /// that crossed is still pushed back to the side it came from); kept when the primitives touch.
 void refresh_stencil(Stencil& stencil, std::span<const Vec3> positions);
 
+/// Stencil of `vertex` against face `f` at barycentric coordinates `w` (weights 1, −w), with
+/// `normal`: the one form shared by proximity contacts and continuous impacts.
+Stencil vertex_face_stencil(Index vertex, const Face& f, const Vec3& w, const Vec3& normal);
+/// Stencil of edges `a` and `b` at their closest-point parameters `s` and `t`, with `normal`.
+Stencil edge_edge_stencil(const Edge& a, const Edge& b, Scalar s, Scalar t, const Vec3& normal);
 /// Stencil of a vertex–face contact; `faces` gives the face's corners.
 Stencil make_stencil(const VertexFaceContact& contact, std::span<const Face> faces);
 /// Stencil of an edge–edge contact.

@@ -13,25 +13,6 @@ namespace crumple::response {
 namespace {
 inline std::size_t at(Index i) { return static_cast<std::size_t>(i); }
 
-Stencil stencil_of(const VertexFaceImpact& c, const Face& f) {
-  Stencil s;
-  s.count = 4;
-  s.vertex = {c.vertex, f[0], f[1], f[2]};
-  s.weight = {1, -c.barycentric[0], -c.barycentric[1], -c.barycentric[2]};
-  s.normal = c.normal;
-  return s;
-}
-
-Stencil stencil_of(const EdgeEdgeImpact& c) {
-  Stencil s;
-  s.count = 4;
-  s.vertex = {c.a[0], c.a[1], c.b[0], c.b[1]};
-  s.weight = {-(1 - c.s), -c.s, 1 - c.t, c.t};
-  s.normal = c.normal;
-  s.edge_edge = true;
-  return s;
-}
-
 /// Union–find root with path halving.
 Index root(std::vector<Index>& parent, Index i) {
   while (parent[at(i)] != i) {
@@ -129,12 +110,12 @@ std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> posit
   };
   const auto faces = topology_->faces();
   for (const VertexFaceImpact& c : impacts_.vf) {
-    Stencil s = stencil_of(c, faces[at(c.face)]);
+    Stencil s = vertex_face_stencil(c.vertex, faces[at(c.face)], c.barycentric, c.normal);
     if (c.toi == 0 && c.distance <= delta && !touches(geometry::CcdPair::kVertexFace, s.vertex)) continue;
     live_.push_back(s);
   }
   for (const EdgeEdgeImpact& c : impacts_.ee) {
-    Stencil s = stencil_of(c);
+    Stencil s = edge_edge_stencil(c.a, c.b, c.s, c.t, c.normal);
     if (c.toi == 0 && c.distance <= delta && !touches(geometry::CcdPair::kEdgeEdge, s.vertex)) continue;
     live_.push_back(s);
   }
