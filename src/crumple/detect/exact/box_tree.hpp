@@ -24,7 +24,7 @@ class BoxTree {
     items_.clear();
     for (std::size_t i = 0; i < boxes.size(); ++i) {
       const Box& b = boxes[i];
-      if ((b.lo[0] <= b.hi[0]) & (b.lo[1] <= b.hi[1]) & (b.lo[2] <= b.hi[2])) items_.push_back(static_cast<std::uint32_t>(i));
+      if (b.lo[0] <= b.hi[0] && b.lo[1] <= b.hi[1] && b.lo[2] <= b.hi[2]) items_.push_back(static_cast<std::uint32_t>(i));
     }
     nodes_.clear();
     if (!items_.empty()) split(0, items_.size());
