@@ -39,19 +39,11 @@ double decode_real(const unsigned char* p, PlyType t, bool swap) {
   return 0;
 }
 
-// Integer types only.
+// Integer types only (0 for the float types). Every PLY integer type has at most 32 bits, so
+// its value is exact in the double of `decode_real`.
 std::int64_t decode_int(const unsigned char* p, PlyType t, bool swap) {
-  switch (t) {
-    case PlyType::Int8: return static_cast<std::int8_t>(p[0]);
-    case PlyType::UInt8: return p[0];
-    case PlyType::Int16: return static_cast<std::int16_t>(load_unsigned<std::uint16_t>(p, swap));
-    case PlyType::UInt16: return load_unsigned<std::uint16_t>(p, swap);
-    case PlyType::Int32: return static_cast<std::int32_t>(load_unsigned<std::uint32_t>(p, swap));
-    case PlyType::UInt32: return load_unsigned<std::uint32_t>(p, swap);
-    case PlyType::Float32:
-    case PlyType::Float64: break;
-  }
-  return 0;
+  if (t == PlyType::Float32 || t == PlyType::Float64) return 0;
+  return static_cast<std::int64_t>(decode_real(p, t, swap));
 }
 
 class BinaryBody {
