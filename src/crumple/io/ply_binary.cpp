@@ -149,12 +149,12 @@ class BinaryBody {
       pos_ += bytes;
       return;
     }
-    for (std::uint64_t i = 0; i < e.count; ++i) skip_properties(e, i, -1);
+    for (std::uint64_t i = 0; i < e.count; ++i) skip_properties(e, i, 0, e.properties.size());
   }
 
-  // Skips the properties of element i after property `from` (all of them for -1).
-  void skip_properties(const PlyElement& e, std::uint64_t i, int from) {
-    for (std::size_t p = static_cast<std::size_t>(from + 1); p < e.properties.size(); ++p) {
+  // Skips properties [begin, end) of element i.
+  void skip_properties(const PlyElement& e, std::uint64_t i, std::size_t begin, std::size_t end) {
+    for (std::size_t p = begin; p < end; ++p) {
       const PlyProperty& prop = e.properties[p];
       if (prop.is_list) {
         pos_ += read_list_count(e, i, prop) * size_of(prop.type);
@@ -224,7 +224,7 @@ class BinaryBody {
     const std::uint64_t fit = (size_ - pos_) / (size_of(list.count_type) + 3 * item);
     faces.reserve(faces.size() + static_cast<std::size_t>(std::min<std::uint64_t>(e.count, fit)));
     for (std::uint64_t i = 0; i < e.count; ++i) {
-      skip_properties_before(e, i, list_index);
+      skip_properties(e, i, 0, list_index);
       const std::size_t count_at = pos_;
       const std::size_t n = read_list_count(e, i, list);
       if (n < 3) {
@@ -257,19 +257,7 @@ class BinaryBody {
       if (faces.size() > static_cast<std::size_t>(std::numeric_limits<Index>::max())) {
         fail_at_byte(path_, static_cast<std::int64_t>(pos_), "too many triangles (at most 2^31-1)");
       }
-      skip_properties(e, i, static_cast<int>(list_index));
-    }
-  }
-
-  void skip_properties_before(const PlyElement& e, std::uint64_t i, std::size_t end) {
-    for (std::size_t p = 0; p < end; ++p) {
-      const PlyProperty& prop = e.properties[p];
-      if (prop.is_list) {
-        pos_ += read_list_count(e, i, prop) * size_of(prop.type);
-      } else {
-        require(size_of(prop.type), e, i, prop.name);
-        pos_ += size_of(prop.type);
-      }
+      skip_properties(e, i, list_index + 1, e.properties.size());
     }
   }
 
