@@ -19,6 +19,8 @@
 #include <charconv>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
+#include <limits>
 #include <mutex>
 #include <string>
 #include <tuple>
@@ -31,24 +33,54 @@ namespace {
 /// A face with what it owns (exact/ownership.hpp): VF (v, g) is tested only in the face pair
 /// {owner(v), g}, EE (e1, e2) only in {owner(e1), owner(e2)}.
 struct OwnedFace {
-  Face v;
-  std::array<Index, 3> e;
+  std::uint8_t vertex_mask = 0;  // the masks first: FaceFrame keeps them in its first cache line
+  std::uint8_t edge_mask = 0;
   /// Side k's corners (k and (k + 1) % 3) in increasing vertex id: the edge's order.
   std::array<std::array<std::uint8_t, 2>, 3> side{};
-  std::uint8_t vertex_mask = 0;
-  std::uint8_t edge_mask = 0;
+  Face v;
+  std::array<Index, 3> e;
 };
 
-/// A face's corners at t = 0 and t = 1 and their slabs: the one record a candidate reads per
-/// face, filled once per step in face order (no scattered loads per sub-pair).
-struct FaceFrame {
+/// Rounds toward −∞ (`down`) or +∞ (`up`) to float: a face test on these bounds is never
+/// stronger than on the doubles (a lower lo and a higher hi only lower fl(lo_f − hi_g), rounding
+/// being monotone), so it too rejects only what the narrow phase's hull filter rejects.
+float down(Scalar x) {
+  float f = static_cast<float>(x);
+  if (static_cast<Scalar>(f) > x) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
+  return f;
+}
+float up(Scalar x) {
+  float f = static_cast<float>(x);
+  if (static_cast<Scalar>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
+}
+
+/// A face's record for one step, filled once in face order: a candidate reads two records
+/// instead of scattered vertex positions. The first cache line holds what the face-level test
+/// reads (most candidates stop there); the corners and ids follow.
+struct alignas(64) FaceFrame {
+  /// Per time τ, the corners' box rounded outwards to float: lo at [τ][0..2], hi at [τ][3..5].
+  std::array<std::array<float, 6>, 2> box;
+  OwnedFace own;                         ///< its masks in the first cache line
   std::array<std::array<Vec3, 3>, 2> x;  ///< x[τ][corner]
-  geometry::CcdSlabs slabs;
 };
+static_assert(offsetof(FaceFrame, own) + 2 <= 64, "the face test reads one cache line");
+
+/// The slab test of two face records on their float boxes (ccd_slabs_apart's test).
+bool boxes_apart(const FaceFrame& a, const FaceFrame& b, Scalar bound) {
+  int apart = 0;
+  for (std::size_t k = 0; k < 3; ++k) {
+    apart |= int(Scalar(a.box[0][k]) - Scalar(b.box[0][k + 3]) > bound) &
+             int(Scalar(a.box[1][k]) - Scalar(b.box[1][k + 3]) > bound);
+    apart |= int(Scalar(b.box[0][k]) - Scalar(a.box[0][k + 3]) > bound) &
+             int(Scalar(b.box[1][k]) - Scalar(a.box[1][k + 3]) > bound);
+  }
+  return apart != 0;
+}
 
 /// Counters of one chunk of work, summed into the query's stats under a lock.
 struct Counts {
-  double vf_box_rejected = 0, ee_box_rejected = 0, vf_tests = 0, ee_tests = 0, boxes = 0;
+  double vf_box_rejected = 0, ee_box_rejected = 0, vf_tests = 0, ee_tests = 0, boxes = 0, face_pairs_apart = 0;
   std::array<double, geometry::kCcdOutcomeCount> outcomes{};  ///< narrow-phase tests per `CcdOutcome`
   void add(const Counts& o) {
     for (std::size_t k = 0; k < outcomes.size(); ++k) outcomes[k] += o.outcomes[k];
@@ -57,6 +89,7 @@ struct Counts {
     vf_tests += o.vf_tests;
     ee_tests += o.ee_tests;
     boxes += o.boxes;
+    face_pairs_apart += o.face_pairs_apart;
   }
 };
 
@@ -71,7 +104,17 @@ struct Step {
   geometry::CcdOptions narrow;
 };
 
-/// The slabs of points `i` and `j` of a face record (an edge), or of point `i` alone (i = j).
+/// The slabs of a face record's three corners.
+geometry::CcdSlabs slabs_of(const FaceFrame& r) {
+  geometry::CcdSlabs s;
+  for (std::size_t tau = 0; tau < 2; ++tau) {
+    s.lo[tau] = r.x[tau][0].cwiseMin(r.x[tau][1]).cwiseMin(r.x[tau][2]);
+    s.hi[tau] = r.x[tau][0].cwiseMax(r.x[tau][1]).cwiseMax(r.x[tau][2]);
+  }
+  return s;
+}
+
+/// The slabs of points `i` and `j` of a face record (an edge).
 geometry::CcdSlabs slabs_of(const FaceFrame& r, int i, int j) {
   const auto ui = static_cast<std::size_t>(i), uj = static_cast<std::size_t>(j);
   geometry::CcdSlabs s;
@@ -228,22 +271,27 @@ struct Tester {
     narrow_edge_edge(e0, e1, a, b, start, end);
   }
 
-  /// Every owned sub-pair of faces f and g (sharing no vertex), from their records. The faces'
-  /// slabs contain their features' slabs, so faces apart put every sub-pair apart.
-  void face_pair(const OwnedFace& f, Index fi, const OwnedFace& g, Index gi) {
+  /// Every owned sub-pair of faces fi and gi (sharing no vertex), from their records. The
+  /// faces' slabs contain their features' slabs, so faces apart put every sub-pair apart.
+  void face_pair(Index fi, Index gi) {
     if (done()) return;
     const FaceFrame& rf = step.frames[static_cast<std::size_t>(fi)];
     const FaceFrame& rg = step.frames[static_cast<std::size_t>(gi)];
-    const int vf_count = bits(f.vertex_mask) + bits(g.vertex_mask);
+    const OwnedFace& f = rf.own;
+    const OwnedFace& g = rg.own;
     const int ee_count = bits(f.edge_mask) * bits(g.edge_mask);
-    if (geometry::ccd_slabs_apart(rf.slabs, rg.slabs, step.hull_bound)) {
-      counts.vf_box_rejected += vf_count;
+    if (boxes_apart(rf, rg, step.hull_bound)) {
+      counts.vf_box_rejected += bits(f.vertex_mask) + bits(g.vertex_mask);
       counts.ee_box_rejected += ee_count;
+      ++counts.face_pairs_apart;
       return;
     }
-    for (int k = 0; k < 3; ++k) {
-      if (f.vertex_mask >> k & 1u) vertex_face(f, rf, k, gi, rg);
-      if (g.vertex_mask >> k & 1u) vertex_face(g, rg, k, fi, rf);
+    if (f.vertex_mask != 0 || g.vertex_mask != 0) {
+      const geometry::CcdSlabs fs = slabs_of(rf), gs = slabs_of(rg);
+      for (int k = 0; k < 3; ++k) {
+        if (f.vertex_mask >> k & 1u) vertex_face(f, rf, k, gi, rg, gs);
+        if (g.vertex_mask >> k & 1u) vertex_face(g, rg, k, fi, rf, fs);
+      }
     }
     if (ee_count == 0) return;
     std::array<geometry::CcdSlabs, 3> gs;
@@ -269,12 +317,13 @@ struct Tester {
     }
   }
 
-  /// Corner k of face f (record rf) against face g (record rg).
-  void vertex_face(const OwnedFace& f, const FaceFrame& rf, int k, Index gi, const FaceFrame& rg) {
+  /// Corner k of face f (record rf) against face g (record rg, slabs gs).
+  void vertex_face(const OwnedFace& f, const FaceFrame& rf, int k, Index gi, const FaceFrame& rg,
+                   const geometry::CcdSlabs& gs) {
     const auto uk = static_cast<std::size_t>(k);
     geometry::CcdSlabs vs;
     vs.lo = vs.hi = {rf.x[0][uk], rf.x[1][uk]};
-    if (geometry::ccd_slabs_apart(vs, rg.slabs, step.hull_bound)) {
+    if (geometry::ccd_slabs_apart(vs, gs, step.hull_bound)) {
       ++counts.vf_box_rejected;
       return;
     }
@@ -353,7 +402,7 @@ struct ContinuousQuery::State {
   std::vector<std::uint8_t> face_owns;
   std::vector<OwnedFace> faces;
   std::vector<Box> vertex_box;
-  std::vector<FaceFrame> frames;
+  std::vector<FaceFrame> frames;  // 64-byte aligned elements (C++17 aligned new)
 };
 
 ContinuousQuery::ContinuousQuery(std::shared_ptr<const Topology> topology, ContinuousOptions options)
@@ -492,14 +541,18 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
   parallel_for_chunks(s.frames.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
     for (std::size_t f = begin; f < end; ++f) {
       FaceFrame& r = s.frames[f];
-      const Face& t = topo.face(static_cast<Index>(f));
+      r.own = s.faces[f];
       for (std::size_t k = 0; k < 3; ++k) {
-        r.x[0][k] = previous[static_cast<std::size_t>(t[k])];
-        r.x[1][k] = current[static_cast<std::size_t>(t[k])];
+        r.x[0][k] = previous[static_cast<std::size_t>(r.own.v[k])];
+        r.x[1][k] = current[static_cast<std::size_t>(r.own.v[k])];
       }
       for (std::size_t tau = 0; tau < 2; ++tau) {
-        r.slabs.lo[tau] = r.x[tau][0].cwiseMin(r.x[tau][1]).cwiseMin(r.x[tau][2]);
-        r.slabs.hi[tau] = r.x[tau][0].cwiseMax(r.x[tau][1]).cwiseMax(r.x[tau][2]);
+        const Vec3 lo = r.x[tau][0].cwiseMin(r.x[tau][1]).cwiseMin(r.x[tau][2]);
+        const Vec3 hi = r.x[tau][0].cwiseMax(r.x[tau][1]).cwiseMax(r.x[tau][2]);
+        for (std::size_t k = 0; k < 3; ++k) {
+          r.box[tau][k] = down(lo[static_cast<Eigen::Index>(k)]);
+          r.box[tau][k + 3] = up(hi[static_cast<Eigen::Index>(k)]);
+        }
       }
     }
   });
@@ -517,8 +570,17 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
   s.candidates.set_consumer([&](std::span<const FacePair> chunk) {
     const auto c0 = std::chrono::steady_clock::now();
     Tester tester{step, {}, {}, earliest};
-    for (const FacePair& p : chunk) {
-      tester.face_pair(s.faces[static_cast<std::size_t>(p[0])], p[0], s.faces[static_cast<std::size_t>(p[1])], p[1]);
+    // The records of a pair a few pairs ahead are fetched while this one is tested (the face
+    // ids of a chunk are scattered: the loop is otherwise bound by memory latency).
+    constexpr std::size_t kAhead = 16;
+    for (std::size_t i = 0; i < chunk.size(); ++i) {
+      if (i + kAhead < chunk.size()) {
+        for (const Index f : chunk[i + kAhead]) {
+          const auto* line = reinterpret_cast<const char*>(&s.frames[static_cast<std::size_t>(f)]);
+          for (std::size_t b = 0; b < sizeof(FaceFrame); b += 64) __builtin_prefetch(line + b);
+        }
+      }
+      tester.face_pair(chunk[i][0], chunk[i][1]);
     }
     sink.take(tester, ms_since(c0));
   });
@@ -608,6 +670,7 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
   stats_.set("vf_box_rejected", sink.counts.vf_box_rejected);
   stats_.set("ee_box_rejected", sink.counts.ee_box_rejected);
   stats_.set("vf_tests", sink.counts.vf_tests);
+  stats_.set("face_pairs_apart", sink.counts.face_pairs_apart);
   stats_.set("ee_tests", sink.counts.ee_tests);
   stats_.set("narrow_boxes", sink.counts.boxes);
   for (std::size_t k = 0; k < sink.counts.outcomes.size(); ++k) {
