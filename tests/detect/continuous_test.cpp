@@ -145,6 +145,11 @@ std::size_t check_all(const std::string& name, const std::shared_ptr<const Topol
       // rejections never exceed the brute-force pair count.
       const DetectorStats& st = query.stats();
       EXPECT_EQ(st.get("vf_impacts") + st.get("ee_impacts"), static_cast<double>(impacts.size()));
+      // The slab test runs before every narrow-phase call and drops the sub-pairs the narrow
+      // phase's hull filter would, but for a band of a few ulps of the scene's magnitude (its
+      // bound is the scene's, the narrow phase's the query's): few remain for the narrow phase.
+      const double slab_rejected = st.get("vf_box_rejected") + st.get("ee_box_rejected");
+      EXPECT_LE(st.get("narrow_separated-hull"), 0.1 * slab_rejected) << name << " " << spec;
       // The step alone (the narrow phase searching only before the running minimum) is the
       // same number, bit for bit.
       EXPECT_EQ(query.collision_free_step(x0, x1), earliest(expected)) << name << " " << spec << " step only";
@@ -166,6 +171,43 @@ TEST(Continuous, LatticesWithRandomMotionMatchBruteForce) {
     }
   }
   EXPECT_GT(total, 50u) << "the motion must make impacts, or the comparison proves little";
+}
+
+// Two triangles in the planes x = c and x = c + 2^-50, sliding along y: closer than the
+// rounding band all step long, so hits at any δ > 0 (at δ = 0 the exact coplanarity signs
+// prove them apart). c and c + 2^-50 lie on either side of the midpoint
+// between the floats 1 and 1 + 2^-23: rounded to nearest, the face records' float boxes would
+// put the triangles a float ulp apart (and drop the pair); rounded outwards they overlap.
+TEST(Continuous, FaceBoxesAcrossAFloatBoundaryAreKept) {
+  const Scalar c = 1 + 0x1p-24 - 0x1p-51, d = c + 0x1p-50;
+  const Positions x0{{c, 0, 0}, {c, 1, 0}, {c, 0, 1}, {d, 0.2, 0.2}, {d, 1.2, 0.2}, {d, 0.2, 1.2}};
+  Positions x1 = x0;
+  for (std::size_t i = 3; i < 6; ++i) x1[i].y() -= 0.1;
+  const TriMesh mesh = TriMesh::create(x0, {{0, 1, 2}, {3, 4, 5}});
+  EXPECT_GT(check_all("float boundary", mesh.topology_ptr(), x0, x1, 1e-20, kAllSpecs), 0u);
+}
+
+// The face records keep float boxes rounded outwards: beyond float's range (overflow to the
+// largest float or infinity, underflow to 0 or the smallest subnormal) the face test must stay
+// weaker than the narrow phase's hull filter. A lattice scaled to 1e39 (beyond float's 3.4e38),
+// to 1e-40 (float subnormals) and to 1e-200 (below them), also moved off the origin by 1e5 of its
+// size, gives brute force's impacts. (Much larger scales overflow the impacts' own geometry.)
+TEST(Continuous, ScaledLatticesBeyondFloatRangeMatchBruteForce) {
+  const TriMesh mesh = shapes::lattice(7, 6);
+  const auto topo = mesh.topology_ptr();
+  const Positions y0 = testing::crumple_lattice(mesh, 0.15, 4);
+  const Positions y1 = testing::jitter(testing::crumple_lattice(mesh, 0.25, 14), 0.12, 24);
+  std::size_t total = 0;
+  for (const Scalar scale : {1e39, 1e-40, 1e-200}) {
+    for (const Scalar offset : {0.0, 1e5}) {
+      Positions x0 = y0, x1 = y1;
+      for (Vec3& p : x0) p = scale * (p + Vec3::Constant(offset));
+      for (Vec3& p : x1) p = scale * (p + Vec3::Constant(offset));
+      total += check_all("lattice scaled " + std::to_string(scale), topo, x0, x1, 0.0);
+      total += check_all("lattice scaled " + std::to_string(scale), topo, x0, x1, 0.02 * scale);
+    }
+  }
+  EXPECT_GT(total, 50u);
 }
 
 // Around a vertex of more than 64 faces (a star) the orphan sub-pairs are found each step from

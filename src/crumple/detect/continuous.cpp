@@ -19,6 +19,8 @@
 #include <charconv>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
+#include <limits>
 #include <mutex>
 #include <string>
 #include <tuple>
@@ -31,15 +33,54 @@ namespace {
 /// A face with what it owns (exact/ownership.hpp): VF (v, g) is tested only in the face pair
 /// {owner(v), g}, EE (e1, e2) only in {owner(e1), owner(e2)}.
 struct OwnedFace {
+  std::uint8_t vertex_mask = 0;  // the masks first: FaceFrame keeps them in its first cache line
+  std::uint8_t edge_mask = 0;
+  /// Side k's corners (k and (k + 1) % 3) in increasing vertex id: the edge's order.
+  std::array<std::array<std::uint8_t, 2>, 3> side{};
   Face v;
   std::array<Index, 3> e;
-  std::uint8_t vertex_mask = 0;
-  std::uint8_t edge_mask = 0;
 };
+
+/// Rounds toward −∞ (`down`) or +∞ (`up`) to float: a face test on these bounds is never
+/// stronger than on the doubles (a lower lo and a higher hi only lower fl(lo_f − hi_g), rounding
+/// being monotone), so it too rejects only what the narrow phase's hull filter rejects.
+float down(Scalar x) {
+  float f = static_cast<float>(x);
+  if (static_cast<Scalar>(f) > x) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
+  return f;
+}
+float up(Scalar x) {
+  float f = static_cast<float>(x);
+  if (static_cast<Scalar>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
+}
+
+/// A face's record for one step, filled once in face order: a candidate reads two records
+/// instead of scattered vertex positions. The first cache line holds what the face-level test
+/// reads (most candidates stop there); the corners and ids follow.
+struct alignas(64) FaceFrame {
+  /// Per time τ, the corners' box rounded outwards to float: lo at [τ][0..2], hi at [τ][3..5].
+  std::array<std::array<float, 6>, 2> box;
+  OwnedFace own;                         ///< its masks in the first cache line
+  std::array<std::array<Vec3, 3>, 2> x;  ///< x[τ][corner]
+};
+static_assert(offsetof(FaceFrame, own) + 2 <= 64, "the face test reads one cache line");
+
+/// The slab test of two face records on their float boxes (ccd_slabs_apart's test).
+bool boxes_apart(const FaceFrame& a, const FaceFrame& b, Scalar bound) {
+  int apart = 0;
+  for (std::size_t k = 0; k < 3; ++k) {
+    apart |= int(Scalar(a.box[0][k]) - Scalar(b.box[0][k + 3]) > bound) &
+             int(Scalar(a.box[1][k]) - Scalar(b.box[1][k + 3]) > bound);
+    apart |= int(Scalar(b.box[0][k]) - Scalar(a.box[0][k + 3]) > bound) &
+             int(Scalar(b.box[1][k]) - Scalar(a.box[1][k + 3]) > bound);
+  }
+  return apart != 0;
+}
 
 /// Counters of one chunk of work, summed into the query's stats under a lock.
 struct Counts {
-  double vf_box_rejected = 0, ee_box_rejected = 0, vf_tests = 0, ee_tests = 0, boxes = 0;
+  double vf_box_rejected = 0, ee_box_rejected = 0, vf_tests = 0, ee_tests = 0, boxes = 0, face_pairs_apart = 0;
   std::array<double, geometry::kCcdOutcomeCount> outcomes{};  ///< narrow-phase tests per `CcdOutcome`
   void add(const Counts& o) {
     for (std::size_t k = 0; k < outcomes.size(); ++k) outcomes[k] += o.outcomes[k];
@@ -48,6 +89,7 @@ struct Counts {
     vf_tests += o.vf_tests;
     ee_tests += o.ee_tests;
     boxes += o.boxes;
+    face_pairs_apart += o.face_pairs_apart;
   }
 };
 
@@ -55,22 +97,53 @@ struct Counts {
 struct Step {
   const Topology& topo;
   PositionsView x0, x1;
-  std::span<const Box> vertex_box;  ///< per vertex, its segment's box (exact: min and max)
-  Scalar reach;                     ///< δ (1 + 1e-6) + 1e-9 M: the box test's margin
+  std::span<const FaceFrame> frames;  ///< per face, its record for this step
+  /// `geometry::ccd_hull_bound` of the step's largest coordinate: the slab test rejects only
+  /// sub-pairs that the narrow phase's own hull filter rejects (certified apart).
+  Scalar hull_bound;
   geometry::CcdOptions narrow;
 };
 
-bool apart(const Box& a, const Box& b, Scalar reach) {
-  // Rounding of hi + reach is at most 2^-53 (M + reach), far below reach − δ (Step::reach).
-  // Ors over ints: branch-free without clang's bitwise-on-bool warning.
-  return (int(a.lo[0] > b.hi[0] + reach) | int(b.lo[0] > a.hi[0] + reach) | int(a.lo[1] > b.hi[1] + reach) |
-          int(b.lo[1] > a.hi[1] + reach) | int(a.lo[2] > b.hi[2] + reach) | int(b.lo[2] > a.hi[2] + reach)) != 0;
+/// The slabs of a face record's three corners.
+geometry::CcdSlabs slabs_of(const FaceFrame& r) {
+  geometry::CcdSlabs s;
+  for (std::size_t tau = 0; tau < 2; ++tau) {
+    s.lo[tau] = r.x[tau][0].cwiseMin(r.x[tau][1]).cwiseMin(r.x[tau][2]);
+    s.hi[tau] = r.x[tau][0].cwiseMax(r.x[tau][1]).cwiseMax(r.x[tau][2]);
+  }
+  return s;
 }
 
-Vec3 at(PositionsView x0, PositionsView x1, Index v, Scalar t) {
-  const Vec3& p = x0[static_cast<std::size_t>(v)];
-  return p + t * (x1[static_cast<std::size_t>(v)] - p);
+/// The slabs of points `i` and `j` of a face record (an edge).
+geometry::CcdSlabs slabs_of(const FaceFrame& r, int i, int j) {
+  const auto ui = static_cast<std::size_t>(i), uj = static_cast<std::size_t>(j);
+  geometry::CcdSlabs s;
+  for (std::size_t tau = 0; tau < 2; ++tau) {
+    s.lo[tau] = r.x[tau][ui].cwiseMin(r.x[tau][uj]);
+    s.hi[tau] = r.x[tau][ui].cwiseMax(r.x[tau][uj]);
+  }
+  return s;
 }
+
+/// The slabs of a query's points `first` .. `first + count - 1`.
+geometry::CcdSlabs slabs_of(const geometry::CcdPoints& start, const geometry::CcdPoints& end, int first, int count) {
+  geometry::CcdSlabs s;
+  for (std::size_t tau = 0; tau < 2; ++tau) {
+    const geometry::CcdPoints& x = tau == 0 ? start : end;
+    s.lo[tau] = s.hi[tau] = x[static_cast<std::size_t>(first)];
+    for (int i = first + 1; i < first + count; ++i) {
+      s.lo[tau] = s.lo[tau].cwiseMin(x[static_cast<std::size_t>(i)]);
+      s.hi[tau] = s.hi[tau].cwiseMax(x[static_cast<std::size_t>(i)]);
+    }
+  }
+  return s;
+}
+
+/// Set bits of a 3-bit ownership mask (std::popcount is a library call without -mpopcnt).
+int bits(std::uint8_t mask) { return (mask & 1) + (mask >> 1 & 1) + (mask >> 2 & 1); }
+
+/// x(t) = p + t (q − p), as the narrow phase's motion.
+Vec3 at(const Vec3& p, const Vec3& q, Scalar t) { return p + t * (q - p); }
 
 /// Lowers an atomic running minimum to `t`.
 void lower_to(std::atomic<Scalar>& bound, Scalar t) {
@@ -82,6 +155,10 @@ void lower_to(std::atomic<Scalar>& bound, Scalar t) {
 /// Tests sub-pairs and keeps the impacts (one per thread and chunk). With `earliest`, only
 /// the collision-free step is wanted: each test searches only before the running minimum
 /// (`CcdOptions::max_time`), hits lower it and no impact is kept.
+///
+/// Every sub-pair first goes through the slab test (`geometry::ccd_slabs_apart` with the
+/// step's bound), which drops only sub-pairs the narrow phase would reject by its hull filter:
+/// the impacts are those of the narrow phase on every sub-pair.
 struct Tester {
   const Step& step;
   ImpactSet found;
@@ -106,30 +183,19 @@ struct Tester {
     return false;
   }
 
-  void vertex_face(Index v, Index f) {
-    if (done()) return;
-    const Face& t = step.topo.face(f);
-    const auto& vb = step.vertex_box;
-    Box fb = vb[static_cast<std::size_t>(t[0])];
-    fb.merge(vb[static_cast<std::size_t>(t[1])]);
-    fb.merge(vb[static_cast<std::size_t>(t[2])]);
-    if (apart(vb[static_cast<std::size_t>(v)], fb, step.reach)) {
-      ++counts.vf_box_rejected;
-      return;
-    }
+  /// The narrow phase of vertex v (s[0], e[0]) against face f (s[1..3], e[1..3], corners in
+  /// order), after the slab test.
+  void narrow_vertex_face(Index v, Index f, const geometry::CcdPoints& s, const geometry::CcdPoints& e) {
     ++counts.vf_tests;
-    const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
-    const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
-    const geometry::CcdResult r = geometry::vertex_face_ccd({s(v), s(t[0]), s(t[1]), s(t[2])},
-                                                            {e(v), e(t[0]), e(t[1]), e(t[2])}, narrow_options());
+    const geometry::CcdResult r = geometry::vertex_face_ccd(s, e, narrow_options());
     if (!keep(r)) return;
     VertexFaceImpact impact;
     impact.vertex = v;
     impact.face = f;
     impact.toi = r.toi;
     impact.outcome = r.outcome;
-    const Vec3 p = at(step.x0, step.x1, v, r.toi), a = at(step.x0, step.x1, t[0], r.toi),
-               b = at(step.x0, step.x1, t[1], r.toi), c = at(step.x0, step.x1, t[2], r.toi);
+    const Vec3 p = at(s[0], e[0], r.toi), a = at(s[1], e[1], r.toi), b = at(s[2], e[2], r.toi),
+               c = at(s[3], e[3], r.toi);
     const geometry::PointTriangleResult q = geometry::point_triangle(p, a, b, c);
     impact.distance = std::sqrt(q.sqr_distance);
     impact.barycentric = q.barycentric;
@@ -143,26 +209,12 @@ struct Tester {
     found.vf.push_back(impact);
   }
 
-  void edge_edge(Index e0, Index e1) {
-    if (done()) return;
-    Edge a = step.topo.edge(e0), b = step.topo.edge(e1);
-    if (b < a) {
-      std::swap(a, b);
-      std::swap(e0, e1);
-    }
-    const auto& vb = step.vertex_box;
-    Box ab = vb[static_cast<std::size_t>(a[0])], bb = vb[static_cast<std::size_t>(b[0])];
-    ab.merge(vb[static_cast<std::size_t>(a[1])]);
-    bb.merge(vb[static_cast<std::size_t>(b[1])]);
-    if (apart(ab, bb, step.reach)) {
-      ++counts.ee_box_rejected;
-      return;
-    }
+  /// The narrow phase of edges a (s[0..1], e[0..1]) and b (s[2..3], e[2..3]), a < b, each
+  /// edge's vertices increasing, after the slab test.
+  void narrow_edge_edge(Index e0, Index e1, const Edge& a, const Edge& b, const geometry::CcdPoints& s,
+                        const geometry::CcdPoints& e) {
     ++counts.ee_tests;
-    const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
-    const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
-    const geometry::CcdResult r = geometry::edge_edge_ccd({s(a[0]), s(a[1]), s(b[0]), s(b[1])},
-                                                          {e(a[0]), e(a[1]), e(b[0]), e(b[1])}, narrow_options());
+    const geometry::CcdResult r = geometry::edge_edge_ccd(s, e, narrow_options());
     if (!keep(r)) return;
     EdgeEdgeImpact impact;
     impact.edge0 = e0;
@@ -171,8 +223,8 @@ struct Tester {
     impact.b = b;
     impact.toi = r.toi;
     impact.outcome = r.outcome;
-    const Vec3 p0 = at(step.x0, step.x1, a[0], r.toi), p1 = at(step.x0, step.x1, a[1], r.toi),
-               q0 = at(step.x0, step.x1, b[0], r.toi), q1 = at(step.x0, step.x1, b[1], r.toi);
+    const Vec3 p0 = at(s[0], e[0], r.toi), p1 = at(s[1], e[1], r.toi), q0 = at(s[2], e[2], r.toi),
+               q1 = at(s[3], e[3], r.toi);
     const geometry::SegmentSegmentResult q = geometry::segment_segment(p0, p1, q0, q1);
     impact.distance = std::sqrt(q.sqr_distance);
     impact.s = q.s;
@@ -187,19 +239,120 @@ struct Tester {
     found.ee.push_back(impact);
   }
 
-  /// Every owned sub-pair of faces f and g (sharing no vertex).
-  void face_pair(const OwnedFace& f, Index fi, const OwnedFace& g, Index gi) {
-    for (int k = 0; k < 3; ++k) {
-      if (f.vertex_mask >> k & 1u) vertex_face(f.v[static_cast<std::size_t>(k)], gi);
-      if (g.vertex_mask >> k & 1u) vertex_face(g.v[static_cast<std::size_t>(k)], fi);
+  /// Vertex v against face f, by ids (orphans, stars, isolated vertices).
+  void vertex_face(Index v, Index f) {
+    if (done()) return;
+    const Face& t = step.topo.face(f);
+    const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
+    const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
+    const geometry::CcdPoints start{s(v), s(t[0]), s(t[1]), s(t[2])}, end{e(v), e(t[0]), e(t[1]), e(t[2])};
+    if (geometry::ccd_slabs_apart(slabs_of(start, end, 0, 1), slabs_of(start, end, 1, 3), step.hull_bound)) {
+      ++counts.vf_box_rejected;
+      return;
     }
-    if (!(f.edge_mask && g.edge_mask)) return;
-    for (int i = 0; i < 3; ++i) {
-      if (!(f.edge_mask >> i & 1u)) continue;
-      for (int j = 0; j < 3; ++j) {
-        if (g.edge_mask >> j & 1u) edge_edge(f.e[static_cast<std::size_t>(i)], g.e[static_cast<std::size_t>(j)]);
+    narrow_vertex_face(v, f, start, end);
+  }
+
+  /// Edges e0 and e1, by ids (orphans, stars).
+  void edge_edge(Index e0, Index e1) {
+    if (done()) return;
+    Edge a = step.topo.edge(e0), b = step.topo.edge(e1);
+    if (b < a) {
+      std::swap(a, b);
+      std::swap(e0, e1);
+    }
+    const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
+    const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
+    const geometry::CcdPoints start{s(a[0]), s(a[1]), s(b[0]), s(b[1])}, end{e(a[0]), e(a[1]), e(b[0]), e(b[1])};
+    if (geometry::ccd_slabs_apart(slabs_of(start, end, 0, 2), slabs_of(start, end, 2, 2), step.hull_bound)) {
+      ++counts.ee_box_rejected;
+      return;
+    }
+    narrow_edge_edge(e0, e1, a, b, start, end);
+  }
+
+  /// Every owned sub-pair of faces fi and gi (sharing no vertex), from their records. The
+  /// faces' slabs contain their features' slabs, so faces apart put every sub-pair apart.
+  void face_pair(Index fi, Index gi) {
+    if (done()) return;
+    const FaceFrame& rf = step.frames[static_cast<std::size_t>(fi)];
+    const FaceFrame& rg = step.frames[static_cast<std::size_t>(gi)];
+    const OwnedFace& f = rf.own;
+    const OwnedFace& g = rg.own;
+    const int ee_count = bits(f.edge_mask) * bits(g.edge_mask);
+    if (boxes_apart(rf, rg, step.hull_bound)) {
+      counts.vf_box_rejected += bits(f.vertex_mask) + bits(g.vertex_mask);
+      counts.ee_box_rejected += ee_count;
+      ++counts.face_pairs_apart;
+      return;
+    }
+    if (f.vertex_mask != 0 || g.vertex_mask != 0) {
+      const geometry::CcdSlabs fs = slabs_of(rf), gs = slabs_of(rg);
+      for (int k = 0; k < 3; ++k) {
+        if (f.vertex_mask >> k & 1u) vertex_face(f, rf, k, gi, rg, gs);
+        if (g.vertex_mask >> k & 1u) vertex_face(g, rg, k, fi, rf, fs);
       }
     }
+    if (ee_count == 0) return;
+    std::array<geometry::CcdSlabs, 3> gs;
+    for (int j = 0; j < 3; ++j) {
+      if (!(g.edge_mask >> j & 1u)) continue;
+      const auto& c = g.side[static_cast<std::size_t>(j)];
+      gs[static_cast<std::size_t>(j)] = slabs_of(rg, c[0], c[1]);
+    }
+    for (int i = 0; i < 3; ++i) {
+      if (!(f.edge_mask >> i & 1u)) continue;
+      const auto& ci = f.side[static_cast<std::size_t>(i)];
+      const geometry::CcdSlabs fs = slabs_of(rf, ci[0], ci[1]);
+      for (int j = 0; j < 3; ++j) {
+        if (!(g.edge_mask >> j & 1u)) continue;
+        if (geometry::ccd_slabs_apart(fs, gs[static_cast<std::size_t>(j)], step.hull_bound)) {
+          ++counts.ee_box_rejected;
+          continue;
+        }
+        if (done()) return;
+        const auto& cj = g.side[static_cast<std::size_t>(j)];
+        edge_edge(f, rf, i, ci, g, rg, j, cj);
+      }
+    }
+  }
+
+  /// Corner k of face f (record rf) against face g (record rg, slabs gs).
+  void vertex_face(const OwnedFace& f, const FaceFrame& rf, int k, Index gi, const FaceFrame& rg,
+                   const geometry::CcdSlabs& gs) {
+    const auto uk = static_cast<std::size_t>(k);
+    geometry::CcdSlabs vs;
+    vs.lo = vs.hi = {rf.x[0][uk], rf.x[1][uk]};
+    if (geometry::ccd_slabs_apart(vs, gs, step.hull_bound)) {
+      ++counts.vf_box_rejected;
+      return;
+    }
+    if (done()) return;
+    const geometry::CcdPoints start{rf.x[0][uk], rg.x[0][0], rg.x[0][1], rg.x[0][2]};
+    const geometry::CcdPoints end{rf.x[1][uk], rg.x[1][0], rg.x[1][1], rg.x[1][2]};
+    narrow_vertex_face(f.v[uk], gi, start, end);
+  }
+
+  /// Side i of face f (corners ci, vertex ids increasing) against side j of face g.
+  void edge_edge(const OwnedFace& f, const FaceFrame& rf, int i, const std::array<std::uint8_t, 2>& ci,
+                 const OwnedFace& g, const FaceFrame& rg, int j, const std::array<std::uint8_t, 2>& cj) {
+    Index e0 = f.e[static_cast<std::size_t>(i)], e1 = g.e[static_cast<std::size_t>(j)];
+    Edge a{f.v[ci[0]], f.v[ci[1]]}, b{g.v[cj[0]], g.v[cj[1]]};
+    const FaceFrame* ra = &rf;
+    const FaceFrame* rb = &rg;
+    std::array<std::uint8_t, 2> ca = ci, cb = cj;
+    if (b < a) {
+      std::swap(a, b);
+      std::swap(e0, e1);
+      std::swap(ra, rb);
+      std::swap(ca, cb);
+    }
+    geometry::CcdPoints start, end;
+    for (std::size_t tau = 0; tau < 2; ++tau) {
+      geometry::CcdPoints& x = tau == 0 ? start : end;
+      x = {ra->x[tau][ca[0]], ra->x[tau][ca[1]], rb->x[tau][cb[0]], rb->x[tau][cb[1]]};
+    }
+    narrow_edge_edge(e0, e1, a, b, start, end);
   }
 };
 
@@ -249,6 +402,7 @@ struct ContinuousQuery::State {
   std::vector<std::uint8_t> face_owns;
   std::vector<OwnedFace> faces;
   std::vector<Box> vertex_box;
+  std::vector<FaceFrame> frames;  // 64-byte aligned elements (C++17 aligned new)
 };
 
 ContinuousQuery::ContinuousQuery(std::shared_ptr<const Topology> topology, ContinuousOptions options)
@@ -279,6 +433,11 @@ ContinuousQuery::ContinuousQuery(std::shared_ptr<const Topology> topology, Conti
     OwnedFace& of = s.faces[static_cast<std::size_t>(f)];
     of.v = topo.face(f);
     of.e = topo.face_edges(f);
+    for (std::size_t k = 0; k < 3; ++k) {
+      const auto k1 = static_cast<std::uint8_t>((k + 1) % 3);
+      const bool increasing = of.v[k] < of.v[k1];
+      of.side[k] = {increasing ? static_cast<std::uint8_t>(k) : k1, increasing ? k1 : static_cast<std::uint8_t>(k)};
+    }
     of.vertex_mask = own.vertex_mask[static_cast<std::size_t>(f)];
     of.edge_mask = own.edge_mask[static_cast<std::size_t>(f)];
   }
@@ -378,7 +537,27 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
   // Two features within δ at some t lie in faces whose swept boxes, each grown by δ/2, meet;
   // the margin covers the rounding of every box bound (docs/ccd.md, broad phase).
   const Scalar reach = options_.min_separation * (1 + 1e-6) + 1e-9 * magnitude;
-  const Step step{topo, previous, current, s.vertex_box, reach, options_.narrow};
+  s.frames.resize(static_cast<std::size_t>(topo.num_faces()));
+  parallel_for_chunks(s.frames.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) {
+      FaceFrame& r = s.frames[f];
+      r.own = s.faces[f];
+      for (std::size_t k = 0; k < 3; ++k) {
+        r.x[0][k] = previous[static_cast<std::size_t>(r.own.v[k])];
+        r.x[1][k] = current[static_cast<std::size_t>(r.own.v[k])];
+      }
+      for (std::size_t tau = 0; tau < 2; ++tau) {
+        const Vec3 lo = r.x[tau][0].cwiseMin(r.x[tau][1]).cwiseMin(r.x[tau][2]);
+        const Vec3 hi = r.x[tau][0].cwiseMax(r.x[tau][1]).cwiseMax(r.x[tau][2]);
+        for (std::size_t k = 0; k < 3; ++k) {
+          r.box[tau][k] = down(lo[static_cast<Eigen::Index>(k)]);
+          r.box[tau][k + 3] = up(hi[static_cast<Eigen::Index>(k)]);
+        }
+      }
+    }
+  });
+  const Step step{topo, previous, current, s.frames, geometry::ccd_hull_bound(magnitude, options_.min_separation),
+                  options_.narrow};
   Sink sink;
 
   // Broad phase, its candidates streamed to the narrow phase on its threads.
@@ -391,8 +570,17 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
   s.candidates.set_consumer([&](std::span<const FacePair> chunk) {
     const auto c0 = std::chrono::steady_clock::now();
     Tester tester{step, {}, {}, earliest};
-    for (const FacePair& p : chunk) {
-      tester.face_pair(s.faces[static_cast<std::size_t>(p[0])], p[0], s.faces[static_cast<std::size_t>(p[1])], p[1]);
+    // The records of a pair a few pairs ahead are fetched while this one is tested (the face
+    // ids of a chunk are scattered: the loop is otherwise bound by memory latency).
+    constexpr std::size_t kAhead = 16;
+    for (std::size_t i = 0; i < chunk.size(); ++i) {
+      if (i + kAhead < chunk.size()) {
+        for (const Index f : chunk[i + kAhead]) {
+          const auto* line = reinterpret_cast<const char*>(&s.frames[static_cast<std::size_t>(f)]);
+          for (std::size_t b = 0; b < sizeof(FaceFrame); b += 64) __builtin_prefetch(line + b);
+        }
+      }
+      tester.face_pair(chunk[i][0], chunk[i][1]);
     }
     sink.take(tester, ms_since(c0));
   });
@@ -482,6 +670,7 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
   stats_.set("vf_box_rejected", sink.counts.vf_box_rejected);
   stats_.set("ee_box_rejected", sink.counts.ee_box_rejected);
   stats_.set("vf_tests", sink.counts.vf_tests);
+  stats_.set("face_pairs_apart", sink.counts.face_pairs_apart);
   stats_.set("ee_tests", sink.counts.ee_tests);
   stats_.set("narrow_boxes", sink.counts.boxes);
   for (std::size_t k = 0; k < sink.counts.outcomes.size(); ++k) {

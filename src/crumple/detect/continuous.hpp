@@ -130,7 +130,9 @@ class ContinuousQuery {
   void query(PositionsView previous, PositionsView current, ImpactSet& out);
 
   /// Counters and timings of the last `query`: `candidates` (face pairs from the broad
-  /// phase), `vf_box_rejected` / `ee_box_rejected` (sub-pairs whose swept boxes are apart),
+  /// phase), `vf_box_rejected` / `ee_box_rejected` (sub-pairs the slab test drops: the narrow
+  /// phase's difference-hull filter, run first from per-time boxes), `face_pairs_apart`
+  /// (candidates whose faces' boxes are apart, all their sub-pairs dropped at once),
   /// `vf_tests` / `ee_tests` (narrow-phase calls), `orphan_vf` / `orphan_ee`,
   /// `isolated_vertices`, `vf_impacts` / `ee_impacts`, `conservative_hits` (impacts decided by
   /// budget, precision or range only), `narrow_boxes`, `narrow_<outcome>` (tests per

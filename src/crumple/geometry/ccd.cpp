@@ -64,10 +64,14 @@ bool in_range(const CcdPoints& start, const CcdPoints& end) {
   return true;
 }
 
-/// err and the hull bound from the largest |coordinate| per axis `m`.
+/// err of one axis from its largest |coordinate| `m` (monotone in m).
+Scalar axis_error(Scalar m) { return kCornerErrorFactor * m + kUnderflowSlack; }
+
+/// err and the hull bound from the largest |coordinate| per axis `m`; `ccd_hull_bound` is the
+/// same expression (so it dominates this one for any larger magnitude).
 void set_bounds(Prepared& p, const Vec3& m, Scalar delta) {
   for (int k = 0; k < 3; ++k) {
-    p.err[k] = kCornerErrorFactor * m[k] + kUnderflowSlack;
+    p.err[k] = axis_error(m[k]);
     p.bound[k] = round_up(p.err[k] + delta);
   }
   p.delta = delta;
@@ -526,10 +530,15 @@ std::string_view to_string(CcdOutcome outcome) {
   return "unknown";
 }
 
+Scalar ccd_hull_bound(Scalar magnitude, Scalar delta) {
+  if (!(magnitude <= kMaxMagnitude)) return INFINITY;  // NaN too
+  return round_up(axis_error(magnitude) + delta);
+}
+
 Vec3 ccd_rounding_bound(const CcdPoints& start, const CcdPoints& end) {
   const Vec3 m = max_abs_coordinates(start, end);
   Vec3 err;
-  for (int k = 0; k < 3; ++k) err[k] = kCornerErrorFactor * m[k] + kUnderflowSlack;
+  for (int k = 0; k < 3; ++k) err[k] = axis_error(m[k]);
   return err;
 }
 

@@ -110,6 +110,34 @@ CcdResult edge_edge_ccd(const CcdPoints& start, const CcdPoints& end, const CcdO
 /// Either, by `pair`.
 CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options = {});
 
+/// Per time τ ∈ {0, 1}, the coordinate-wise min `lo[τ]` and max `hi[τ]` of a feature's points
+/// (a vertex, an edge's endpoints, a triangle's corners) at t = τ.
+struct CcdSlabs {
+  std::array<Vec3, 2> lo, hi;
+};
+
+/// A bound for `ccd_slabs_apart` valid for every query whose coordinates are all at most
+/// `magnitude` in absolute value: at least the err + δ (rounded up) that `ccd`'s difference-hull
+/// filter uses on every axis (the same expression, monotone in the magnitude). +∞ when
+/// `magnitude` exceeds 2^1000 or is not finite: such queries are out of range, never rejected.
+Scalar ccd_hull_bound(Scalar magnitude, Scalar delta);
+
+/// `ccd`'s difference-hull filter (docs/ccd.md, step 2) from the two features' slabs: true when
+/// on some axis, at t = 0 and at t = 1 alike, every rounded difference a − b of a point of `a`
+/// and a point of `b` exceeds `bound` (or every one is below −bound). Rounding is monotone, so
+/// fl(lo_a − hi_b) is the smallest of the rounded differences fl(a_i − b_j) that `ccd` tests:
+/// with `bound` = `ccd_hull_bound` of a magnitude ≥ every coordinate, a true answer means that
+/// `ccd` on the pair returns `kSeparatedHull` (certified: no contact), whatever the order of the
+/// features and points. Branch-free (its outcome is unpredictable in a candidate loop).
+inline bool ccd_slabs_apart(const CcdSlabs& a, const CcdSlabs& b, Scalar bound) {
+  int apart = 0;
+  for (int k = 0; k < 3; ++k) {
+    apart |= int(a.lo[0][k] - b.hi[0][k] > bound) & int(a.lo[1][k] - b.hi[1][k] > bound);
+    apart |= int(b.lo[0][k] - a.hi[0][k] > bound) & int(b.lo[1][k] - a.hi[1][k] > bound);
+  }
+  return apart != 0;
+}
+
 /// err, per axis: a certified bound on the absolute rounding error of every difference value
 /// F(t, u, v) the bisection evaluates for these points (64 u · max|coordinate| + 2^-1000,
 /// u = 2^-53; docs/ccd.md derives the 30 u the evaluation needs).
