@@ -114,24 +114,25 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
     if (first >= 0) ++out.contours[at(out.crossings[at(first)].contour)].pairs;
   }
 
-  // 3. Regions: flood fill with the contour's crossing edges cut.
+  // 3. Regions: flood fill with the contour's crossing edges cut, the outside chosen in each
+  // connected piece of the mesh (two separate sheets each have theirs).
   const Index nv = topology.num_vertices();
   std::vector<char> cut(at(topology.num_edges()), 0);
-  std::vector<Index> part(at(nv), -1), stack;
+  std::vector<Index> part(at(nv), -1), piece(at(nv), -1), stack;
   std::vector<std::size_t> size;
   std::vector<char> pinned;
   std::vector<char> inside_any(at(nv), 0);
-  for (Contour& k : out.contours) {
-    for (Index i : k.crossings) cut[at(out.crossings[at(i)].edge)] = 1;
-    std::fill(part.begin(), part.end(), -1);
+  // Labels the parts of the mesh reachable along edges that are not cut; returns their count.
+  const auto fill = [&](std::vector<Index>& label) {
+    std::fill(label.begin(), label.end(), -1);
     size.clear();
     pinned.clear();
     for (Index seed = 0; seed < nv; ++seed) {
-      if (part[at(seed)] >= 0 || topology.vertex_edges()[seed].empty()) continue;
+      if (label[at(seed)] >= 0 || topology.vertex_edges()[seed].empty()) continue;
       const Index id = static_cast<Index>(size.size());
       size.push_back(0);
       pinned.push_back(0);
-      part[at(seed)] = id;
+      label[at(seed)] = id;
       stack.assign(1, seed);
       while (!stack.empty()) {
         const Index v = stack.back();
@@ -142,25 +143,41 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
           if (cut[at(e)]) continue;
           const Edge& ed = topology.edge(e);
           const Index w = ed[0] == v ? ed[1] : ed[0];
-          if (part[at(w)] < 0) {
-            part[at(w)] = id;
+          if (label[at(w)] < 0) {
+            label[at(w)] = id;
             stack.push_back(w);
           }
         }
       }
     }
+    return size.size();
+  };
+  const std::size_t pieces = fill(piece);
+  std::vector<Index> piece_of_part;
+  std::vector<Index> outside_of_piece(pieces);
+  std::vector<char> piece_pinned(pieces);
+  for (Contour& k : out.contours) {
+    for (Index i : k.crossings) cut[at(out.crossings[at(i)].edge)] = 1;
+    k.parts = fill(part);
     for (Index i : k.crossings) cut[at(out.crossings[at(i)].edge)] = 0;
-    k.parts = size.size();
-    if (size.size() < 2) continue;
-    const bool any_pinned = std::find(pinned.begin(), pinned.end(), 1) != pinned.end();
-    Index outside = -1;
-    for (std::size_t id = 0; id < size.size(); ++id) {
-      if (any_pinned && !pinned[id]) continue;
+    if (k.parts == pieces) continue;  // the curve cuts nothing off
+    piece_of_part.assign(k.parts, -1);
+    for (Index v = 0; v < nv; ++v) {
+      if (part[at(v)] >= 0) piece_of_part[at(part[at(v)])] = piece[at(v)];
+    }
+    // In each piece: the largest part, or the largest pinned one when the piece has pins.
+    std::fill(outside_of_piece.begin(), outside_of_piece.end(), -1);
+    std::fill(piece_pinned.begin(), piece_pinned.end(), 0);
+    for (std::size_t id = 0; id < k.parts; ++id) piece_pinned[at(piece_of_part[id])] |= pinned[id];
+    for (std::size_t id = 0; id < k.parts; ++id) {
+      const Index pc = piece_of_part[id];
+      if (piece_pinned[at(pc)] && !pinned[id]) continue;
+      Index& outside = outside_of_piece[at(pc)];
       if (outside < 0 || size[id] > size[at(outside)]) outside = static_cast<Index>(id);
     }
     for (Index v = 0; v < nv; ++v) {
       const Index id = part[at(v)];
-      if (id >= 0 && id != outside && !pinned[at(id)]) {
+      if (id >= 0 && id != outside_of_piece[at(piece[at(v)])] && !pinned[at(id)]) {
         k.inside.push_back(v);
         inside_any[at(v)] = 1;
         out.tangle[at(v)] = 1;

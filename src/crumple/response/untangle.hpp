@@ -14,8 +14,8 @@
 ///     pair belong to one contour). A contour is *open* when a crossing edge is a boundary edge
 ///     (the intersection curve reaches the cloth's border).
 ///  3. **Regions**: the mesh's vertices flood-filled along edges, the contour's crossing edges
-///     cut. The largest part is *outside*; every other part is *inside*: the smaller side of
-///     the curve, which went through. A part holding a pinned vertex (m⁻¹ = 0) cannot go back
+///     cut. In each connected piece of the mesh the largest part is *outside*; every other part
+///     is *inside*: the smaller side of the curve, which went through. A part holding a pinned vertex (m⁻¹ = 0) cannot go back
 ///     through, so when one exists the largest pinned part is the outside instead. This also
 ///     handles open contours: a flap of the cloth whose intersection curve runs from its border
 ///     to its border is cut off and is the inside; a curve that cuts nothing (from the border
@@ -65,7 +65,9 @@ struct Contour {
   std::vector<Index> crossings;  ///< indices into `IntersectionAnalysis::crossings`
   std::size_t pairs = 0;         ///< intersecting face pairs along it
   bool open = false;             ///< a crossing edge is a boundary edge
-  std::size_t parts = 0;         ///< parts of the mesh with the crossing edges cut (>= 1)
+  /// Parts of the mesh with the crossing edges cut (the connected pieces of the mesh when the
+  /// curve cuts nothing off).
+  std::size_t parts = 0;
   std::vector<Index> inside;     ///< vertices of its inside parts (sorted; empty: no inside)
 };
 
