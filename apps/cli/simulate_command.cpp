@@ -506,7 +506,7 @@ int run_simulate(const SimulateArgs& args) {
     }
     summary.add(s, settings.detector.thickness);
   };
-  const auto save = [&] { save_state(out, *simulation, settings, spec_text, start.seed); };
+  const auto save = [&] { save_state(out, *simulation, simulation->settings(), spec_text, start.seed); };
 
   // SIGINT and SIGTERM finish the current frame, then leave complete files and a state to resume.
   g_interrupted = 0;

@@ -217,6 +217,14 @@ TEST(Simulate, ResponseFromUntanglesAndCountsIntersectingPairs) {
   ASSERT_EQ(lines.size(), 212u);
   for (std::size_t k = 1; k < lines.size(); ++k) EXPECT_EQ(field(lines[k], column), "-1") << lines[k];
 
+  // A run that ends before the switch saves its state with the response off.
+  r = run_cli("simulate hanging-cloth:nx=4,ny=4 --response-from 10 --frames 5 -q -o " + (dir / "early").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  std::ifstream early(dir / "early" / "state.json");
+  const std::string early_json((std::istreambuf_iterator<char>(early)), std::istreambuf_iterator<char>());
+  EXPECT_NE(early_json.find("\"response\":false"), std::string::npos) << early_json;
+  EXPECT_NE(json.find("\"response\":true"), std::string::npos) << json;
+
   r = run_cli("simulate hanging-cloth:nx=4,ny=4 --response-from 3 --response off --frames 5 -q -o " +
               (dir / "bad").string());
   EXPECT_NE(r.status, 0);
