@@ -90,6 +90,9 @@ void BM_Frame(benchmark::State& bench, const std::string& spec, bool fail_safe) 
   Settings settings = s.settings;
   settings.method = MethodSpec::parse("kdop");
   settings.fail_safe = fail_safe;
+  // The baseline without the fail-safe also runs without untangling (which would query and
+  // repair intersections every frame); with it, untangling costs one query at the first frame.
+  settings.untangle = fail_safe;
   Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
                  settings);
   DetectorOptions tt_options;

@@ -48,6 +48,8 @@ struct SimulateArgs {
   std::optional<std::string> response;
   std::optional<int> passes;
   std::optional<std::string> fail_safe;
+  std::optional<std::string> untangle;
+  std::optional<long long> response_from;
   std::optional<std::uint64_t> seed;
   std::optional<std::string> out;  ///< default: the resumed state's folder, else kDefaultOut
   std::string format = "obj";
@@ -62,7 +64,7 @@ constexpr const char* kDefaultOut = "crumple-out";
 constexpr const char* kStatsHeader =
     "frame,time,integrate_ms,detect_ms,response_ms,vf,ee,tt,collision_share,min_distance,"
     "obstacle_penetration,cg_iterations,corrections,energy,max_speed,min_x,min_y,min_z,max_x,"
-    "max_y,max_z,ccd_ms,ccd_impacts,ccd_frozen";
+    "max_y,max_z,ccd_ms,ccd_impacts,ccd_frozen,intersecting_pairs,contours,untangle_pulls";
 
 std::string scenes_help() {
   std::string out = "Built-in scene SPEC, NAME[:key=value,...], or a file (.x3d .obj .ply .off). Scenes:";
@@ -169,6 +171,8 @@ struct Summary {
   long long close_frames = 0;  // frames with a VF/EE pair closer than half the thickness
   double wall_ms = 0;          // the frame loop's wall time, writing frames included
   double max_penetration = 0;
+  long long first_pairs = -1, last_pairs = -1;  // intersecting pairs, -1: not measured
+  long long clean_frame = -1;                   // first frame whose pairs fell to 0 after > 0
   void add(const sim::FrameStats& s, Scalar thickness) {
     ++frames;
     integrate_ms += s.integrate_ms;
@@ -183,6 +187,11 @@ struct Summary {
     hit80 |= s.collision_share >= 0.8;
     if (s.min_distance < 0.5 * thickness) ++close_frames;
     max_penetration = std::max<double>(max_penetration, s.obstacle_penetration);
+    if (s.intersecting_pairs >= 0) {
+      if (first_pairs < 0) first_pairs = s.intersecting_pairs;
+      if (s.intersecting_pairs == 0 && last_pairs > 0 && clean_frame < 0) clean_frame = s.frame;
+      last_pairs = s.intersecting_pairs;
+    }
   }
 };
 
@@ -249,6 +258,7 @@ void save_state(const std::filesystem::path& out, const sim::Simulation& simulat
                                     .add("response", settings.response)
                                     .add("passes", settings.passes)
                                     .add("fail_safe", settings.fail_safe)
+                                    .add("untangle", settings.untangle)
                                     .add("detector_state", simulation.detector_state())
                                     .str();
   write_file_atomically(out / "state.json", [&](std::ostream& os) { os << side_json << "\n"; });
@@ -276,6 +286,12 @@ void print_summary(const Summary& summary, const sim::Simulation& simulation,
               yes(summary.hit30), yes(summary.hit50), yes(summary.hit80));
   std::printf("  %-28s %lld of %lld\n", "frames with a pair < h/2", summary.close_frames, summary.frames);
   std::printf("  %-28s %.3g m\n", "max obstacle penetration", summary.max_penetration);
+  if (summary.first_pairs >= 0) {
+    std::printf("  %-28s %lld first measured, %lld at the end", "intersecting pairs", summary.first_pairs,
+                summary.last_pairs);
+    if (summary.clean_frame >= 0) std::printf(" (0 from frame %lld)", summary.clean_frame);
+    std::printf("\n");
+  }
   std::printf("  %-28s %s%s, %s\n", "wrote", csv_path.string().c_str(), append ? " (appended)" : "",
               (out / "state.x3d").string().c_str());
 }
@@ -382,6 +398,7 @@ int run_simulate(const SimulateArgs& args) {
     settings.passes = static_cast<int>(side->number("passes", side_path));
     // Absent from states saved before the fail-safe existed: the default (on).
     if (side->values.count("fail_safe")) settings.fail_safe = side->text("fail_safe", side_path) == "true";
+    if (side->values.count("untangle")) settings.untangle = side->text("untangle", side_path) == "true";
   }
   if (args.dt) settings.dt = *args.dt;
   if (args.substeps) settings.substeps = *args.substeps;
@@ -392,6 +409,15 @@ int run_simulate(const SimulateArgs& args) {
   if (args.response) settings.response = parse_on_off(*args.response, "--response");
   if (args.passes) settings.passes = *args.passes;
   if (args.fail_safe) settings.fail_safe = parse_on_off(*args.fail_safe, "--fail-safe");
+  if (args.untangle) settings.untangle = parse_on_off(*args.untangle, "--untangle");
+  if (args.response_from) {
+    if (*args.response_from < start.frame) {
+      throw InputError("--response-from " + std::to_string(*args.response_from) + " is before the first frame (" +
+                       std::to_string(start.frame) + ")");
+    }
+    if (args.response && !settings.response) throw InputError("--response-from needs the response on, not --response off");
+    settings.response = true;
+  }
   settings.detector.threads = args.detection.threads;
   if (!(settings.dt > 0 && std::isfinite(settings.dt))) throw InputError("--dt must be > 0");
   if (settings.substeps < 1) throw InputError("--substeps must be >= 1");
@@ -407,12 +433,19 @@ int run_simulate(const SimulateArgs& args) {
   const auto faces = std::vector<Face>(scene.model.topology().faces().begin(), scene.model.topology().faces().end());
   check_contact_budget(scene.model.topology(), scene.state.x, settings.detector,
                        args.detection.max_contacts);
-  sim::Simulation simulation(std::move(scene.model), std::move(scene.state), scene.field,
-                             std::move(scene.obstacles), std::move(scene.kinematics), settings, start.frame);
+  // --response-from: the run starts with the response off and switches to `settings` there.
+  const bool delayed = args.response_from && *args.response_from > start.frame;
+  sim::Settings early = settings;
+  early.response = false;
+  const sim::Kinematics kinematics = scene.kinematics;
+  std::optional<sim::Simulation> holder;
+  holder.emplace(std::move(scene.model), std::move(scene.state), scene.field, std::move(scene.obstacles),
+                 std::move(scene.kinematics), delayed ? early : settings, start.frame);
+  sim::Simulation* simulation = &*holder;
   // The stochastic detector's kept pairs and generator, when the method is unchanged.
   if (side && side->values.count("detector_state")) {
     if (settings.method.to_string() == side->text("method", side_path)) {
-      simulation.restore_detector_state(side->text("detector_state", side_path));
+      simulation->restore_detector_state(side->text("detector_state", side_path));
     } else if (!side->text("detector_state", side_path).empty()) {
       std::cerr << "crumple: warning: the method changed from " << side->text("method", side_path)
                 << ": its saved state across frames is not restored\n";
@@ -422,10 +455,13 @@ int run_simulate(const SimulateArgs& args) {
   if (!args.quiet) {
     std::printf("crumple simulate: %s\n  %d particles, %zu springs, %zu faces, %d edges; dt %.6g s x %d substeps "
                 "per frame, %s, detector %s, thickness %.6g m, response %s\n",
-                start.source.c_str(), simulation.model().num_particles(), simulation.model().springs().size(),
-                faces.size(), simulation.model().topology().num_edges(), settings.dt, settings.substeps,
+                start.source.c_str(), simulation->model().num_particles(), simulation->model().springs().size(),
+                faces.size(), simulation->model().topology().num_edges(), settings.dt, settings.substeps,
                 integrator_name.c_str(), settings.method.to_string().c_str(),
-                settings.detector.thickness, settings.response ? "on" : "off");
+                settings.detector.thickness,
+                delayed ? ("off until frame " + std::to_string(*args.response_from) + ", then on").c_str()
+                : settings.response ? "on"
+                                    : "off");
     std::fflush(stdout);
   }
 
@@ -457,14 +493,20 @@ int run_simulate(const SimulateArgs& args) {
         csv_number(s.bounds.min.y()) + "," + csv_number(s.bounds.min.z()) + "," +
         csv_number(s.bounds.max.x()) + "," + csv_number(s.bounds.max.y()) + "," +
         csv_number(s.bounds.max.z()) + "," + csv_number(s.ccd_ms) + "," + std::to_string(s.ccd_impacts) + "," +
-        std::to_string(s.ccd_frozen) + "\n";
+        std::to_string(s.ccd_frozen) + "," + std::to_string(s.intersecting_pairs) + "," +
+        std::to_string(s.contours) + "," + std::to_string(s.untangle_pulls) + "\n";
     write_csv(line);
+    if (!args.quiet && s.intersecting_pairs == 0 && summary.last_pairs > 0 && summary.clean_frame < 0) {
+      std::printf("\rcrumple simulate: 0 intersecting triangle pairs at frame %lld (%lld before)\n",
+                  static_cast<long long>(s.frame), summary.last_pairs);
+      std::fflush(stdout);
+    }
     if ((s.frame - start.frame) % args.every == 0) {
-      io::write_mesh(frames_dir / frame_name(s.frame, args.format), simulation.state().x, faces);
+      io::write_mesh(frames_dir / frame_name(s.frame, args.format), simulation->state().x, faces);
     }
     summary.add(s, settings.detector.thickness);
   };
-  const auto save = [&] { save_state(out, simulation, settings, spec_text, start.seed); };
+  const auto save = [&] { save_state(out, *simulation, simulation->settings(), spec_text, start.seed); };
 
   // SIGINT and SIGTERM finish the current frame, then leave complete files and a state to resume.
   g_interrupted = 0;
@@ -485,15 +527,23 @@ int run_simulate(const SimulateArgs& args) {
   Progress progress("simulate", "frame", static_cast<std::size_t>(args.frames), !args.quiet);
   std::optional<sim::DivergenceError> diverged;
   if (append) {
-    summary.add(simulation.current_stats(), settings.detector.thickness);  // already on file
+    summary.add(simulation->current_stats(), settings.detector.thickness);  // already on file
   } else {
-    record(simulation.current_stats());
+    record(simulation->current_stats());
   }
   const auto loop_start = std::chrono::steady_clock::now();
   try {
     for (long long k = 0; k < args.frames; ++k) {
       if (g_interrupted) break;
-      record(simulation.advance_frame());
+      if (delayed && simulation->frame() == *args.response_from) {
+        // The response starts: a new simulation from the current state with `settings`.
+        sim::Simulation& before = *simulation;
+        sim::Simulation next(before.model(), before.state(), before.field(), before.obstacles(), kinematics,
+                             settings, before.frame());
+        holder.emplace(std::move(next));
+        simulation = &*holder;
+      }
+      record(simulation->advance_frame());
       progress.update(static_cast<std::size_t>(k + 1));
     }
   } catch (const sim::DivergenceError& e) {
@@ -515,8 +565,8 @@ int run_simulate(const SimulateArgs& args) {
                  "  Resume it with a smaller time step or a stable integrator, e.g.\n"
                  "    crumple simulate %s --dt %.3g --substeps %d\n"
                  "    crumple simulate %s -i implicit-euler\n",
-                 diverged->what(), static_cast<long long>(simulation.frame()),
-                 static_cast<long long>(simulation.frame()), state.c_str(), state.c_str(), dt,
+                 diverged->what(), static_cast<long long>(simulation->frame()),
+                 static_cast<long long>(simulation->frame()), state.c_str(), state.c_str(), dt,
                  substeps, state.c_str());
     return 1;
   }
@@ -524,10 +574,10 @@ int run_simulate(const SimulateArgs& args) {
   if (g_interrupted) {
     std::fprintf(stderr, "crumple: %s after frame %lld; files are complete, resume with `crumple simulate %s`\n",
                  g_interrupted == SIGTERM ? "terminated" : "interrupted",
-                 static_cast<long long>(simulation.frame()), (out / "state.x3d").string().c_str());
+                 static_cast<long long>(simulation->frame()), (out / "state.x3d").string().c_str());
     status = 128 + static_cast<int>(g_interrupted);
   }
-  if (!args.quiet) print_summary(summary, simulation, frames_dir, csv_path, append, out);
+  if (!args.quiet) print_summary(summary, *simulation, frames_dir, csv_path, append, out);
   return status;
 }
 
@@ -558,6 +608,13 @@ Run add_simulate_command(CLI::App& app) {
   app.add_option("--fail-safe", args->fail_safe,
                  "on|off: with response on, the continuous (CCD) fail-safe that keeps every frame "
                  "intersection-free; default on");
+  app.add_option("--untangle", args->untangle,
+                 "on|off: with response on, untangle a cloth that already intersects itself (Global "
+                 "Intersection Analysis); the column intersecting_pairs of stats.csv counts the "
+                 "intersecting triangle pairs every frame; default on");
+  app.add_option("--response-from", args->response_from,
+                 "Frame from which the response is on; before it the run has no response (e.g. a "
+                 "hanging cloth falls through itself, then untangles)");
   app.add_option("-s,--seed", args->seed, "Seed of the scene's random perturbation; default 1");
   app.add_option("-o,--out", args->out,
                  std::string("Output folder; default: the resumed state's folder (the run goes "

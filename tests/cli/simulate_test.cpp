@@ -176,5 +176,63 @@ TEST(Simulate, FailSafeFlagIsSavedAndChecked) {
   EXPECT_NE(r.out.find("--fail-safe expects on or off, got 'maybe'"), std::string::npos) << r.out;
 }
 
+/// The field `column` (0-based) of a stats.csv line.
+std::string field(const std::string& line, std::size_t column) {
+  std::stringstream in(line);
+  std::string item;
+  for (std::size_t k = 0; k <= column && std::getline(in, item, ','); ++k) {
+  }
+  return item;
+}
+
+// --response-from: the 8x8 hanging cloth falls through itself for 200 frames, then untangles;
+// the column intersecting_pairs counts the pairs (-1 while not measured) down to 0, and the
+// run says when they reach 0. With --untangle off nothing is measured or printed.
+TEST(Simulate, ResponseFromUntanglesAndCountsIntersectingPairs) {
+  const testing::TempDir dir;
+  auto r = run_cli("simulate hanging-cloth:nx=8,ny=8 --response-from 200 --frames 240 --every 100 -o " +
+                   (dir / "on").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("response off until frame 200, then on"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0 intersecting triangle pairs at frame"), std::string::npos) << r.out;
+  auto lines = read_lines(dir / "on" / "stats.csv");
+  ASSERT_EQ(lines.size(), 242u);
+  const std::string header = ",intersecting_pairs,contours,untangle_pulls";
+  ASSERT_EQ(lines[0].substr(lines[0].size() - header.size()), header) << lines[0];
+  const std::size_t column = count_fields(lines[0]) - 3;
+  EXPECT_EQ(field(lines[200], column), "-1") << "frame 199: no response, not measured";
+  EXPECT_EQ(field(lines[201], column), "-1") << "frame 200: the last without response";
+  EXPECT_GT(std::stoi(field(lines[202], column)), 0) << "frame 201: still tangled";
+  EXPECT_GT(std::stoi(field(lines[202], column + 2)), 0) << "pushes";
+  EXPECT_EQ(field(lines[241], column), "0") << "frame 240: untangled";
+  std::ifstream in(dir / "on" / "state.json");
+  const std::string json((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(json.find("\"untangle\":true"), std::string::npos) << json;
+
+  r = run_cli("simulate hanging-cloth:nx=8,ny=8 --response-from 200 --frames 210 --untangle off --every 100 -o " +
+              (dir / "off").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_EQ(r.out.find("0 intersecting triangle pairs at frame"), std::string::npos) << r.out;
+  lines = read_lines(dir / "off" / "stats.csv");
+  ASSERT_EQ(lines.size(), 212u);
+  for (std::size_t k = 1; k < lines.size(); ++k) EXPECT_EQ(field(lines[k], column), "-1") << lines[k];
+
+  // A run that ends before the switch saves its state with the response off.
+  r = run_cli("simulate hanging-cloth:nx=4,ny=4 --response-from 10 --frames 5 -q -o " + (dir / "early").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  std::ifstream early(dir / "early" / "state.json");
+  const std::string early_json((std::istreambuf_iterator<char>(early)), std::istreambuf_iterator<char>());
+  EXPECT_NE(early_json.find("\"response\":false"), std::string::npos) << early_json;
+  EXPECT_NE(json.find("\"response\":true"), std::string::npos) << json;
+
+  r = run_cli("simulate hanging-cloth:nx=4,ny=4 --response-from 3 --response off --frames 5 -q -o " +
+              (dir / "bad").string());
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("--response-from needs the response on"), std::string::npos) << r.out;
+  r = run_cli("simulate hanging-cloth:nx=4,ny=4 --untangle maybe --frames 1 -q -o " + (dir / "bad2").string());
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("--untangle expects on or off, got 'maybe'"), std::string::npos) << r.out;
+}
+
 }  // namespace
 }  // namespace crumple

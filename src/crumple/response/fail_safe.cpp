@@ -1,6 +1,7 @@
 #include <crumple/core/error.hpp>
 #include <crumple/geometry/ccd.hpp>
 #include <crumple/response/fail_safe.hpp>
+#include <crumple/response/untangle.hpp>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -112,11 +113,13 @@ std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> posit
   for (const VertexFaceImpact& c : impacts_.vf) {
     Stencil s = vertex_face_stencil(c.vertex, faces[at(c.face)], c.barycentric, c.normal);
     if (c.toi == 0 && c.distance <= delta && !touches(geometry::CcdPair::kVertexFace, s.vertex)) continue;
+    if (touches_tangle_on_both_sides(s, tangle_)) continue;
     live_.push_back(s);
   }
   for (const EdgeEdgeImpact& c : impacts_.ee) {
     Stencil s = edge_edge_stencil(c.a, c.b, c.s, c.t, c.normal);
     if (c.toi == 0 && c.distance <= delta && !touches(geometry::CcdPair::kEdgeEdge, s.vertex)) continue;
+    if (touches_tangle_on_both_sides(s, tangle_)) continue;
     live_.push_back(s);
   }
   return live_.size();

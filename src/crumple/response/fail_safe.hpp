@@ -77,6 +77,11 @@ class CcdFailSafe {
   FailSafeStats apply(PositionsView start, std::span<const Scalar> inv_mass, Scalar duration,
                       std::span<Vec3> positions, std::span<Vec3> velocities);
 
+  /// Vertices of an existing intersection being untangled (#V flags; empty = none): an impact
+  /// with a flagged vertex on each of its sides is not live, so the fail-safe lets the tangle
+  /// move through itself (`response/untangle.hpp`). The guarantee then covers the other pairs.
+  void set_tangle(std::span<const char> tangle) { tangle_.assign(tangle.begin(), tangle.end()); }
+
   const FailSafeOptions& options() const { return options_; }
   /// The continuous query (its statistics of the last query).
   const ContinuousQuery& query() const { return query_; }
@@ -90,6 +95,7 @@ class CcdFailSafe {
   ContinuousQuery query_;
   ImpactSet impacts_;
   std::vector<Stencil> live_;
+  std::vector<char> tangle_;
 };
 
 }  // namespace crumple::response

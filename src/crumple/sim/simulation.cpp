@@ -14,6 +14,17 @@ namespace crumple::sim {
 namespace {
 using Clock = std::chrono::steady_clock;
 
+Scalar mean_edge(const Topology& topology, PositionsView x) {
+  return topology.num_edges() > 0 ? edge_length_stats(topology, x).mean : 0;
+}
+
+/// Drops the stencils of pairs inside the tangle being untangled (both sides in it).
+void drop_tangled(std::vector<response::Stencil>& stencils, const response::Untangler* untangler) {
+  if (!untangler || !untangler->tangled()) return;
+  const auto tangle = untangler->tangle();
+  std::erase_if(stencils, [&](const response::Stencil& s) { return response::touches_tangle_on_both_sides(s, tangle); });
+}
+
 std::string number(Scalar v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.3g", v);
@@ -74,6 +85,43 @@ Simulation::Simulation(Model model, State state, ForceField field,
     options.query.threads = settings_.detector.threads;
     ccd_ = std::make_unique<response::CcdFailSafe>(model_.topology_ptr(), options);
   }
+  CRUMPLE_CHECK(settings_.untangle_step > 0 && std::isfinite(settings_.untangle_step),
+                "untangle_step must be finite and > 0");
+  CRUMPLE_CHECK(settings_.contour_step >= 0 && std::isfinite(settings_.contour_step),
+                "contour_step must be finite and >= 0");
+  if (settings_.response && settings_.untangle) {
+    response::UntangleOptions options;
+    const Scalar h = settings_.detector.thickness;
+    options.thickness = h;
+    // A zero thickness still needs a step: a tenth of the mean edge length stands in for h.
+    const Scalar unit = h > 0 ? h : 0.1 * mean_edge(model_.topology(), state_.x);
+    options.max_step = settings_.untangle_step * unit;
+    options.contour_step = settings_.contour_step * unit;
+    options.threads = settings_.detector.threads;
+    if (options.max_step > 0) untangler_ = std::make_unique<response::Untangler>(model_.topology_ptr(), options);
+  }
+}
+
+void Simulation::untangle_check() {
+  if (!untangler_ || untangle_valid_) return;
+  untangle_valid_ = true;
+  if (known_clean_ && ccd_ && !fail_safe_) {
+    intersecting_ = 0;
+    return;
+  }
+  const auto start = Clock::now();
+  intersecting_ = static_cast<std::int64_t>(untangler_->analyse(state_.x, model_.inv_mass()));
+  if (ccd_) ccd_->set_tangle(intersecting_ > 0 ? untangler_->tangle() : std::span<const char>{});
+  known_clean_ = intersecting_ == 0 && ccd_ && !fail_safe_;
+  untangle_ms_ += ms_since(start);
+}
+
+void Simulation::untangle_push() {
+  if (!untangler_ || !untangler_->tangled()) return;
+  const auto start = Clock::now();
+  const response::UntangleStats stats = untangler_->apply(model_.inv_mass(), state_.x, state_.v);
+  untangle_pulls_ += stats.pulls + stats.contour_moves;
+  untangle_ms_ += ms_since(start);
 }
 
 void Simulation::run_fail_safe(PositionsView frame_start) {
@@ -129,9 +177,11 @@ void Simulation::filter_contacts() {
 
 void Simulation::proximity_frame() {
   if (!contacts_valid_) detect_now();
+  untangle_check();
   const Positions frame_start = state_.x;
   auto start = Clock::now();
   stencils_ = response::make_stencils(contacts_, model_.topology().faces());
+  drop_tangled(stencils_, untangler_.get());
   response_ms_ += ms_since(start);
   response::ProximityOptions options;
   options.thickness = settings_.detector.thickness;
@@ -151,10 +201,12 @@ void Simulation::proximity_frame() {
     corrections_ += stats.corrections;
     if (!obstacles_.empty() && stats.corrections > 0) obstacles_pass();
     response_ms_ += ms_since(start);
+    untangle_push();
     check_state(k + 1);
   }
   run_fail_safe(frame_start);
   contacts_valid_ = false;
+  untangle_valid_ = false;
 }
 
 void Simulation::restore_detector_state(std::string_view text) {
@@ -186,6 +238,7 @@ void Simulation::step() {
   obstacles_pass();
   if (settings_.response) {
     stencils_ = response::make_stencils(contacts_, model_.topology().faces());
+    drop_tangled(stencils_, untangler_.get());
     response::ResponseOptions options;
     options.thickness = settings_.detector.thickness;
     options.passes = settings_.passes;
@@ -195,7 +248,9 @@ void Simulation::step() {
     if (!obstacles_.empty() && stats.corrections > 0) obstacles_pass();
   }
   response_ms_ += ms_since(start);
+  if (settings_.response) untangle_push();
   contacts_valid_ = false;
+  untangle_valid_ = false;
 }
 
 void Simulation::check_state(int step) const {
@@ -250,17 +305,23 @@ FrameStats Simulation::frame_stats() {
   for (const auto& o : obstacles_) {
     s.obstacle_penetration = std::max(s.obstacle_penetration, response::max_penetration(o, state_.time, state_.x));
   }
+  untangle_check();
+  s.intersecting_pairs = intersecting_;
+  if (untangler_ && !(known_clean_ && intersecting_ == 0)) s.contours = untangler_->analysis().contours.size();
+  s.untangle_pulls = untangle_pulls_;
+  s.untangle_ms = untangle_ms_;
   s.cg_iterations = cg_iterations_;
   s.detections = detections_;
   s.corrections = corrections_;
   s.energy = compute_energy(model_, field_, state_).total();
   for (const Vec3& v : state_.v) s.max_speed = std::max(s.max_speed, v.norm());
   if (!state_.x.empty()) s.bounds = compute_bounds(state_.x);
-  integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = 0;
+  integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = untangle_ms_ = 0;
   ccd_stats_ = {};
   cg_iterations_ = 0;
   detections_ = 0;
   corrections_ = 0;
+  untangle_pulls_ = 0;
   return s;
 }
 
@@ -272,6 +333,7 @@ FrameStats Simulation::advance_frame() {
     if (per_frame()) {
       proximity_frame();
     } else {
+      if (settings_.response) untangle_check();
       for (int k = 0; k < settings_.substeps; ++k) {
         step();
         check_state(k + 1);
@@ -284,10 +346,11 @@ FrameStats Simulation::advance_frame() {
   } catch (const DivergenceError&) {  // the frame is undone: the state stays the last good one
     state_ = start;
     contacts_valid_ = false;
-    integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = 0;
+    integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = untangle_ms_ = 0;
     ccd_stats_ = {};
     cg_iterations_ = 0;
     corrections_ = 0;
+    untangle_pulls_ = 0;
     throw;
   }
   ++frame_;

@@ -19,6 +19,12 @@
 /// positions to the proposed end: **a frame that starts intersection-free ends
 /// intersection-free** (no two triangles sharing no vertex intersect), whatever the speed.
 ///
+/// With response on and `Settings::untangle` (the default), a frame that starts with
+/// intersecting triangles is untangled (`response/untangle.hpp`: Global Intersection Analysis,
+/// then pushes after every step that pull the inside regions back through); the regular
+/// response and the fail-safe leave the tangle's own pairs alone meanwhile. Once a frame starts
+/// intersection-free with the built-in fail-safe, every later one does too, and the check stops.
+///
 /// After every step the state is checked (`DivergenceError`): a diverging run stops at once
 /// instead of producing frames of huge or NaN coordinates.
 
@@ -27,6 +33,7 @@
 #include <crumple/response/contact_response.hpp>
 #include <crumple/response/fail_safe.hpp>
 #include <crumple/response/obstacle.hpp>
+#include <crumple/response/untangle.hpp>
 #include <crumple/sim/integrator.hpp>
 
 #include <cstdint>
@@ -101,6 +108,14 @@ struct Settings {
   bool fail_safe = true;
   /// The fail-safe's minimum separation δ as a fraction of the thickness h_c (>= 0).
   Scalar fail_safe_separation = 0.1;
+  /// With `response` on: analyse the intersecting triangle pairs at every frame's start and
+  /// untangle them (see the file comment). Costs one exact intersection query per frame until
+  /// a frame is found intersection-free with the built-in fail-safe on.
+  bool untangle = true;
+  /// Largest pull-through position impulse of one crossing per step, as a fraction of h_c (> 0).
+  Scalar untangle_step = 0.25;
+  /// Contour-minimisation displacement per step (contours bounding no region), fraction of h_c.
+  Scalar contour_step = 0.05;
 };
 
 /// Figures of one frame (timings summed over its steps).
@@ -126,6 +141,14 @@ struct FrameStats {
   Scalar energy = 0;     ///< total mechanical energy at the frame's end (`compute_energy`, J)
   Scalar max_speed = 0;  ///< largest particle speed at the frame's end (m/s)
   Bounds bounds{Vec3::Zero(), Vec3::Zero()};  ///< box of the particles at the frame's end
+  /// Intersecting triangle pairs (sharing no vertex) at the frame's end, by the exact `kdop`
+  /// detector; -1 when not measured (response or `Settings::untangle` off). After a frame that
+  /// started intersection-free with the built-in fail-safe it is 0 by the fail-safe's
+  /// guarantee, without a query.
+  std::int64_t intersecting_pairs = -1;
+  std::size_t contours = 0;        ///< intersection contours at the frame's end
+  std::size_t untangle_pulls = 0;  ///< pull-through and contour pushes over the frame's steps
+  double untangle_ms = 0;          ///< intersection analysis and pushes
 };
 
 /// Share of mesh edges (0..1) in at least one contact: both edges of every EE contact and the
@@ -178,6 +201,10 @@ class Simulation {
   void obstacles_pass();
   /// The custom or built-in fail-safe from `frame_start` to the current state.
   void run_fail_safe(PositionsView frame_start);
+  /// Analyses the intersections at the current positions once (see `Settings::untangle`).
+  void untangle_check();
+  /// Pushes of the untangler after a step (no-op when clean or off).
+  void untangle_push();
   /// Throws `DivergenceError` (frame being computed, step) when the state is not sane.
   void check_state(int step) const;
   FrameStats frame_stats();
@@ -198,6 +225,12 @@ class Simulation {
   FailSafe fail_safe_;
   std::unique_ptr<response::CcdFailSafe> ccd_;  ///< built-in fail-safe (response and fail_safe on)
   response::FailSafeStats ccd_stats_;           ///< summed over the current frame
+  std::unique_ptr<response::Untangler> untangler_;  ///< response and untangle on
+  bool untangle_valid_ = false;  ///< the untangler's analysis is of the current positions
+  bool known_clean_ = false;     ///< a frame started intersection-free with the built-in fail-safe
+  std::int64_t intersecting_ = -1;
+  std::size_t untangle_pulls_ = 0;
+  double untangle_ms_ = 0;
   std::vector<response::Stencil> stencils_;
   // Accumulated over the current frame.
   double integrate_ms_ = 0, detect_ms_ = 0, response_ms_ = 0, ccd_ms_ = 0;

@@ -1,0 +1,317 @@
+#include <crumple/core/error.hpp>
+#include <crumple/geometry/distance.hpp>
+#include <crumple/geometry/triangle_intersection.hpp>
+#include <crumple/response/untangle.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <tuple>
+
+namespace crumple::response {
+
+namespace {
+inline std::size_t at(Index i) { return static_cast<std::size_t>(i); }
+
+Index root(std::vector<Index>& parent, Index i) {
+  while (parent[at(i)] != i) {
+    parent[at(i)] = parent[at(parent[at(i)])];
+    i = parent[at(i)];
+  }
+  return i;
+}
+
+/// Barycentric coordinates (w.r.t. a, b, c) of the point where segment pq meets the triangle:
+/// the plane crossing when pq is not parallel to the plane, clamped into the triangle by taking
+/// the triangle's closest point to it.
+Vec3 crossing_point(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 n = (b - a).cross(c - a);
+  const Scalar vp = n.dot(p - a), vq = n.dot(q - a);
+  const Scalar s = vp != vq ? std::clamp(vp / (vp - vq), Scalar(0), Scalar(1)) : Scalar(0.5);
+  return geometry::point_triangle(p + s * (q - p), a, b, c).barycentric;
+}
+
+/// One (edge, face) crossing found on pair `pair`.
+struct Record {
+  Index edge, face, pair;
+  bool operator<(const Record& o) const { return std::tie(edge, face, pair) < std::tie(o.edge, o.face, o.pair); }
+};
+
+Vec3 unit_normal(const Face& f, PositionsView x) {
+  const Vec3 n = (x[at(f[1])] - x[at(f[0])]).cross(x[at(f[2])] - x[at(f[0])]);
+  const Scalar len = n.norm();
+  return len > 0 ? Vec3(n / len) : Vec3::Zero();
+}
+}  // namespace
+
+IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsView x,
+                                           std::span<const TriangleTriangleContact> pairs,
+                                           std::span<const Scalar> inv_mass) {
+  CRUMPLE_CHECK(x.size() == at(topology.num_vertices()), "positions must have #V entries");
+  CRUMPLE_CHECK(inv_mass.empty() || inv_mass.size() == x.size(), "inv_mass must be empty or have #V entries");
+  IntersectionAnalysis out;
+  out.pairs = pairs.size();
+  out.tangle.assign(x.size(), 0);
+
+  // 1. Crossings.
+  std::vector<Record> records;
+  for (std::size_t p = 0; p < pairs.size(); ++p) {
+    const Index faces[2] = {pairs[p].face0, pairs[p].face1};
+    for (int side = 0; side < 2; ++side) {
+      const Index f = faces[side], g = faces[1 - side];
+      const Face& t = topology.face(g);
+      for (Index c : topology.face(f)) out.tangle[at(c)] = 1;
+      for (Index e : topology.face_edges(f)) {
+        const Edge& ed = topology.edge(e);
+        if (geometry::segment_triangle_intersect(x[at(ed[0])], x[at(ed[1])], x[at(t[0])], x[at(t[1])],
+                                                 x[at(t[2])])) {
+          records.push_back({e, g, static_cast<Index>(p)});
+        }
+      }
+    }
+  }
+  std::sort(records.begin(), records.end());
+  std::vector<Index> record_crossing(records.size());
+  for (std::size_t r = 0; r < records.size(); ++r) {
+    if (r == 0 || records[r].edge != records[r - 1].edge || records[r].face != records[r - 1].face) {
+      const Record& rec = records[r];
+      const Edge& ed = topology.edge(rec.edge);
+      const Face& t = topology.face(rec.face);
+      Crossing c;
+      c.edge = rec.edge;
+      c.face = rec.face;
+      c.barycentric = crossing_point(x[at(ed[0])], x[at(ed[1])], x[at(t[0])], x[at(t[1])], x[at(t[2])]);
+      out.crossings.push_back(c);
+    }
+    record_crossing[r] = static_cast<Index>(out.crossings.size()) - 1;
+  }
+
+  // 2. Contours: the crossings of one pair are on one curve.
+  std::vector<Index> parent(out.crossings.size());
+  for (std::size_t i = 0; i < parent.size(); ++i) parent[i] = static_cast<Index>(i);
+  std::vector<Index> pair_first(pairs.size(), -1);
+  for (std::size_t r = 0; r < records.size(); ++r) {
+    Index& first = pair_first[at(records[r].pair)];
+    if (first < 0) {
+      first = record_crossing[r];
+    } else {
+      parent[at(root(parent, record_crossing[r]))] = root(parent, first);
+    }
+  }
+  std::vector<Index> contour_of_root(parent.size(), -1);
+  for (std::size_t i = 0; i < out.crossings.size(); ++i) {
+    const Index r = root(parent, static_cast<Index>(i));
+    if (contour_of_root[at(r)] < 0) {
+      contour_of_root[at(r)] = static_cast<Index>(out.contours.size());
+      out.contours.emplace_back();
+    }
+    Crossing& c = out.crossings[i];
+    c.contour = contour_of_root[at(r)];
+    Contour& k = out.contours[at(c.contour)];
+    k.crossings.push_back(static_cast<Index>(i));
+    k.open = k.open || topology.edge_faces()[c.edge].size() == 1;
+  }
+  for (Index first : pair_first) {
+    if (first >= 0) ++out.contours[at(out.crossings[at(first)].contour)].pairs;
+  }
+
+  // 3. Regions: flood fill with the contour's crossing edges cut, the outside chosen in each
+  // connected piece of the mesh (two separate sheets each have theirs).
+  const Index nv = topology.num_vertices();
+  std::vector<char> cut(at(topology.num_edges()), 0);
+  std::vector<Index> part(at(nv), -1), piece(at(nv), -1), stack;
+  std::vector<std::size_t> size;
+  std::vector<char> pinned;
+  std::vector<char> inside_any(at(nv), 0);
+  // Labels the parts of the mesh reachable along edges that are not cut; returns their count.
+  const auto fill = [&](std::vector<Index>& label) {
+    std::fill(label.begin(), label.end(), -1);
+    size.clear();
+    pinned.clear();
+    for (Index seed = 0; seed < nv; ++seed) {
+      if (label[at(seed)] >= 0 || topology.vertex_edges()[seed].empty()) continue;
+      const Index id = static_cast<Index>(size.size());
+      size.push_back(0);
+      pinned.push_back(0);
+      label[at(seed)] = id;
+      stack.assign(1, seed);
+      while (!stack.empty()) {
+        const Index v = stack.back();
+        stack.pop_back();
+        ++size[at(id)];
+        if (!inv_mass.empty() && inv_mass[at(v)] == 0) pinned[at(id)] = 1;
+        for (Index e : topology.vertex_edges()[v]) {
+          if (cut[at(e)]) continue;
+          const Edge& ed = topology.edge(e);
+          const Index w = ed[0] == v ? ed[1] : ed[0];
+          if (label[at(w)] < 0) {
+            label[at(w)] = id;
+            stack.push_back(w);
+          }
+        }
+      }
+    }
+    return size.size();
+  };
+  const std::size_t pieces = fill(piece);
+  std::vector<Index> piece_of_part;
+  std::vector<Index> outside_of_piece(pieces);
+  std::vector<char> piece_pinned(pieces);
+  for (Contour& k : out.contours) {
+    for (Index i : k.crossings) cut[at(out.crossings[at(i)].edge)] = 1;
+    k.parts = fill(part);
+    for (Index i : k.crossings) cut[at(out.crossings[at(i)].edge)] = 0;
+    if (k.parts == pieces) continue;  // the curve cuts nothing off
+    piece_of_part.assign(k.parts, -1);
+    for (Index v = 0; v < nv; ++v) {
+      if (part[at(v)] >= 0) piece_of_part[at(part[at(v)])] = piece[at(v)];
+    }
+    // In each piece: the largest part, or the largest pinned one when the piece has pins.
+    std::fill(outside_of_piece.begin(), outside_of_piece.end(), -1);
+    std::fill(piece_pinned.begin(), piece_pinned.end(), 0);
+    for (std::size_t id = 0; id < k.parts; ++id) piece_pinned[at(piece_of_part[id])] |= pinned[id];
+    for (std::size_t id = 0; id < k.parts; ++id) {
+      const Index pc = piece_of_part[id];
+      if (piece_pinned[at(pc)] && !pinned[id]) continue;
+      Index& outside = outside_of_piece[at(pc)];
+      if (outside < 0 || size[id] > size[at(outside)]) outside = static_cast<Index>(id);
+    }
+    for (Index v = 0; v < nv; ++v) {
+      const Index id = part[at(v)];
+      if (id >= 0 && id != outside_of_piece[at(piece[at(v)])] && !pinned[at(id)]) {
+        k.inside.push_back(v);
+        inside_any[at(v)] = 1;
+        out.tangle[at(v)] = 1;
+      }
+    }
+  }
+  out.inside_vertices = static_cast<std::size_t>(std::count(inside_any.begin(), inside_any.end(), 1));
+  return out;
+}
+
+bool touches_tangle_on_both_sides(const Stencil& s, std::span<const char> tangle) {
+  if (tangle.empty()) return false;
+  const auto in = [&](int k) { return s.vertex[at(k)] >= 0 && tangle[at(s.vertex[at(k)])] != 0; };
+  const bool first = s.edge_edge ? in(0) || in(1) : in(0);
+  const bool second = s.edge_edge ? in(2) || in(3) : in(1) || in(2) || in(3);
+  return first && second;
+}
+
+namespace {
+UntangleOptions checked(UntangleOptions o) {
+  if (!(o.thickness >= 0) || !std::isfinite(o.thickness)) throw InputError("untangle thickness must be finite and >= 0");
+  if (!(o.max_step > 0) || !std::isfinite(o.max_step)) throw InputError("untangle step must be finite and > 0");
+  if (!(o.contour_step >= 0) || !std::isfinite(o.contour_step)) {
+    throw InputError("untangle contour step must be finite and >= 0");
+  }
+  return o;
+}
+}  // namespace
+
+Untangler::Untangler(std::shared_ptr<const Topology> topology, UntangleOptions options)
+    : topology_(std::move(topology)), options_(checked(options)) {
+  CRUMPLE_CHECK(topology_ != nullptr, "untangler needs a topology");
+  DetectorOptions detection;
+  detection.kinds = ContactKinds::parse("tt");
+  detection.threads = options_.threads;
+  detector_ = make_detector(MethodSpec(Method::Kdop), detection);
+  detector_->set_topology(topology_);
+  analysis_.tangle.assign(at(topology_->num_vertices()), 0);
+}
+
+std::size_t Untangler::count(PositionsView x) {
+  detector_->update(x, contacts_);
+  analysis_ = {};
+  analysis_.pairs = contacts_.tt.size();
+  analysis_.tangle.assign(x.size(), 0);
+  pulls_.clear();
+  shifts_.clear();
+  return contacts_.tt.size();
+}
+
+std::size_t Untangler::analyse(PositionsView x, std::span<const Scalar> inv_mass) {
+  detector_->update(x, contacts_);
+  analysis_ = analyse_intersections(*topology_, x, contacts_.tt, inv_mass);
+  pulls_.clear();
+  shifts_.clear();
+  const Topology& topo = *topology_;
+  for (const Crossing& c : analysis_.crossings) {
+    const Contour& k = analysis_.contours[at(c.contour)];
+    const Edge& ed = topo.edge(c.edge);
+    const Face& t = topo.face(c.face);
+    const Vec3 n = unit_normal(t, x);
+    if (n == Vec3::Zero()) continue;
+    if (!k.inside.empty()) {
+      const bool in0 = std::binary_search(k.inside.begin(), k.inside.end(), ed[0]);
+      const bool in1 = std::binary_search(k.inside.begin(), k.inside.end(), ed[1]);
+      if (in0 == in1) continue;
+      const Index inner = in0 ? ed[0] : ed[1], outer = in0 ? ed[1] : ed[0];
+      const Scalar side = n.dot(x[at(outer)] - x[at(inner)]);
+      if (side == 0) continue;
+      pulls_.push_back(vertex_face_stencil(inner, t, c.barycentric, side > 0 ? n : Vec3(-n)));
+      continue;
+    }
+    // No inside: shorten the curve (contour minimisation).
+    const Vec3 p = c.barycentric[0] * x[at(t[0])] + c.barycentric[1] * x[at(t[1])] + c.barycentric[2] * x[at(t[2])];
+    const Vec3 along = x[at(ed[1])] - x[at(ed[0])];
+    if (along.norm() == 0) continue;
+    const Vec3 e = along.normalized();
+    const Scalar en = e.dot(n);
+    Vec3 g = Vec3::Zero();
+    for (Index f : topo.edge_faces()[c.edge]) {
+      const Face& face = topo.face(f);
+      const Vec3 m = unit_normal(face, x);
+      Vec3 r = n.cross(m);
+      if (m == Vec3::Zero() || r.norm() == 0) continue;
+      r.normalize();
+      Index opposite = face[0];
+      for (Index v : face) {
+        if (v != ed[0] && v != ed[1]) opposite = v;
+      }
+      Vec3 into = x[at(opposite)] - p;
+      into -= into.dot(e) * e;
+      if (r.dot(into) < 0) r = -r;
+      g += std::abs(en) > 1e-3 ? Vec3(r - (e.dot(r) / en) * n) : r;
+    }
+    if (!(g.norm() > 0) || !g.allFinite()) continue;
+    Shift s;
+    s.vertex = {ed[0], ed[1], t[0], t[1], t[2]};
+    s.direction = g.normalized();
+    shifts_.push_back(s);
+  }
+  return analysis_.pairs;
+}
+
+UntangleStats Untangler::apply(std::span<const Scalar> inv_mass, std::span<Vec3> x,
+                               std::span<Vec3> v) const {
+  UntangleStats stats;
+  const Scalar h = options_.thickness;
+  for (const Stencil& s : pulls_) {
+    const Scalar gap = relative_normal(s, x);
+    const Scalar denom = inverse_effective_mass(s, inv_mass);
+    if (!(denom > 0)) continue;
+    if (gap < h) {
+      const Scalar mu = std::min(h - gap, options_.max_step) / denom;
+      for (int k = 0; k < s.count; ++k) {
+        const Index i = s.vertex[at(k)];
+        x[at(i)] += (s.weight[at(k)] * inv_mass[at(i)] * mu) * s.normal;
+      }
+      ++stats.pulls;
+    }
+    correct_velocity(s, inv_mass, v);
+  }
+  if (options_.contour_step > 0) {
+    for (const Shift& s : shifts_) {
+      bool moved = false;
+      for (int k = 0; k < 5; ++k) {
+        const Index i = s.vertex[at(k)];
+        if (inv_mass[at(i)] == 0) continue;
+        x[at(i)] += (k < 2 ? options_.contour_step : -options_.contour_step) * s.direction;
+        moved = true;
+      }
+      stats.contour_moves += moved ? 1 : 0;
+    }
+  }
+  return stats;
+}
+
+}  // namespace crumple::response

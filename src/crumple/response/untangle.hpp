@@ -1,0 +1,145 @@
+#pragma once
+/// \file
+/// Untangling a mesh that already passes through itself: Global Intersection Analysis (Baraff,
+/// Witkin, Kass, *Untangling Cloth*, SIGGRAPH 2003; ALGORITHMS-2 §4) and the pushes that pull
+/// the regions it finds back through, with Intersection Contour Minimization (Volino &
+/// Magnenat-Thalmann 2006) for contours that bound no region. docs/simulation.md, "Untangling".
+///
+/// Analysis (`analyse_intersections`), from the intersecting triangle pairs (faces sharing no
+/// vertex, e.g. an exact detector's `tt` contacts):
+///  1. **Crossings**: every edge of one face of a pair that meets the other face (exact
+///     `segment_triangle_intersect`); a crossing is an (edge, face) pair, shared by the pairs
+///     of the edge's faces with that face.
+///  2. **Contours**: the crossings chained through the pairs (union–find: the crossings of one
+///     pair belong to one contour). A contour is *open* when a crossing edge is a boundary edge
+///     (the intersection curve reaches the cloth's border).
+///  3. **Regions**: the mesh's vertices flood-filled along edges, the contour's crossing edges
+///     cut. In each connected piece of the mesh the largest part is *outside*; every other part
+///     is *inside*: the smaller side of the curve, which went through. A part holding a pinned vertex (m⁻¹ = 0) cannot go back
+///     through, so when one exists the largest pinned part is the outside instead. This also
+///     handles open contours: a flap of the cloth whose intersection curve runs from its border
+///     to its border is cut off and is the inside; a curve that cuts nothing (from the border
+///     of one sheet to the border of another, a slit) has no inside.
+///
+/// Pushes (`Untangler::apply`), built at the analysed positions, applied after each step:
+///  - a crossing whose edge has one end inside and one outside: the inside end and the crossed
+///    face (at the crossing's barycentric point) get a position impulse in the stencil form of
+///    `contact_response.hpp` along the face's normal turned towards the outside end — the
+///    repulsion with its sign flipped for the pair, so the inside end passes back through the
+///    face to a gap of the thickness h — at most `max_step` per call, and their approaching
+///    relative velocity along it is removed;
+///  - a crossing of a contour with no inside: its edge's ends move by +σG, the face's corners
+///    by −σG (σ = `contour_step`), G the direction that shortens the intersection curve:
+///    Σ over the edge's faces f of R_f − (E·R_f)/(E·N) N (E the edge's direction, N the
+///    face's normal, R_f the curve's direction into f), normalised — the first-order change of
+///    the curve's length when the edge moves (the N term dropped when |E·N| is tiny).
+/// The vertices of inside regions and of intersecting faces form the *tangle*; a contact or
+/// impact whose two sides both touch the tangle is exempt from the regular response and the
+/// fail-safe (`touches_tangle_on_both_sides`), which would otherwise hold the intersection in
+/// place.
+
+#include <crumple/core/types.hpp>
+#include <crumple/detect/contact.hpp>
+#include <crumple/detect/detector.hpp>
+#include <crumple/response/contact_response.hpp>
+
+#include <cstddef>
+#include <memory>
+#include <span>
+#include <vector>
+
+namespace crumple::response {
+
+/// A mesh edge passing through a face it shares no vertex with.
+struct Crossing {
+  Index edge = -1;
+  Index face = -1;
+  /// Of the crossing point w.r.t. the face's corners (clamped into the face; the closest point
+  /// of the face for an edge lying in its plane).
+  Vec3 barycentric = Vec3::Zero();
+  Index contour = -1;
+};
+
+/// One intersection curve.
+struct Contour {
+  std::vector<Index> crossings;  ///< indices into `IntersectionAnalysis::crossings`
+  std::size_t pairs = 0;         ///< intersecting face pairs along it
+  bool open = false;             ///< a crossing edge is a boundary edge
+  /// Parts of the mesh with the crossing edges cut (the connected pieces of the mesh when the
+  /// curve cuts nothing off).
+  std::size_t parts = 0;
+  std::vector<Index> inside;     ///< vertices of its inside parts (sorted; empty: no inside)
+};
+
+/// What `analyse_intersections` found.
+struct IntersectionAnalysis {
+  std::size_t pairs = 0;            ///< intersecting face pairs analysed
+  std::vector<Crossing> crossings;  ///< sorted by (edge, face)
+  std::vector<Contour> contours;
+  /// Per vertex: 1 for the tangle (inside some contour, or a corner of an intersecting face).
+  std::vector<char> tangle;
+  std::size_t inside_vertices = 0;  ///< vertices inside some contour
+};
+
+/// Global Intersection Analysis (see the file comment). `pairs`: intersecting faces sharing no
+/// vertex (not checked: a pair that does not intersect gives no crossing); `inv_mass`: #V
+/// entries (0 = pinned), or empty for no pins. Deterministic; O(#pairs + #contours × (#V + #E)).
+IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsView positions,
+                                           std::span<const TriangleTriangleContact> pairs,
+                                           std::span<const Scalar> inv_mass = {});
+
+/// True when both sides of the stencil (VF: the vertex and the face; EE: the two edges) have a
+/// vertex in `tangle` (#V flags; empty = none).
+bool touches_tangle_on_both_sides(const Stencil& stencil, std::span<const char> tangle);
+
+struct UntangleOptions {
+  Scalar thickness = 0;     ///< h: a pulled-through end goes to the gap h beyond the face (>= 0)
+  Scalar max_step = 0;      ///< largest position impulse of one push per `apply` (m, > 0)
+  Scalar contour_step = 0;  ///< σ: contour-minimisation displacement per `apply` (m, >= 0)
+  int threads = 1;          ///< threads of the intersection detector (0 = all)
+};
+
+/// What one `apply` did.
+struct UntangleStats {
+  std::size_t pulls = 0;       ///< pull-through pushes that moved something
+  std::size_t contour_moves = 0;  ///< contour-minimisation moves
+};
+
+/// Finds intersections (the exact `kdop` detector, kinds `tt`), analyses them, and pushes.
+class Untangler {
+ public:
+  /// Throws `InputError` for bad options.
+  Untangler(std::shared_ptr<const Topology> topology, UntangleOptions options);
+
+  /// Detects the intersecting pairs at `positions`, analyses them and builds the pushes (from
+  /// these positions). Returns the number of intersecting pairs.
+  std::size_t analyse(PositionsView positions, std::span<const Scalar> inv_mass);
+  /// Only counts the intersecting pairs at `positions` (no analysis; the pushes are cleared).
+  std::size_t count(PositionsView positions);
+
+  /// Applies the pushes of the last analysis at the current positions (see the file comment).
+  UntangleStats apply(std::span<const Scalar> inv_mass, std::span<Vec3> positions,
+                      std::span<Vec3> velocities) const;
+
+  const IntersectionAnalysis& analysis() const { return analysis_; }
+  /// The tangle of the last analysis (#V flags, all 0 when the mesh was clean).
+  std::span<const char> tangle() const { return analysis_.tangle; }
+  bool tangled() const { return analysis_.pairs > 0; }
+  const UntangleOptions& options() const { return options_; }
+
+ private:
+  struct Shift {
+    std::array<Index, 5> vertex{-1, -1, -1, -1, -1};  ///< the edge's two ends, the face's corners
+    Vec3 direction = Vec3::Zero();                     ///< G (unit)
+  };
+
+  std::shared_ptr<const Topology> topology_;
+  UntangleOptions options_;
+  std::unique_ptr<Detector> detector_;
+  ContactSet contacts_;
+  IntersectionAnalysis analysis_;
+  std::vector<Stencil> pulls_;
+  std::vector<Shift> shifts_;
+};
+
+}  // namespace crumple::response

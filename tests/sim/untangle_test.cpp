@@ -1,0 +1,87 @@
+// Untangling in the simulation: a hanging cloth left to fall through itself with the response
+// off, then simulated with the response on, reaches 0 intersecting triangle pairs with the
+// untangler and keeps its intersections without it.
+#include <crumple/sim/scene.hpp>
+
+#include <gtest/gtest.h>
+
+#include <map>
+#include <string>
+#include <utility>
+
+namespace crumple::sim {
+namespace {
+
+/// Intersecting triangle pairs (faces sharing no vertex) at `x`, by the exact kdop detector.
+std::size_t intersecting_pairs(std::shared_ptr<const Topology> topology, PositionsView x) {
+  DetectorOptions options;
+  options.kinds = ContactKinds::parse("tt");
+  options.threads = 1;
+  auto detector = make_detector(MethodSpec::parse("kdop"), options);
+  detector->set_topology(std::move(topology));
+  ContactSet contacts;
+  detector->update(x, contacts);
+  return contacts.tt.size();
+}
+
+struct Untangled {
+  std::size_t tangled_pairs = 0;  ///< when the response starts
+  int frames_to_clean = -1;       ///< frames with the response on until 0 pairs (-1: never)
+  std::size_t last_pairs = 0;     ///< after the last frame
+  int misreported = 0;            ///< frames whose `FrameStats::intersecting_pairs` is not the count
+  int intersecting_after_clean = 0;  ///< frames with pairs after the first clean one
+};
+
+/// `spec` (seed 1) simulated `off_frames` frames with the response off, then `on_frames` with
+/// it on; every frame's intersecting pairs counted by an independent exact detector.
+Untangled run(const std::string& spec, int off_frames, int on_frames, bool untangle) {
+  const Scene s = make_scene(SceneSpec::parse(spec), 1);
+  Settings off = s.settings;
+  off.response = false;
+  off.detector.threads = 1;
+  static std::map<std::pair<std::string, int>, State> tangled;  // the off phase, run once
+  auto it = tangled.find({spec, off_frames});
+  if (it == tangled.end()) {
+    Simulation first(s.model, s.state, s.field, s.obstacles, s.kinematics, off);
+    for (int f = 0; f < off_frames; ++f) first.advance_frame();
+    it = tangled.emplace(std::make_pair(spec, off_frames), first.state()).first;
+  }
+  Settings on = off;
+  on.response = true;
+  on.untangle = untangle;
+  Simulation sim(s.model, it->second, s.field, s.obstacles, s.kinematics, on, off_frames);
+  Untangled r;
+  r.tangled_pairs = intersecting_pairs(sim.model().topology_ptr(), sim.state().x);
+  for (int f = 1; f <= on_frames; ++f) {
+    const FrameStats st = sim.advance_frame();
+    r.last_pairs = intersecting_pairs(sim.model().topology_ptr(), sim.state().x);
+    const std::int64_t expected = untangle ? static_cast<std::int64_t>(r.last_pairs) : -1;
+    if (st.intersecting_pairs != expected) ++r.misreported;
+    if (r.frames_to_clean > 0 && r.last_pairs > 0) ++r.intersecting_after_clean;
+    if (r.last_pairs == 0 && r.frames_to_clean < 0) r.frames_to_clean = f;
+  }
+  return r;
+}
+
+// The 8 x 8 hanging cloth after 200 frames without response hangs in a bundle through itself
+// (67 intersecting pairs); with the response and the untangler it is intersection-free within
+// 100 frames (measured: 15 frames; the test allows 40) and stays so; without the untangler
+// the fail-safe holds the intersections where they are over the same 40 frames.
+TEST(Untangle, TangledHangingClothRecovers) {
+  const std::string spec = "hanging-cloth:nx=8,ny=8";
+  const Untangled with = run(spec, 200, 40, true);
+  EXPECT_GT(with.tangled_pairs, 20u);
+  EXPECT_GE(with.frames_to_clean, 1);
+  EXPECT_LE(with.frames_to_clean, 40);
+  EXPECT_EQ(with.last_pairs, 0u);
+  EXPECT_EQ(with.intersecting_after_clean, 0);
+  EXPECT_EQ(with.misreported, 0) << "FrameStats::intersecting_pairs is the exact count";
+  const Untangled without = run(spec, 200, 40, false);
+  EXPECT_EQ(without.tangled_pairs, with.tangled_pairs);
+  EXPECT_EQ(without.frames_to_clean, -1);
+  EXPECT_GT(without.last_pairs, 0u);
+  EXPECT_EQ(without.misreported, 0) << "not measured: -1";
+}
+
+}  // namespace
+}  // namespace crumple::sim
