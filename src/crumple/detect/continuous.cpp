@@ -2,12 +2,12 @@
 #include <crumple/core/error.hpp>
 #include <crumple/core/parallel.hpp>
 #include <crumple/core/timing.hpp>
+#include <crumple/detect/broad_phase/box_tree_detail.hpp>
 #include <crumple/detect/broad_phase/broad_phase.hpp>
 #include <crumple/detect/broad_phase/hash_grid.hpp>
 #include <crumple/detect/broad_phase/kdop_tree.hpp>
 #include <crumple/detect/broad_phase/sweep_prune.hpp>
 #include <crumple/detect/continuous.hpp>
-#include <crumple/detect/exact/box_tree.hpp>
 #include <crumple/detect/exact/orphans.hpp>
 #include <crumple/detect/exact/ownership.hpp>
 #include <crumple/detect/exact/stars.hpp>
@@ -641,7 +641,7 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
   if (!isolated.empty()) {
     std::vector<Box> boxes(static_cast<std::size_t>(topo.num_faces()));
     for (std::size_t f = 0; f < boxes.size(); ++f) boxes[f] = face_box(static_cast<Index>(f));
-    exact::BoxTree tree;
+    detail::BoxTree tree;
     tree.build(boxes);
     parallel_for_chunks(isolated.size(), threads, 64, [&](std::size_t begin, std::size_t end) {
       Tester tester{step, {}, {}, earliest};

@@ -13,9 +13,11 @@
 /// give a candidate when they are the same cell c (hash collisions only cost time), c is the
 /// cell of the lower corner of the two boxes' intersection (so every pair is reported from
 /// exactly one cell), the boxes overlap and the faces share no vertex. A face whose box spans
-/// more than `kMaxCellsPerFace` cells enters no cell and is tested against every face by box,
-/// so the entries are at most that many per face. The result never depends on the cell size
-/// or table size.
+/// more than `kMaxCellsPerFace` cells ("oversized") enters no cell, so the entries are at most
+/// that many per face whatever the faces' sizes; every face then queries a box tree over the
+/// oversized faces' boxes, which costs about log(oversized) box tests per face plus the pairs
+/// found. The result never depends on the cell size or table size. Stats: `hash_cells`,
+/// `hash_oversized` and `hash_oversized_tests` (the tree's box tests).
 /// Spec: `hash:cell=C,table=N` — C is the cell size as a multiple of the mean edge length of
 /// the first frame (0 = automatic: max(mean edge, 2 h)); N the bucket count (0 = the smallest
 /// prime >= 2 x the entries of the first frame); plus `max_contacts`, `overflow`.
@@ -50,8 +52,8 @@ class HashGrid final : public BroadPhase {
     std::int32_t cell[3];
   };
   /// A face whose box spans more cells than this is "oversized": it enters no cell and is
-  /// tested against every face by box instead, so the grid holds at most this many entries
-  /// per face whatever the faces' sizes.
+  /// found by the other faces through a box tree instead, so the grid holds at most this many
+  /// entries per face whatever the faces' sizes.
   static constexpr double kMaxCellsPerFace = 64;
   HashParams params_;
   const Topology* topo_ = nullptr;
@@ -66,6 +68,7 @@ class HashGrid final : public BroadPhase {
   std::vector<Entry> sorted_;                        ///< entries grouped by bucket
   std::vector<std::uint8_t> oversized_flag_;         ///< per face: 1 when oversized
   std::vector<Index> oversized_;                     ///< the oversized faces, ascending
+  std::vector<Box> oversized_boxes_;                 ///< their boxes, in the same order
 };
 
 }  // namespace crumple

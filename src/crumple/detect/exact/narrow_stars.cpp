@@ -1,5 +1,5 @@
 #include <crumple/core/parallel.hpp>
-#include <crumple/detect/exact/box_tree.hpp>
+#include <crumple/detect/broad_phase/box_tree_detail.hpp>
 #include <crumple/detect/exact/narrow_frame.hpp>
 #include <crumple/detect/exact/stars.hpp>
 
@@ -68,7 +68,7 @@ void narrow_isolated(NarrowFrame& frame, const std::vector<Index>& isolated) {
   parallel_for_chunks(boxes.size(), frame.threads, 4096, [&](std::size_t begin, std::size_t end) {
     for (std::size_t g = begin; g < end; ++g) boxes[g] = corner_box(frame, frame.packed[g], r);
   });
-  BoxTree tree;
+  detail::BoxTree tree;
   tree.build(boxes);
   parallel_for_chunks(isolated.size(), frame.threads, 64, [&](std::size_t begin, std::size_t end) {
     LocalContacts local{frame.spares.take()};

@@ -3,8 +3,8 @@
 /// Internal to the exact detector and the continuous query: the face pairs around a star
 /// (orphans.hpp) that may hold an orphan sub-pair within reach, found from a box tree.
 
+#include <crumple/detect/broad_phase/box_tree_detail.hpp>
 #include <crumple/detect/broad_phase/broad_phase.hpp>
-#include <crumple/detect/exact/box_tree.hpp>
 #include <crumple/detect/exact/orphans.hpp>
 
 #include <algorithm>
@@ -18,7 +18,7 @@ struct StarScratch {
   std::vector<Index> faces;
   std::vector<Box> boxes;
   std::vector<std::pair<Index, Index>> pairs;
-  BoxTree tree;
+  detail::BoxTree tree;
 };
 
 /// Calls each(f, g), f < g, once for every pair of faces around star v whose smallest shared

@@ -1,9 +1,10 @@
 #pragma once
 /// \file
-/// Internal to the exact detector: a binary tree of axis-aligned boxes, built in O(n log n) and
-/// queried for the boxes that overlap a given one. Used where a per-topology list would be
-/// quadratic (the faces around a star, vertices used by no face): built per frame, it keeps
-/// those stages near-linear in their input whenever the boxes are not themselves crowded.
+/// Internal: a binary tree of axis-aligned boxes, built in O(n log n) and queried for the boxes
+/// that overlap a given one. Used where a per-topology list or an all-pairs test would be
+/// quadratic (the faces around a star, vertices used by no face, the hash grid's oversized
+/// faces): built per frame, it keeps those stages near-linear in their input whenever the boxes
+/// are not themselves crowded.
 
 #include <crumple/detect/broad_phase/broad_phase.hpp>
 
@@ -13,7 +14,7 @@
 #include <span>
 #include <vector>
 
-namespace crumple::exact {
+namespace crumple::detail {
 
 class BoxTree {
  public:
@@ -108,4 +109,4 @@ class BoxTree {
   std::vector<Node> nodes_;
 };
 
-}  // namespace crumple::exact
+}  // namespace crumple::detail
