@@ -21,7 +21,7 @@ namespace {
 
 /// The exact detector over a k-DOP tree (what `make_detector` builds for `kdop`).
 ExactDetector kdop_detector(DetectorOptions options, const KdopParams& params) {
-  return ExactDetector(options, params.exact, std::make_unique<KdopTree>(params));
+  return ExactDetector(options, ExactParams{}, std::make_unique<KdopTree>(params));
 }
 
 /// Its hierarchy, as the viewer sees it.

@@ -19,15 +19,15 @@ std::unique_ptr<Detector> make_detector(const MethodSpec& spec, const DetectorOp
       return std::make_unique<NaiveDetector>(options);
     case Method::Kdop: {
       const KdopParams p = KdopParams::from_spec(spec);
-      return std::make_unique<ExactDetector>(options, p.exact, std::make_unique<KdopTree>(p));
+      return std::make_unique<ExactDetector>(options, ExactParams::from_spec(spec), std::make_unique<KdopTree>(p));
     }
     case Method::Hash: {
       const HashParams p = HashParams::from_spec(spec);
-      return std::make_unique<ExactDetector>(options, p.exact, std::make_unique<HashGrid>(p));
+      return std::make_unique<ExactDetector>(options, ExactParams::from_spec(spec), std::make_unique<HashGrid>(p));
     }
     case Method::Sap: {
       const SapParams p = SapParams::from_spec(spec);
-      return std::make_unique<ExactDetector>(options, p.exact, std::make_unique<SweepPrune>(p));
+      return std::make_unique<ExactDetector>(options, ExactParams::from_spec(spec), std::make_unique<SweepPrune>(p));
     }
     case Method::Stochastic:
       return std::make_unique<StochasticDetector>(options, StochasticParams::from_spec(spec));

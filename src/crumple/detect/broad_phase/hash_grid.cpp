@@ -1,3 +1,4 @@
+#include <crumple/core/error.hpp>
 #include <crumple/core/parallel.hpp>
 #include <crumple/core/timing.hpp>
 #include <crumple/detect/broad_phase/box_tree_detail.hpp>
@@ -48,7 +49,6 @@ HashParams HashParams::from_spec(const MethodSpec& spec) {
     throw InputError("method " + spec.to_string() + ": table must be in 0..2^31");
   }
   p.table = static_cast<std::uint64_t>(table);
-  p.exact = ExactParams::from_spec(spec);
   return p;
 }
 

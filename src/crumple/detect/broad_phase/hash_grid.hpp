@@ -23,7 +23,6 @@
 /// prime >= 2 x the entries of the first frame); plus `max_contacts`, `overflow`.
 
 #include <crumple/detect/broad_phase/broad_phase.hpp>
-#include <crumple/detect/exact_detector.hpp>
 
 #include <cstdint>
 #include <vector>
@@ -33,7 +32,6 @@ namespace crumple {
 struct HashParams {
   double cell = 0;         ///< cell size / mean edge length; 0 = automatic
   std::uint64_t table = 0;  ///< number of buckets; 0 = automatic
-  ExactParams exact;
   static HashParams from_spec(const MethodSpec& spec);
   bool operator==(const HashParams&) const = default;
 };

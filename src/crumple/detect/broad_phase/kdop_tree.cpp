@@ -1,3 +1,4 @@
+#include <crumple/core/error.hpp>
 // The k-DOP hierarchy as a broad phase (kdop_tree.hpp): its parameters, the `KdopTree` facade
 // over one `detail::DopTree<K>` per k, and a frame's order of steps (kdop_tree_detail.hpp lists
 // the units that define the rest).
@@ -30,7 +31,6 @@ KdopParams KdopParams::from_spec(const MethodSpec& spec) {
   p.sweep = spec.get_bool("sweep", p.sweep);
   p.cones = spec.get_bool("cones", p.cones);
   p.coherence = spec.get_bool("coherence", p.coherence);
-  p.exact = ExactParams::from_spec(spec);
   p.validate("method " + spec.to_string());
   return p;
 }

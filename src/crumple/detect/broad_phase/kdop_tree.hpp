@@ -53,7 +53,6 @@
 ///    pays only the sample).
 
 #include <crumple/detect/broad_phase/broad_phase.hpp>
-#include <crumple/detect/exact_detector.hpp>
 
 #include <memory>
 #include <vector>
@@ -82,7 +81,6 @@ struct KdopParams {
   /// since a refresh frame reuses that frame's candidates instead of being traversed again
   /// (rigid bodies carried along, cloth at rest). The contacts are the same either way.
   bool coherence = true;
-  ExactParams exact;
   /// Reads a `kdop:...` spec; keys left out keep the defaults above.
   static KdopParams from_spec(const MethodSpec& spec);
   bool operator==(const KdopParams&) const = default;

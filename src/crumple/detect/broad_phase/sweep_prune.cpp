@@ -1,3 +1,4 @@
+#include <crumple/core/error.hpp>
 #include <crumple/core/parallel.hpp>
 #include <crumple/core/timing.hpp>
 #include <crumple/detect/broad_phase/sweep_prune.hpp>
@@ -15,7 +16,6 @@ SapParams SapParams::from_spec(const MethodSpec& spec) {
   static constexpr std::array<std::string_view, 4> kAxis{"auto", "x", "y", "z"};
   const std::string axis = spec.get_choice("axis", "auto", kAxis);
   p.axis = axis == "auto" ? -1 : axis[0] - 'x';
-  p.exact = ExactParams::from_spec(spec);
   return p;
 }
 

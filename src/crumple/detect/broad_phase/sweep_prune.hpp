@@ -17,7 +17,6 @@
 /// Spec: `sap:axis=auto|x|y|z` plus `max_contacts`, `overflow`.
 
 #include <crumple/detect/broad_phase/broad_phase.hpp>
-#include <crumple/detect/exact_detector.hpp>
 
 #include <vector>
 
@@ -25,7 +24,6 @@ namespace crumple {
 
 struct SapParams {
   int axis = -1;  ///< 0, 1, 2, or -1 = automatic
-  ExactParams exact;
   static SapParams from_spec(const MethodSpec& spec);
   bool operator==(const SapParams&) const = default;
 };
