@@ -17,13 +17,13 @@ set(CRUMPLE_PCH_HEADERS
   <string_view> <utility> <vector>)
 
 # crumple_precompile(TARGET [HEADER...]): TARGET's files compile against one precompiled
-# CRUMPLE_PCH_HEADERS plus the given headers. Only for targets of 3 files or more: building the
-# precompiled header costs about as much as parsing it twice.
+# CRUMPLE_PCH_HEADERS plus the given headers. Only for targets of 5 files or more: building the
+# precompiled header costs about 11 CPU s (gcc 12), and each file saves 3 to 5 s.
 function(crumple_precompile target)
   get_target_property(_sources ${target} SOURCES)
   list(FILTER _sources INCLUDE REGEX "\\.cpp$")
   list(LENGTH _sources _count)
-  if(CRUMPLE_PCH AND _count GREATER_EQUAL 3)
+  if(CRUMPLE_PCH AND _count GREATER_EQUAL 5)
     target_precompile_headers(${target} PRIVATE ${CRUMPLE_PCH_HEADERS} ${ARGN})
   endif()
 endfunction()
