@@ -34,6 +34,25 @@ build() {  # build PRESET
   cmake --build --preset "$1" -j "$JOBS"
 }
 
+# Elapsed seconds per phase, printed at the end, also when a phase fails (set -e stops the
+# script there), so that a CI log shows where the time went.
+PHASES=()
+CURRENT=""
+phase() {  # phase NAME COMMAND...
+  CURRENT=$1
+  local start=$SECONDS
+  shift
+  "$@"
+  PHASES+=("$(printf '%-16s %5d s' "$CURRENT" $((SECONDS - start)))")
+  CURRENT=""
+}
+print_phases() {
+  [ -n "$CURRENT" ] && PHASES+=("$(printf '%-16s FAILED' "$CURRENT")")
+  echo "== time per phase"
+  printf '  %s\n' "${PHASES[@]}"
+  printf '  %-16s %5d s\n' total "$SECONDS"
+}
+
 case "${1:-}" in
   deps)
     install_deps
@@ -56,20 +75,21 @@ Look at the result (every 10th frame in demo-out/frames, statistics in demo-out/
 EOF
     ;;
   test)
-    install_deps
-    build release
-    build asan
+    trap print_phases EXIT
+    phase "install deps" install_deps
+    phase "build release" build release
+    phase "build asan" build asan
     echo "== Release tests"
-    ctest --preset release -j "$JOBS" --timeout 900
+    phase "ctest release" ctest --preset release -j "$JOBS" --timeout 900
     echo "== AddressSanitizer + UBSan tests"
-    ctest --preset asan -j "$JOBS" --timeout 1500
+    phase "ctest asan" ctest --preset asan -j "$JOBS" --timeout 1500
     echo "== Python tests (module in build/release/python, Debian's /usr/bin/python3)"
     [ -d build/release/python/crumple ] || { echo "no Python module: reconfigure build/release with -DCRUMPLE_BUILD_PYTHON=ON" >&2; exit 1; }
     PYTHONPATH="$PWD/build/release/python" PYTHONDONTWRITEBYTECODE=1 \
-      /usr/bin/python3 -m pytest tests/python -q -p no:cacheprovider
+      phase pytest /usr/bin/python3 -m pytest tests/python -q -p no:cacheprovider
     echo "== libFuzzer targets, 15 s each over a copy of the seed corpus (docs/fuzzing.md)"
-    build fuzz
-    bash scripts/fuzz.sh ci 15
+    phase "build fuzz" build fuzz
+    phase "fuzz 4 x 15 s" bash scripts/fuzz.sh ci 15
     ;;
   *)
     echo "usage: bash scripts/dev.sh demo|test|deps" >&2
