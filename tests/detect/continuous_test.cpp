@@ -132,11 +132,15 @@ std::size_t check_all(const std::string& name, const std::shared_ptr<const Topol
       }));
       EXPECT_TRUE(std::is_sorted(impacts.ee.begin(), impacts.ee.end(),
                                  [](const auto& p, const auto& q) { return std::tie(p.a, p.b) < std::tie(q.a, q.b); }));
+      // Finite at every scale (squares of coordinates past 1e154 overflowed into NaN).
       for (const auto& i : impacts.vf) {
+        EXPECT_TRUE(i.barycentric.allFinite() && i.normal.allFinite() && std::isfinite(i.distance)) << name;
         EXPECT_NEAR(i.barycentric.sum(), 1.0, 1e-12);
         EXPECT_TRUE(i.normal.norm() == 0 || std::abs(i.normal.norm() - 1) < 1e-12);
       }
       for (const auto& i : impacts.ee) {
+        EXPECT_TRUE(std::isfinite(i.s) && std::isfinite(i.t) && i.normal.allFinite() && std::isfinite(i.distance))
+            << name;
         EXPECT_TRUE(i.s >= 0 && i.s <= 1 && i.t >= 0 && i.t <= 1);
         EXPECT_EQ(topo->edge(i.edge0), i.a);
         EXPECT_EQ(topo->edge(i.edge1), i.b);
@@ -191,15 +195,19 @@ TEST(Continuous, FaceBoxesAcrossAFloatBoundaryAreKept) {
 // largest float or infinity, underflow to 0 or the smallest subnormal) the face test must stay
 // weaker than the narrow phase's hull filter. A lattice scaled to 1e39 (beyond float's 3.4e38),
 // to 1e-40 (float subnormals) and to 1e-200 (below them), also moved off the origin by 1e5 of its
-// size, gives brute force's impacts. (Much larger scales overflow the impacts' own geometry.)
+// size, gives brute force's impacts. At 1e200 and 1e300 the narrow phase's squared lengths
+// overflowed (inf <= inf made every bisection corner a witness: a spurious hit at t = 0 that
+// kdop's k-DOPs, rightly apart, did not pass on, so kdop differed from brute force), and the
+// impacts' barycentric coordinates were NaN; every impact field must be finite.
 TEST(Continuous, ScaledLatticesBeyondFloatRangeMatchBruteForce) {
   const TriMesh mesh = shapes::lattice(7, 6);
   const auto topo = mesh.topology_ptr();
   const Positions y0 = testing::crumple_lattice(mesh, 0.15, 4);
   const Positions y1 = testing::jitter(testing::crumple_lattice(mesh, 0.25, 14), 0.12, 24);
   std::size_t total = 0;
-  for (const Scalar scale : {1e39, 1e-40, 1e-200}) {
-    for (const Scalar offset : {0.0, 1e5}) {
+  for (const Scalar scale : {1e39, 1e-40, 1e-200, 1e200, 1e300}) {
+    // At 1e300 an offset of 1e5 would pass the narrow phase's range (2^1000 ~ 1.07e301).
+    for (const Scalar offset : {0.0, scale > 1e250 ? 1.0 : 1e5}) {
       Positions x0 = y0, x1 = y1;
       for (Vec3& p : x0) p = scale * (p + Vec3::Constant(offset));
       for (Vec3& p : x1) p = scale * (p + Vec3::Constant(offset));

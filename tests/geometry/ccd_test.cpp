@@ -132,7 +132,9 @@ TEST(Ccd, DegenerateTriangles) {
 }
 
 TEST(Ccd, TinyAndHugeScales) {
-  for (const Scalar scale : {1e-20, 3e-15, 1.0, 7e8, 1e20}) {
+  // Past 2^300 (1e200, 1e300) the sign filter and advancement are off, and squared lengths
+  // overflowed: inf <= inf made every bisection corner a witness (the miss was a hit at t = 0).
+  for (const Scalar scale : {1e-200, 1e-20, 3e-15, 1.0, 7e8, 1e20, 1e200, 1e300}) {
     CcdPoints s = kTri, e = kTri;
     s[0] = Vec3(0.25, 0.25, 1);
     e[0] = Vec3(0.25, 0.25, -1);
@@ -142,10 +144,30 @@ TEST(Ccd, TinyAndHugeScales) {
       for (CcdPoints* x : {&s, &e, &miss_s, &miss_e}) (*x)[i] = ((*x)[i] * scale).eval();
     }
     const CcdResult r = vertex_face_ccd(s, e);
-    ASSERT_TRUE(r.hit) << scale;
+    ASSERT_TRUE(r.hit) << scale << " " << to_string(r.outcome);
     EXPECT_LE(r.toi, 0.5) << scale;
-    EXPECT_GE(r.toi, 0.5 - 2e-6) << scale;
+    EXPECT_GE(r.toi, 0.5 - 2e-6) << scale << " " << to_string(r.outcome);
     EXPECT_FALSE(vertex_face_ccd(miss_s, miss_e).hit) << scale;
+  }
+}
+
+// Two edges about 0.1 apart all step (from a crumpled lattice: the pair that made `kdop`
+// differ from brute force at 1e200): apart at every scale up to the narrow phase's range.
+TEST(Ccd, EdgesApartAtEveryScale) {
+  const CcdPoints s0 = pts(Vec3(0.782409, 0.550568, 0.0112717), Vec3(1.06189, 0.616255, 0.0418252),
+                           Vec3(0.684851, 0.769551, -0.0147011), Vec3(0.69007, 0.943782, 0.00950558));
+  const CcdPoints e0 = pts(Vec3(0.732154, 0.46771, 0.0645032), Vec3(0.895191, 0.882173, 0.0940357),
+                           Vec3(0.700666, 0.870223, 0.156244), Vec3(0.758529, 1.13695, 0.0169541));
+  for (const Scalar scale : {1e-200, 1e-40, 1.0, 1e39, 1e100, 1e200, 1e300}) {
+    CcdPoints s = s0, e = e0;
+    for (int i = 0; i < 4; ++i) {
+      s[i] *= scale;
+      e[i] *= scale;
+    }
+    EXPECT_FALSE(edge_edge_ccd(s, e).hit) << scale;
+    CcdOptions o;
+    o.min_separation = 0.01 * scale;
+    EXPECT_FALSE(edge_edge_ccd(s, e, o).hit) << scale;
   }
 }
 

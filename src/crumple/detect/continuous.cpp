@@ -55,6 +55,16 @@ float up(Scalar x) {
   return f;
 }
 
+/// The power of two that brings the largest |coordinate| of a pair's points to [1, 2) (1 for
+/// all zero): the impact geometry's squared lengths then neither overflow nor underflow (they
+/// made barycentric coordinates NaN past ~1e154), and scaling by a power of two is exact, so
+/// the barycentric coordinates and normals are those of the unscaled points.
+Scalar unit_scale(const geometry::CcdPoints& start, const geometry::CcdPoints& end) {
+  Scalar m = 0;
+  for (std::size_t i = 0; i < 4; ++i) m = std::max({m, start[i].cwiseAbs().maxCoeff(), end[i].cwiseAbs().maxCoeff()});
+  return m > 0 ? std::ldexp(Scalar(1), -std::ilogb(m)) : Scalar(1);
+}
+
 /// A face's record for one step, filled once in face order: a candidate reads two records
 /// instead of scattered vertex positions. The first cache line holds what the face-level test
 /// reads (most candidates stop there); the corners and ids follow.
@@ -194,10 +204,12 @@ struct Tester {
     impact.face = f;
     impact.toi = r.toi;
     impact.outcome = r.outcome;
-    const Vec3 p = at(s[0], e[0], r.toi), a = at(s[1], e[1], r.toi), b = at(s[2], e[2], r.toi),
-               c = at(s[3], e[3], r.toi);
+    // Times `unit`: finite squares at any magnitude (unit_scale).
+    const Scalar unit = unit_scale(s, e);
+    const Vec3 p = at(s[0], e[0], r.toi) * unit, a = at(s[1], e[1], r.toi) * unit,
+               b = at(s[2], e[2], r.toi) * unit, c = at(s[3], e[3], r.toi) * unit;
     const geometry::PointTriangleResult q = geometry::point_triangle(p, a, b, c);
-    impact.distance = std::sqrt(q.sqr_distance);
+    impact.distance = std::sqrt(q.sqr_distance) / unit;
     impact.barycentric = q.barycentric;
     const Vec3 away = p - q.closest;
     if (const Scalar len = away.norm(); len > 0) {
@@ -223,10 +235,11 @@ struct Tester {
     impact.b = b;
     impact.toi = r.toi;
     impact.outcome = r.outcome;
-    const Vec3 p0 = at(s[0], e[0], r.toi), p1 = at(s[1], e[1], r.toi), q0 = at(s[2], e[2], r.toi),
-               q1 = at(s[3], e[3], r.toi);
+    const Scalar unit = unit_scale(s, e);
+    const Vec3 p0 = at(s[0], e[0], r.toi) * unit, p1 = at(s[1], e[1], r.toi) * unit,
+               q0 = at(s[2], e[2], r.toi) * unit, q1 = at(s[3], e[3], r.toi) * unit;
     const geometry::SegmentSegmentResult q = geometry::segment_segment(p0, p1, q0, q1);
-    impact.distance = std::sqrt(q.sqr_distance);
+    impact.distance = std::sqrt(q.sqr_distance) / unit;
     impact.s = q.s;
     impact.t = q.t;
     const Vec3 across = q.closest1 - q.closest0;

@@ -37,7 +37,12 @@ struct Prepared {
   Vec3 bound;  // err + δ, rounded up, per axis
   Vec3 err;
   Scalar delta = 0;
-  Scalar delta2_up = 0;  // ≥ δ²
+  Scalar delta2_up = 0;  // ≥ (δ · square)²
+  /// A power of two that the squared-length tests (witness, δ rejection) multiply lengths by
+  /// before squaring: 1 for magnitudes in [2^-300, 2^300], else 2^-ilogb(magnitude), so the
+  /// squares neither overflow (inf <= inf made every corner a witness) nor underflow. Exact:
+  /// scaling by a power of two commutes with rounding away from overflow and underflow.
+  Scalar square = 1;
   bool face = false;
 };
 
@@ -75,7 +80,11 @@ void set_bounds(Prepared& p, const Vec3& m, Scalar delta) {
     p.bound[k] = round_up(p.err[k] + delta);
   }
   p.delta = delta;
-  p.delta2_up = round_up(delta * delta);
+  const Scalar magnitude = m.maxCoeff();
+  if (magnitude > 0x1p300 || (magnitude > 0 && magnitude < 0x1p-300)) {
+    p.square = std::ldexp(Scalar(1), -std::ilogb(magnitude));
+  }
+  p.delta2_up = round_up((delta * p.square) * (delta * p.square));
 }
 
 /// The differences a, b, c at t = 0 and t = 1 (after set_bounds).
@@ -156,18 +165,20 @@ bool separated_along(const Vec3& n, const Hull& hull, const Vec3& err, Scalar de
 
 /// Directions worth trying: the triangle's normals (VF), the edges' common normals and the
 /// perpendicular from edge a's line to b0 (EE, for near-parallel edges), at t = 0 and t = 1.
+/// The differences are taken times `square` (Prepared::square), so that the products that
+/// build a direction stay finite at any magnitude (any direction is valid).
 bool separated_by_a_direction(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Hull& hull,
-                              const Vec3& err, Scalar delta) {
+                              const Vec3& err, Scalar delta, Scalar square) {
   for (const CcdPoints* x : {&start, &end}) {
     const CcdPoints& q = *x;
     if (pair == CcdPair::kVertexFace) {
-      if (separated_along((q[2] - q[1]).cross(q[3] - q[1]), hull, err, delta)) return true;
+      if (separated_along(((q[2] - q[1]) * square).cross((q[3] - q[1]) * square), hull, err, delta)) return true;
     } else {
-      const Vec3 da = q[1] - q[0], db = q[3] - q[2];
+      const Vec3 da = (q[1] - q[0]) * square, db = (q[3] - q[2]) * square;
       if (separated_along(da.cross(db), hull, err, delta)) return true;
       const Scalar aa = da.squaredNorm();
       if (aa > 0) {
-        const Vec3 w = q[2] - q[0];
+        const Vec3 w = (q[2] - q[0]) * square;
         if (separated_along(w - (w.dot(da) / aa) * da, hull, err, delta)) return true;
       }
     }
@@ -248,7 +259,7 @@ Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, cons
     bool witness = false;
     if (u >= 0 && u <= 1 && v >= 0 && v <= 1) {
       if (p.face && u + v > 1) v = 1 - u;
-      witness = evaluate(p, t, u, v).squaredNorm() <= reach2;
+      witness = (evaluate(p, t, u, v) * p.square).squaredNorm() <= reach2;
     }
     const auto stop = [&] {
       if (witness) r.state = Advance::kWitness;
@@ -441,7 +452,7 @@ CcdResult bisect(const Prepared& p, Scalar reach2, Scalar tol_t, std::int64_t ma
       // 2 u high, the sum of squares 8 u) above δ: no point of the box within δ.
       Scalar sum = 0;
       for (int k = 0; k < 3; ++k) {
-        const Scalar gap = std::max({lo[k] - p.err[k], -hi[k] - p.err[k], Scalar(0)});
+        const Scalar gap = std::max({lo[k] - p.err[k], -hi[k] - p.err[k], Scalar(0)}) * p.square;
         sum += gap * gap;
       }
       rejected = sum * (1 - 16 * kU) > p.delta2_up;
@@ -453,7 +464,7 @@ CcdResult bisect(const Prepared& p, Scalar reach2, Scalar tol_t, std::int64_t ma
     int witness = 2;
     for (int i = 0; i < 8 && witness > 0; ++i) {
       if (p.face && us[(i >> 1) & 1] + vs[i & 1] > 1) continue;  // exact sum
-      if (f[i].squaredNorm() <= reach2) witness = std::min(witness, i >> 2);
+      if ((f[i] * p.square).squaredNorm() <= reach2) witness = std::min(witness, i >> 2);
     }
     const bool t_small = box.t1 - box.t0 <= tol_t;
     if (witness == 0 || (witness == 1 && t_small)) {
@@ -572,15 +583,15 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
     result.outcome = CcdOutcome::kSeparatedCoplanarity;
     return result;
   }
-  if (separated_by_a_direction(pair, start, end, hull, p.err, delta)) {
+  if (separated_by_a_direction(pair, start, end, hull, p.err, delta, p.square)) {
     result.outcome = CcdOutcome::kSeparatedDirection;
     return result;
   }
   const Scalar eps = std::max(options.distance_tolerance * extent, 4 * p.err.maxCoeff());
   const Scalar tol_t = std::clamp(options.time_tolerance, kMinWidth, Scalar(1));
   // Witnesses: computed ‖F‖ ≤ reach, so the exact point is within reach + ‖err‖.
-  const Scalar reach = delta * (1 + options.separation_tolerance) + eps + p.err.norm();
-  const Scalar reach2 = reach * reach;
+  const Scalar reach = delta * (1 + options.separation_tolerance) + eps + (p.err * p.square).norm() / p.square;
+  const Scalar reach2 = (reach * p.square) * (reach * p.square);  // of lengths times p.square
   Scalar t_begin = 0;
   std::int64_t steps = 0;
   if (magnitude <= kMaxSignFilterMagnitude && options.max_advance_steps > 0) {
