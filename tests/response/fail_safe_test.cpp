@@ -9,20 +9,10 @@
 
 #include <random>
 
+#include "support/intersections.hpp"
+
 namespace crumple::response {
 namespace {
-
-/// Intersecting triangle pairs (sharing no vertex) by the exact kdop detector.
-std::size_t intersecting_pairs(std::shared_ptr<const Topology> topology, PositionsView x) {
-  DetectorOptions options;
-  options.kinds = ContactKinds::parse("tt");
-  options.threads = 1;
-  auto detector = make_detector(MethodSpec::parse("kdop"), options);
-  detector->set_topology(std::move(topology));
-  ContactSet contacts;
-  detector->update(x, contacts);
-  return contacts.tt.size();
-}
 
 /// VF/EE pairs that touch (δ = 0) during the linear motion from `x0` to `x1`.
 std::size_t touching_pairs(std::shared_ptr<const Topology> topology, PositionsView x0, PositionsView x1) {
@@ -59,14 +49,14 @@ FailSafeOptions options(int impulse_rounds, int zone_rounds) {
 
 TEST(FailSafe, TwoTrianglesMovingThroughEachOtherEndApart) {
   for (const auto& [impulses, zones] : {std::pair{3, 8}, std::pair{0, 8}, std::pair{0, 0}}) {
-    SCOPED_TRACE(testing::Message() << impulses << " impulse rounds, " << zones << " zone rounds");
+    SCOPED_TRACE(::testing::Message() << impulses << " impulse rounds, " << zones << " zone rounds");
     Crossing c;
-    ASSERT_EQ(intersecting_pairs(c.topology, c.start), 0u);
-    ASSERT_GT(intersecting_pairs(c.topology, c.end), 0u) << "the proposed end intersects";
+    ASSERT_EQ(testing::intersecting_triangles(c.topology, c.start).size(), 0u);
+    ASSERT_GT(testing::intersecting_triangles(c.topology, c.end).size(), 0u) << "the proposed end intersects";
     CcdFailSafe safe(c.topology, options(impulses, zones));
     const FailSafeStats stats = safe.apply(c.start, c.inv_mass, 0.1, c.end, c.velocity);
     EXPECT_GT(stats.impacts, 0u);
-    EXPECT_EQ(intersecting_pairs(c.topology, c.end), 0u);
+    EXPECT_EQ(testing::intersecting_triangles(c.topology, c.end).size(), 0u);
     EXPECT_EQ(touching_pairs(c.topology, c.start, c.end), 0u) << "no pair touches during the corrected motion";
     // Velocities follow the corrected positions: the frame's mean velocity, or 0 when frozen.
     for (std::size_t i = 0; i < 6; ++i) {
@@ -113,7 +103,7 @@ TEST(FailSafe, RandomTangleOfALatticeEndsIntersectionFree) {
 #endif
   for (const auto& [impulses, zones] : {std::pair{3, 8}, std::pair{0, 8}, std::pair{0, 0}}) {
     for (int seed = 1; seed <= kSeeds; ++seed) {
-      SCOPED_TRACE(testing::Message() << "seed " << seed << ", " << impulses << " impulse rounds, " << zones
+      SCOPED_TRACE(::testing::Message() << "seed " << seed << ", " << impulses << " impulse rounds, " << zones
                                       << " zone rounds");
       const TriMesh lattice = shapes::lattice(kSide, kSide);
       const auto topology = lattice.topology_ptr();
@@ -122,14 +112,14 @@ TEST(FailSafe, RandomTangleOfALatticeEndsIntersectionFree) {
       std::uniform_real_distribution<Scalar> d(-0.3, 0.3);
       Positions end = start, velocity(start.size(), Vec3::Zero());
       for (Vec3& p : end) p += Vec3(d(rng), d(rng), d(rng));
-      ASSERT_GT(intersecting_pairs(topology, end), 0u) << "the proposed end is tangled";
+      ASSERT_GT(testing::intersecting_triangles(topology, end).size(), 0u) << "the proposed end is tangled";
       std::vector<Scalar> inv_mass(start.size(), 1);
       inv_mass[0] = 0;  // a pinned corner
       CcdFailSafe safe(topology, options(impulses, zones));
       const FailSafeStats stats = safe.apply(start, inv_mass, 1.0 / 60, end, velocity);
       EXPECT_GT(stats.impacts, 0u);
       EXPECT_EQ(stats.static_left, 0u);
-      EXPECT_EQ(intersecting_pairs(topology, end), 0u);
+      EXPECT_EQ(testing::intersecting_triangles(topology, end).size(), 0u);
       EXPECT_EQ(touching_pairs(topology, start, end), 0u);
       if (impulses == 0 && zones > 0) {
         EXPECT_GT(stats.zone_vertices, 0u);

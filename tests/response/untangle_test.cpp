@@ -10,20 +10,10 @@
 #include <algorithm>
 #include <functional>
 
+#include "support/intersections.hpp"
+
 namespace crumple::response {
 namespace {
-
-/// Intersecting triangle pairs (sharing no vertex) by the exact kdop detector.
-std::vector<TriangleTriangleContact> intersecting(std::shared_ptr<const Topology> topology, PositionsView x) {
-  DetectorOptions options;
-  options.kinds = ContactKinds::parse("tt");
-  options.threads = 1;
-  auto detector = make_detector(MethodSpec::parse("kdop"), options);
-  detector->set_topology(std::move(topology));
-  ContactSet contacts;
-  detector->update(x, contacts);
-  return contacts.tt;
-}
 
 /// Sheets of lattice quads (two triangles each) collected into one mesh.
 struct Sheets {
@@ -81,7 +71,7 @@ std::vector<Index> below_a(const Sheets& s, Index first, std::size_t a_faces) {
 TEST(Untangle, ClosedLoopFindsBothInsideRegions) {
   const Sheets s = bump();
   const auto topology = s.topology();
-  const auto pairs = intersecting(topology, s.x);
+  const auto pairs = testing::intersecting_triangles(topology, s.x);
   ASSERT_GT(pairs.size(), 0u);
   const IntersectionAnalysis a = analyse_intersections(*topology, s.x, pairs);
   EXPECT_EQ(a.pairs, pairs.size());
@@ -124,7 +114,7 @@ Sheets flap() {
 TEST(Untangle, FlapThroughASheetIsTheInsideOfAnOpenCurve) {
   Sheets s = flap();
   const auto topology = s.topology();
-  const auto pairs = intersecting(topology, s.x);
+  const auto pairs = testing::intersecting_triangles(topology, s.x);
   ASSERT_GT(pairs.size(), 0u);
   const IntersectionAnalysis a = analyse_intersections(*topology, s.x, pairs);
   ASSERT_EQ(a.contours.size(), 1u);
@@ -160,7 +150,7 @@ Sheets slit() {
 TEST(Untangle, SlitHasNoInside) {
   const Sheets s = slit();
   const auto topology = s.topology();
-  const auto pairs = intersecting(topology, s.x);
+  const auto pairs = testing::intersecting_triangles(topology, s.x);
   ASSERT_GT(pairs.size(), 0u);
   const IntersectionAnalysis a = analyse_intersections(*topology, s.x, pairs);
   ASSERT_EQ(a.contours.size(), 1u);
@@ -174,7 +164,7 @@ TEST(Untangle, CleanMeshHasNothing) {
   Sheets s = bump();
   s.x[12].y() = 0.05;
   const auto topology = s.topology();
-  const auto pairs = intersecting(topology, s.x);
+  const auto pairs = testing::intersecting_triangles(topology, s.x);
   ASSERT_EQ(pairs.size(), 0u);
   const IntersectionAnalysis a = analyse_intersections(*topology, s.x, pairs);
   EXPECT_TRUE(a.crossings.empty());

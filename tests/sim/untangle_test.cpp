@@ -9,20 +9,10 @@
 #include <string>
 #include <utility>
 
+#include "support/intersections.hpp"
+
 namespace crumple::sim {
 namespace {
-
-/// Intersecting triangle pairs (faces sharing no vertex) at `x`, by the exact kdop detector.
-std::size_t intersecting_pairs(std::shared_ptr<const Topology> topology, PositionsView x) {
-  DetectorOptions options;
-  options.kinds = ContactKinds::parse("tt");
-  options.threads = 1;
-  auto detector = make_detector(MethodSpec::parse("kdop"), options);
-  detector->set_topology(std::move(topology));
-  ContactSet contacts;
-  detector->update(x, contacts);
-  return contacts.tt.size();
-}
 
 struct Untangled {
   std::size_t tangled_pairs = 0;  ///< when the response starts
@@ -51,10 +41,10 @@ Untangled run(const std::string& spec, int off_frames, int on_frames, bool untan
   on.untangle = untangle;
   Simulation sim(s.model, it->second, s.field, s.obstacles, s.kinematics, on, off_frames);
   Untangled r;
-  r.tangled_pairs = intersecting_pairs(sim.model().topology_ptr(), sim.state().x);
+  r.tangled_pairs = testing::intersecting_triangles(sim.model().topology_ptr(), sim.state().x).size();
   for (int f = 1; f <= on_frames; ++f) {
     const FrameStats st = sim.advance_frame();
-    r.last_pairs = intersecting_pairs(sim.model().topology_ptr(), sim.state().x);
+    r.last_pairs = testing::intersecting_triangles(sim.model().topology_ptr(), sim.state().x).size();
     const std::int64_t expected = untangle ? static_cast<std::int64_t>(r.last_pairs) : -1;
     if (st.intersecting_pairs != expected) ++r.misreported;
     if (r.frames_to_clean > 0 && r.last_pairs > 0) ++r.intersecting_after_clean;

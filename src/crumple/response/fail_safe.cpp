@@ -1,6 +1,7 @@
 #include <crumple/core/error.hpp>
 #include <crumple/geometry/ccd.hpp>
 #include <crumple/response/fail_safe.hpp>
+#include <crumple/response/union_find_detail.hpp>
 #include <crumple/response/untangle.hpp>
 
 #include <Eigen/Eigenvalues>
@@ -14,14 +15,7 @@ namespace crumple::response {
 namespace {
 inline std::size_t at(Index i) { return static_cast<std::size_t>(i); }
 
-/// Union–find root with path halving.
-Index root(std::vector<Index>& parent, Index i) {
-  while (parent[at(i)] != i) {
-    parent[at(i)] = parent[at(parent[at(i)])];
-    i = parent[at(i)];
-  }
-  return i;
-}
+using detail::root;
 
 /// Moves the zone `members` rigidly (see the file comment); pinned members keep their
 /// displacement and the others translate with the pinned ones' mean.

@@ -1,6 +1,7 @@
 #include <crumple/core/error.hpp>
 #include <crumple/geometry/distance.hpp>
 #include <crumple/geometry/triangle_intersection.hpp>
+#include <crumple/response/union_find_detail.hpp>
 #include <crumple/response/untangle.hpp>
 
 #include <algorithm>
@@ -12,13 +13,7 @@ namespace crumple::response {
 namespace {
 inline std::size_t at(Index i) { return static_cast<std::size_t>(i); }
 
-Index root(std::vector<Index>& parent, Index i) {
-  while (parent[at(i)] != i) {
-    parent[at(i)] = parent[at(parent[at(i)])];
-    i = parent[at(i)];
-  }
-  return i;
-}
+using detail::root;
 
 /// Barycentric coordinates (w.r.t. a, b, c) of the point where segment pq meets the triangle:
 /// the plane crossing when pq is not parallel to the plane, clamped into the triangle by taking
