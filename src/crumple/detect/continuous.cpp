@@ -44,12 +44,20 @@ struct OwnedFace {
 /// Rounds toward −∞ (`down`) or +∞ (`up`) to float: a face test on these bounds is never
 /// stronger than on the doubles (a lower lo and a higher hi only lower fl(lo_f − hi_g), rounding
 /// being monotone), so it too rejects only what the narrow phase's hull filter rejects.
+/// Beyond the float range the nearest bound in the right direction is given explicitly (a
+/// conversion of an out-of-range double is undefined behaviour).
 float down(Scalar x) {
+  constexpr Scalar kMax = std::numeric_limits<float>::max();
+  if (x > kMax) return std::numeric_limits<float>::max();
+  if (x < -kMax) return -std::numeric_limits<float>::infinity();
   float f = static_cast<float>(x);
   if (static_cast<Scalar>(f) > x) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
   return f;
 }
 float up(Scalar x) {
+  constexpr Scalar kMax = std::numeric_limits<float>::max();
+  if (x < -kMax) return -std::numeric_limits<float>::max();
+  if (x > kMax) return std::numeric_limits<float>::infinity();
   float f = static_cast<float>(x);
   if (static_cast<Scalar>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
   return f;

@@ -102,6 +102,7 @@ __attribute__((always_inline)) inline CoarseMasks coarse_masks(const CoarseAxes&
 inline float coarse_pad(Scalar pad, Scalar extent) {
   constexpr Scalar u = 0x1p-24;
   const Scalar wide = (pad + 8 * u * extent) * (1 + 8 * u) + 1e-37;
+  if (!(wide <= std::numeric_limits<float>::max())) return std::numeric_limits<float>::infinity();
   auto f = static_cast<float>(wide);
   if (static_cast<Scalar>(f) < wide) f = std::nextafter(f, std::numeric_limits<float>::infinity());
   return f;
