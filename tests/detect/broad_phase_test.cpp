@@ -179,6 +179,16 @@ std::vector<FacePair> flatten(const CandidateBuffer& buffer) {
   return out;
 }
 
+/// A default `hash` grid's candidates for one frame of `topo`, with the grid's stats.
+std::vector<FacePair> hash_pairs(const Topology& topo, const FrameInput& in, DetectorStats& stats) {
+  HashGrid grid{HashParams{}};
+  grid.build(topo);
+  grid.update(in, stats);
+  CandidateBuffer buffer;
+  grid.self_pairs(buffer, stats);
+  return flatten(buffer);
+}
+
 /// A scene: a mesh and its frames (positions in order), with the radius to inflate by.
 struct Scene {
   std::string name;
@@ -335,27 +345,19 @@ TEST(BroadPhase, HashCellsAreBoundedByTheFacesWhateverTheirSize) {
     const TriMesh mesh = with_huge_triangle(shapes::lattice(n, n, 1, 1), size);
     const Topology& topo = mesh.topology();
     const FrameInput in{{}, mesh.positions(), 0.001, 2, false, {}};
-    HashGrid grid{HashParams{}};
-    grid.build(topo);
     DetectorStats stats;
-    grid.update(in, stats);
-    CandidateBuffer buffer;
-    grid.self_pairs(buffer, stats);
+    const std::vector<FacePair> pairs = hash_pairs(topo, in, stats);
     EXPECT_LE(stats.get("hash_cells"), 16.0 * topo.num_faces()) << n << " x " << n << " + " << size;
     EXPECT_EQ(stats.get("hash_oversized"), 1.0);
     if (n == 40) {
-      const auto why = contract_broken(topo, flatten(buffer), brute_force(topo, in, true));
+      const auto why = contract_broken(topo, pairs, brute_force(topo, in, true));
       EXPECT_FALSE(why.has_value()) << *why;
     }
   }
 }
 
-// Issue 45: the kdop tree grew its patches over `face_faces`, whose size is the square of a
-// vertex's valence (a fan of n faces around one vertex has n^2 pairs). Building and querying
-// the tree on a fan twice as large takes at most about twice the topology's memory.
 // The oversized faces' pairs cost about F log(oversized) box tests plus the pairs found, not
-// F x oversized (every face against every oversized face, which made `hash` about 3x slower
-// on the n-body frames). A 100 x 100 lattice under a 20 x 20 tiling of slanted triangles,
+// F x oversized (every face against every oversized face). A 100 x 100 lattice under a 20 x 20 tiling of slanted triangles,
 // each spanning over 64 cells: 8.2e6 box tests for every face against each, 4.2e5 by the tree.
 TEST(BroadPhase, HashOversizedFacesCostFarLessThanEveryFaceAgainstEach) {
   const TriMesh lattice = shapes::lattice(100, 100, 1, 1);
@@ -379,21 +381,20 @@ TEST(BroadPhase, HashOversizedFacesCostFarLessThanEveryFaceAgainstEach) {
   const double all_against_oversized = double(topo.num_faces()) * kTiles * kTiles;
   for (const int threads : {1, 2}) {
     const FrameInput in{{}, mesh.positions(), 0.001, threads, false, {}};
-    HashGrid grid{HashParams{}};
-    grid.build(topo);
     DetectorStats stats;
-    grid.update(in, stats);
-    CandidateBuffer buffer;
-    grid.self_pairs(buffer, stats);
+    const std::vector<FacePair> pairs = hash_pairs(topo, in, stats);
     ASSERT_EQ(stats.get("hash_oversized"), kTiles * kTiles) << threads << " threads";
     const double tests = stats.get("hash_oversized_tests");
     EXPECT_GT(tests, 0) << threads << " threads";
     EXPECT_LT(tests, all_against_oversized / 8) << threads << " threads";
-    const auto why = contract_broken(topo, flatten(buffer), brute_force(topo, in, true));
+    const auto why = contract_broken(topo, pairs, brute_force(topo, in, true));
     EXPECT_FALSE(why.has_value()) << *why;
   }
 }
 
+// Issue 45: the kdop tree grew its patches over `face_faces`, whose size is the square of a
+// vertex's valence (a fan of n faces around one vertex has n^2 pairs). Building and querying
+// the tree on a fan twice as large takes at most about twice the topology's memory.
 TEST(BroadPhase, KdopTreeOnAFanNeedsNoQuadraticAdjacency) {
   const auto fan = [](Index n) {
     Positions positions{Vec3::Zero()};
