@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # crumple's one entry point for a fresh Debian 12 machine (run as root, apt reachable):
-#   bash scripts/dev.sh demo   install what is missing, build Release, run `crumple simulate` on the
-#                              thesis' hanging-cloth scene and print a summary table
+#   bash scripts/dev.sh demo   install what is missing, build Release (the CLI and the Python module),
+#                              run `crumple simulate` on the thesis' hanging-cloth scene, print a
+#                              summary table and the PYTHONPATH line for `import crumple`
 #   bash scripts/dev.sh test   install what is missing, build Release and the asan preset, run
 #                              every test of both, then the Python tests, then each libFuzzer
 #                              target for 15 s (docs/fuzzing.md)
@@ -59,9 +60,12 @@ case "${1:-}" in
     ;;
   demo)
     install_deps
-    # Only what the demo runs: the command-line tool (no tests, no benchmarks).
+    # Only what the demo runs: the command-line tool, and the Python module `crumple` (a few
+    # binding files over the same library; no tests, no benchmarks).
     cmake --preset release >/dev/null
-    cmake --build --preset release -j "$JOBS" --target crumple_cli
+    PYTHON_TARGET=""
+    grep -q '^CRUMPLE_BUILD_PYTHON:BOOL=ON' build/release/CMakeCache.txt && PYTHON_TARGET=crumple_python
+    cmake --build --preset release -j "$JOBS" --target crumple_cli $PYTHON_TARGET
     # The thesis scene: 10x10 cloth hanging from a corner, 600 frames; prints a summary table
     # (collision share reached, ms per frame by part); frames, stats.csv and state in demo-out/
     # (--force: a previous demo's files there are replaced).
@@ -73,6 +77,14 @@ Look at the result (every 10th frame in demo-out/frames, statistics in demo-out/
   ./build/release/apps/cli/crumple render demo-out/frames --video demo-out/video --force
 (the second writes one PNG per saved frame, and demo-out/video/video.mp4 when ffmpeg is installed)
 EOF
+    if [ -n "$PYTHON_TARGET" ]; then
+      cat <<EOF
+Python (module built in build/release/python, nothing installed; README.md "Python"):
+  PYTHONPATH=$PWD/build/release/python /usr/bin/python3 -c "import crumple; print(crumple.Simulation('hanging-cloth').run(10)['vf'])"
+EOF
+    else
+      echo "Python: module not built (CRUMPLE_BUILD_PYTHON is off: pybind11-dev or python3-dev missing)"
+    fi
     ;;
   test)
     trap print_phases EXIT

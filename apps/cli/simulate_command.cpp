@@ -10,6 +10,7 @@
 #include <crumple/core/json.hpp>
 #include <crumple/io/mesh_io.hpp>
 #include <crumple/sim/scene.hpp>
+#include <crumple/sim/time_step.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -231,13 +232,6 @@ std::string last_line(const std::filesystem::path& path, std::string* first = nu
   return last;
 }
 
-/// A step length within `kind`'s stable range that divides `frame_time`: (dt, substeps).
-std::pair<Scalar, int> stable_split(Scalar frame_time, Scalar stable_dt) {
-  const double n = std::ceil(frame_time / (0.9 * stable_dt));
-  const int substeps = n < 1 ? 1 : n > 1e9 ? 1000000000 : static_cast<int>(n);
-  return {frame_time / substeps, substeps};
-}
-
 /// The final state: X3D MassSpring + JSON side file (the settings needed to resume bit for bit).
 void save_state(const std::filesystem::path& out, const sim::Simulation& simulation,
                 const sim::Settings& settings, const std::string& spec_text, std::uint64_t seed) {
@@ -345,30 +339,26 @@ RunOutput prepare_run_output(const SimulateArgs& args, bool resumed, std::int64_
   return result;
 }
 
-/// A time step beyond the integrator's stable range: the scene's own step is split into stable
-/// substeps (same frame length) when that costs at most 100 times the steps; a step the user
-/// chose (`user_step`) is kept, with a warning. Returns the stable step estimate.
-Scalar fit_time_step(sim::Settings& settings, const sim::Model& model, bool user_step) {
-  const Scalar stable_dt = sim::stable_time_step(model, settings.integrator);
-  if (!(settings.dt > stable_dt)) return stable_dt;
+/// A time step beyond the integrator's stable range, fitted by `sim::fit_time_step` (the scene's
+/// own step split into stable substeps, a step the user chose kept), and the choice said.
+/// Returns the stable step estimate.
+Scalar choose_time_step(sim::Settings& settings, const sim::Model& model, bool user_step) {
+  const sim::TimeStepFit fit = sim::fit_time_step(settings, model, user_step);
   const std::string name(sim::to_string(settings.integrator));
-  const auto [dt, substeps] = stable_split(settings.dt * settings.substeps, stable_dt);
-  if (!user_step && substeps <= 100 * settings.substeps) {
+  if (fit.action == sim::StepFit::Split) {
     std::fprintf(stderr,
                  "crumple simulate: the scene's time step %.3g s is beyond %s's stable range "
                  "(about %.3g s for the stiffest spring): using %d substeps of %.3g s per frame "
                  "instead of %d (same frame length); --dt and --substeps override\n",
-                 settings.dt, name.c_str(), stable_dt, substeps, dt, settings.substeps);
-    settings.dt = dt;
-    settings.substeps = substeps;
-  } else {
+                 fit.given_dt, name.c_str(), fit.stable_dt, fit.substeps, fit.dt, fit.given_substeps);
+  } else if (fit.action == sim::StepFit::Kept) {
     std::fprintf(stderr,
                  "crumple: warning: the time step %.3g s is beyond %s's stable range (about "
                  "%.3g s for the stiffest spring): the run will likely diverge. Use --dt %.3g "
                  "--substeps %d (same frame length) or -i implicit-euler\n",
-                 settings.dt, name.c_str(), stable_dt, dt, substeps);
+                 fit.given_dt, name.c_str(), fit.stable_dt, fit.dt, fit.substeps);
   }
-  return stable_dt;
+  return fit.stable_dt;
 }
 
 int run_simulate(const SimulateArgs& args) {
@@ -426,7 +416,7 @@ int run_simulate(const SimulateArgs& args) {
   const auto [out, append] = prepare_run_output(args, side.has_value(), start.frame);
   const std::filesystem::path csv_path = out / "stats.csv";
   const std::filesystem::path frames_dir = out / "frames";
-  const Scalar stable_dt = fit_time_step(settings, scene.model, args.dt || args.substeps || side);
+  const Scalar stable_dt = choose_time_step(settings, scene.model, args.dt || args.substeps || side);
   const std::string integrator_name(sim::to_string(settings.integrator));
 
   const std::string spec_text = scene.spec;
@@ -557,7 +547,7 @@ int run_simulate(const SimulateArgs& args) {
 
   if (diverged) {
     const Scalar frame_time = settings.dt * settings.substeps;
-    const auto [dt, substeps] = stable_split(frame_time, std::min(settings.dt / 4, stable_dt));
+    const auto [dt, substeps] = sim::stable_split(frame_time, std::min(settings.dt / 4, stable_dt));
     const std::string state = (out / "state.x3d").string();
     std::fprintf(stderr,
                  "crumple: error: %s.\n"

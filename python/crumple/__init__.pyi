@@ -70,8 +70,9 @@ def read_mesh(path: _Path) -> TriMesh:
 def write_mesh(path: _Path, mesh: TriMesh) -> None:
     """By extension, atomically; positions round-trip bit for bit. ParseError if unwritable."""
 
-def default_thickness(positions: _Positions) -> float:
-    """1e-3 of the bounding-box diagonal (the CLI's default thickness)."""
+def default_thickness(positions: _Positions, *, relative: float | None = None) -> float:
+    """1e-3 (or relative, the CLI's --thickness-rel) of the bounding-box diagonal (the CLI's
+    default thickness)."""
 
 def methods() -> list[dict[str, Any]]:
     """Every method: name, summary, capabilities {exact, stochastic, uses_motion},
@@ -296,10 +297,13 @@ def render(mesh: TriMesh, positions: _Positions | None = None, contacts: Contact
 class Simulation:
     """Mass-spring cloth with obstacles and self-collision response (the CLI's `simulate`).
     Settings keywords (None = the scene's): method, thickness, kinds, response, fail_safe,
-    passes, dt, substeps, integrator, threads."""
+    untangle, response_from, passes, dt, substeps, integrator, threads. The scene's own step
+    beyond an explicit integrator's stable range is split as the CLI splits it (time_step_fit);
+    a given dt or substeps is kept, with a RuntimeWarning when beyond it."""
     def __init__(self, scene: str = "cloth-on-sphere", *, seed: int = 1, method: str | None = ...,
                  thickness: float | None = ..., kinds: str | None = ..., response: bool | None = ...,
-                 fail_safe: bool | None = ...,
+                 fail_safe: bool | None = ..., untangle: bool | None = ...,
+                 response_from: int | None = ...,
                  passes: int | None = ..., dt: float | None = ..., substeps: int | None = ...,
                  integrator: str | None = ..., threads: int = 0) -> None:
         """scene: NAME[:key=value,...] as the CLI's `simulate SPEC`; InputError on bad specs or
@@ -308,6 +312,7 @@ class Simulation:
     def from_mesh(mesh: TriMesh, params: str = "", *, method: str | None = ...,
                   thickness: float | None = ..., kinds: str | None = ...,
                   response: bool | None = ..., fail_safe: bool | None = ...,
+                  untangle: bool | None = ..., response_from: int | None = ...,
                   passes: int | None = ..., dt: float | None = ...,
                   substeps: int | None = ..., integrator: str | None = ...,
                   threads: int = 0) -> Simulation:
@@ -320,7 +325,8 @@ class Simulation:
     def current_stats(self) -> dict[str, float]:
         """frame, time, integrate_ms, detect_ms, response_ms, ccd_ms, ccd_impacts, ccd_queries,
         ccd_zone_vertices, ccd_frozen, vf, ee, tt, collision_share,
-        min_distance, obstacle_penetration, cg_iterations, corrections, energy, max_speed."""
+        min_distance, obstacle_penetration, cg_iterations, corrections, energy, max_speed,
+        intersecting_pairs (-1 when not measured), contours, untangle_pulls, untangle_ms."""
     @property
     def positions(self) -> npt.NDArray[np.float64]:
         """(n, 3) copy."""
@@ -356,6 +362,9 @@ class Simulation:
     def edge_length(self) -> float: ...
     @property
     def settings(self) -> dict[str, Any]: ...
+    @property
+    def time_step_fit(self) -> dict[str, Any]:
+        """action ('stable', 'split', 'kept'), stable_dt, given_dt, given_substeps, dt, substeps."""
     @property
     def detector_stats(self) -> dict[str, float]: ...
 

@@ -2,10 +2,15 @@
 
 #include "bindings.hpp"
 
+#include <crumple/core/error.hpp>
 #include <crumple/io/mesh_io.hpp>
 #include <crumple/mesh/mesh.hpp>
 
+#include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
+
+#include <cmath>
+#include <optional>
 
 #include <string>
 #include <utility>
@@ -161,10 +166,18 @@ positions round-trip bit for bit. Raises crumple.ParseError when the file cannot
 )doc");
   m.def(
       "default_thickness",
-      [](py::handle positions) { return default_thickness(positions_arg(positions, "positions").doubles()); },
-      py::arg("positions"),
+      [](py::handle positions, std::optional<double> relative) {
+        PositionsArg arg = positions_arg(positions, "positions");
+        const PositionsView x = arg.doubles();  // may view arg's storage: arg outlives it
+        if (!relative) return default_thickness(x);
+        if (!(std::isfinite(*relative) && *relative >= 0)) {
+          throw InputError("default_thickness: relative must be a finite number >= 0");
+        }
+        return *relative * compute_bounds(x).diagonal();
+      },
+      py::arg("positions"), py::kw_only(), py::arg("relative") = py::none(),
       "The thickness the CLI uses when none is given: 1e-3 of the bounding-box diagonal of "
-      "(n, 3) positions.");
+      "(n, 3) positions; with relative=r, r times that diagonal (the CLI's --thickness-rel r).");
 }
 
 }  // namespace crumple::python

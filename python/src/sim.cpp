@@ -10,11 +10,13 @@
 #include <crumple/render/picture.hpp>
 #include <crumple/sim/scene.hpp>
 #include <crumple/sim/simulation.hpp>
+#include <crumple/sim/time_step.hpp>
 
 #include <pybind11/stl.h>
 
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -33,6 +35,8 @@ struct SettingsArgs {
   std::optional<std::string> kinds;
   std::optional<bool> response;
   std::optional<bool> fail_safe;
+  std::optional<bool> untangle;
+  std::optional<std::int64_t> response_from;
   std::optional<int> passes;
   std::optional<double> dt;
   std::optional<int> substeps;
@@ -45,6 +49,7 @@ struct SettingsArgs {
     if (kinds) s.detector.kinds = ContactKinds::parse(*kinds);
     if (response) s.response = *response;
     if (fail_safe) s.fail_safe = *fail_safe;
+    if (untangle) s.untangle = *untangle;
     if (passes) s.passes = *passes;
     if (dt) s.dt = *dt;
     if (substeps) s.substeps = *substeps;
@@ -57,7 +62,16 @@ struct SettingsArgs {
       throw InputError("Simulation: thickness must be finite and >= 0");
     }
     if (threads < 0) throw InputError("Simulation: threads must be >= 0");
+    if (response_from) {
+      if (*response_from < 0) throw InputError("Simulation: response_from must be >= 0 (a frame)");
+      if (response && !*response) {
+        throw InputError("Simulation: response_from needs the response on, not response=False");
+      }
+      s.response = true;
+    }
   }
+  /// Whether the user chose the step (then `sim::fit_time_step` keeps it).
+  bool user_step() const { return dt.has_value() || substeps.has_value(); }
 };
 
 /// Camera and drawing options of a picture.
@@ -132,6 +146,10 @@ py::dict stats_dict(const sim::FrameStats& s) {
   d["corrections"] = s.corrections;
   d["energy"] = s.energy;
   d["max_speed"] = s.max_speed;
+  d["intersecting_pairs"] = s.intersecting_pairs;
+  d["contours"] = s.contours;
+  d["untangle_pulls"] = s.untangle_pulls;
+  d["untangle_ms"] = s.untangle_ms;
   return d;
 }
 
@@ -185,10 +203,31 @@ class PySimulation {
     edge_length_ = scene.edge_length;
     sim::Settings settings = scene.settings;
     args.apply(settings);
+    fit_ = sim::fit_time_step(settings, scene.model, args.user_step());
     topology_ = scene.model.topology_ptr();
+    // response_from: the run starts with the response off and switches to `settings` there.
+    if (args.response_from && *args.response_from > 0) response_from_ = *args.response_from;
+    settings_ = settings;
+    kinematics_ = scene.kinematics;
+    sim::Settings early = settings;
+    early.response = false;
     sim_ = std::make_unique<sim::Simulation>(std::move(scene.model), std::move(scene.state), scene.field,
                                              std::move(scene.obstacles), std::move(scene.kinematics),
-                                             settings);
+                                             response_from_ ? early : settings);
+  }
+
+  /// Warns (RuntimeWarning) when the step was kept beyond the integrator's stable range, as the
+  /// CLI does; call with the GIL held.
+  void warn_unstable_step() const {
+    if (fit_.action != sim::StepFit::Kept) return;
+    char text[512];
+    std::snprintf(text, sizeof text,
+                  "crumple.Simulation: the time step %.3g s is beyond %s's stable range (about %.3g s for "
+                  "the stiffest spring): the run will likely diverge. Use dt=%.3g, substeps=%d (same "
+                  "frame length) or integrator='implicit-euler'",
+                  fit_.given_dt, std::string(sim::to_string(settings_.integrator)).c_str(), fit_.stable_dt,
+                  fit_.dt, fit_.substeps);
+    if (PyErr_WarnEx(PyExc_RuntimeWarning, text, 1) != 0) throw py::error_already_set();
   }
 
   std::unique_lock<std::mutex> guard() {
@@ -203,7 +242,16 @@ class PySimulation {
     std::vector<sim::FrameStats> out;
     out.reserve(static_cast<std::size_t>(frames));
     py::gil_scoped_release release;
-    for (std::int64_t f = 0; f < frames; ++f) out.push_back(sim_->advance_frame());
+    for (std::int64_t f = 0; f < frames; ++f) {
+      if (response_from_ && sim_->frame() == *response_from_) {
+        // The response starts: a new simulation from the current state with the full settings.
+        sim::Simulation& before = *sim_;
+        sim_ = std::make_unique<sim::Simulation>(before.model(), before.state(), before.field(), before.obstacles(),
+                                                 kinematics_, settings_, before.frame());
+        response_from_.reset();
+      }
+      out.push_back(sim_->advance_frame());
+    }
     return out;
   }
 
@@ -234,6 +282,9 @@ class PySimulation {
   const std::string& spec() const { return spec_; }
   std::uint64_t seed() const { return seed_; }
   double edge_length() const { return edge_length_; }
+  const sim::TimeStepFit& time_step_fit() const { return fit_; }
+  /// The frame from which the response is on, while it is still ahead.
+  const std::optional<std::int64_t>& response_from() const { return response_from_; }
 
  private:
   std::string spec_;
@@ -241,6 +292,10 @@ class PySimulation {
   double edge_length_ = 0;
   std::shared_ptr<const Topology> topology_;
   std::unique_ptr<sim::Simulation> sim_;
+  sim::Settings settings_;  ///< the run's settings (response on from `response_from_`)
+  sim::Kinematics kinematics_;
+  std::optional<std::int64_t> response_from_;
+  sim::TimeStepFit fit_;
   std::mutex busy_;
 };
 
@@ -255,6 +310,8 @@ SettingsArgs settings_args(const py::kwargs& kw) {
     else if (key == "kinds") a.kinds = v.cast<std::string>();
     else if (key == "response") a.response = v.cast<bool>();
     else if (key == "fail_safe") a.fail_safe = v.cast<bool>();
+    else if (key == "untangle") a.untangle = v.cast<bool>();
+    else if (key == "response_from") a.response_from = v.cast<std::int64_t>();
     else if (key == "passes") a.passes = v.cast<int>();
     else if (key == "dt") a.dt = v.cast<double>();
     else if (key == "substeps") a.substeps = v.cast<int>();
@@ -262,7 +319,7 @@ SettingsArgs settings_args(const py::kwargs& kw) {
     else if (key == "threads") a.threads = v.cast<int>();
     else {
       throw py::type_error("Simulation: unexpected keyword '" + key +
-                           "' (method, thickness, kinds, response, fail_safe, passes, dt, "
+                           "' (method, thickness, kinds, response, fail_safe, untangle, response_from, passes, dt, "
                            "substeps, integrator, threads; scene options go in the spec text)");
     }
   }
@@ -278,9 +335,15 @@ constexpr const char* kSettingsDoc = R"doc(
 Run settings (keyword-only; None or absent keeps the scene's suggestion, the CLI's options):
 method (detection spec, as Detector's), thickness (contact thickness, m), kinds ("vf,ee"),
 response (bool: self-collision response), fail_safe (bool, default on with response: the
-continuous fail-safe that keeps every frame intersection-free, docs/simulation.md), passes (>= 1), dt (step, s), substeps (steps per
-frame), integrator ("implicit-euler", "explicit-euler", "symplectic-euler", "rk4"), threads
-(0 = all). A dt beyond an explicit integrator's stable range is kept as given (the CLI splits it).
+continuous fail-safe that keeps every frame intersection-free, docs/simulation.md), untangle
+(bool, default on with response: a cloth that already intersects itself is untangled; the
+figures intersecting_pairs, contours and untangle_pulls), response_from (frame from which the
+response is on, off before it, as the CLI's --response-from), passes (>= 1), dt (step, s),
+substeps (steps per frame), integrator ("implicit-euler", "explicit-euler",
+"symplectic-euler", "rk4", "projective"), threads (0 = all).
+Time step as the CLI's: the scene's own step beyond an explicit integrator's stable range is
+split into stable substeps of the same frame length (see time_step_fit); a dt or substeps
+given here is kept, with a RuntimeWarning when beyond that range.
 Raises crumple.InputError (a ValueError) on a bad spec, key or value, TypeError on an unknown
 keyword.
 )doc";
@@ -297,8 +360,10 @@ Deterministic: the same spec, seed and settings give the same positions, bit for
 )doc");
   cls.def(py::init([](const std::string& scene, std::uint64_t seed, const py::kwargs& kw) {
             const SettingsArgs args = settings_args(kw);
-            return std::make_unique<PySimulation>(sim::make_scene(sim::SceneSpec::parse(scene), seed), args,
-                                                  seed);
+            auto out = std::make_unique<PySimulation>(sim::make_scene(sim::SceneSpec::parse(scene), seed), args,
+                                                      seed);
+            out->warn_unstable_step();
+            return out;
           }),
           py::arg("scene") = "cloth-on-sphere", py::kw_only(), py::arg("seed") = 1,
           (std::string(R"doc(
@@ -310,8 +375,10 @@ crumple.scenes()). seed: the scene's random perturbation.
           [](const TriMesh& mesh, const std::string& params, const py::kwargs& kw) {
             const SettingsArgs args = settings_args(kw);
             const std::string spec = params.empty() ? std::string("file") : "file:" + params;
-            return std::make_unique<PySimulation>(sim::make_scene_from_mesh(mesh, sim::SceneSpec::parse(spec)),
-                                                  args, 0);
+            auto out = std::make_unique<PySimulation>(
+                sim::make_scene_from_mesh(mesh, sim::SceneSpec::parse(spec)), args, 0);
+            out->warn_unstable_step();
+            return out;
           },
           py::arg("mesh"), py::arg("params") = "",
           (std::string(R"doc(
@@ -339,7 +406,10 @@ On divergence raises crumple.DivergenceError; the frames before it stay done.
           },
           "Figures of the current frame: frame, time (s), integrate_ms, detect_ms, response_ms, "
           "ccd_ms, ccd_impacts, ccd_queries, ccd_zone_vertices, ccd_frozen (the fail-safe), vf, ee, tt (contacts), collision_share (edges in contact, 0..1), min_distance, "
-          "obstacle_penetration (m), cg_iterations, corrections, energy (J), max_speed (m/s).")
+          "obstacle_penetration (m), cg_iterations, corrections, energy (J), max_speed (m/s), "
+          "intersecting_pairs (intersecting triangle pairs at the frame's end, -1 when not measured: "
+          "response or untangle off), contours (intersection contours), untangle_pulls (the "
+          "untangler's pushes over the frame's steps), untangle_ms.")
       .def_property_readonly(
           "positions",
           [](PySimulation& s) {
@@ -438,11 +508,32 @@ The GIL is released while drawing. crumple.InputError on a bad size or camera.
             d["kinds"] = st.detector.kinds.to_string();
             d["response"] = st.response;
             d["fail_safe"] = st.fail_safe;
+            d["untangle"] = st.untangle;
+            d["response_from"] = s.response_from() ? py::object(py::int_(*s.response_from())) : py::object(py::none());
             d["passes"] = st.passes;
             d["threads"] = st.detector.threads;
             return d;
           },
-          "The run settings in use (dict with the constructor's keyword names).")
+          "The run settings in use (dict with the constructor's keyword names; response is off and "
+          "response_from the frame number until the run reaches response_from, then None).")
+      .def_property_readonly(
+          "time_step_fit",
+          [](PySimulation& s) {
+            const sim::TimeStepFit& f = s.time_step_fit();
+            py::dict d;
+            d["action"] = f.action == sim::StepFit::Split ? "split" : f.action == sim::StepFit::Kept ? "kept" : "stable";
+            d["stable_dt"] = f.stable_dt;
+            d["given_dt"] = f.given_dt;
+            d["given_substeps"] = f.given_substeps;
+            d["dt"] = f.dt;
+            d["substeps"] = f.substeps;
+            return d;
+          },
+          "How the step was fitted to the integrator's stable range (the CLI's rule): action "
+          "'stable' (within it), 'split' (the scene's own step split into substeps of the same "
+          "frame length), 'kept' (a dt or substeps given beyond it, kept: likely to diverge); "
+          "stable_dt (s, inf for implicit integrators), given_dt, given_substeps, and dt, "
+          "substeps: the stable split (applied when 'split').")
       .def_property_readonly(
           "detector_stats",
           [](PySimulation& s) {

@@ -91,6 +91,50 @@ def test_every_method_with_tt_same_as_cli(tmp_path, cli, data, method):
         assert len(c.tt) > 0
 
 
+def spec_with_every_key(method):
+    """NAME:key=default,... with every key the method accepts (crumple.methods())."""
+    return method["name"] + ":" + ",".join(f"{k}={v[0]}" for k, v in method["params"].items())
+
+
+@pytest.mark.parametrize("method", [m for m in crumple.methods() if m["params"]],
+                         ids=lambda m: m["name"])
+def test_every_key_of_every_method_same_as_cli(tmp_path, cli, data, method):
+    det, _ = check_same_as_cli(tmp_path, cli, [data / CUBES], spec_with_every_key(method),
+                               kinds="vf,ee,tt")
+    assert det.method.split(":")[0] == method["name"]
+
+
+@pytest.mark.parametrize("spec", [
+    "hybrid:leaf=32,every=2,zones=6,search=stochastic,draw=20,propagation=full,near=3,steps=4,seed=9",
+    "hybrid:search=exact,leaf=16,propagation=none",
+    "stochastic:variant=propagate-by-convergence,active=30,draw=10,propagation=full,near=3,"
+    "steps=8,ef=on,seed=5",
+    "stochastic:setting=1,seed=2",
+    "kdop:k=26,arity=2,leaf=16,rebuild=1,sweep=on,cones=on,coherence=off",
+    "hash:cell=0.02,table=4096",
+])
+def test_non_default_keys_two_frames_same_as_cli(tmp_path, cli, data, spec):
+    """Stochastic and hybrid detectors carry state across frames: the second frame's contacts
+    depend on it, and are the CLI's."""
+    det, _ = check_same_as_cli(tmp_path, cli, [data / p for p in FUNNEL], spec)
+    assert det.method.split(":")[0] == spec.split(":")[0]
+
+
+def test_relative_thickness_is_the_clis_thickness_rel(tmp_path, cli, data):
+    m = crumple.read_mesh(data / CUBES)
+    h = crumple.default_thickness(m.vertices, relative=0.05)
+    diagonal = np.linalg.norm(m.vertices.max(axis=0) - m.vertices.min(axis=0))
+    assert h == pytest.approx(0.05 * diagonal, rel=1e-15)
+    assert crumple.default_thickness(m.vertices, relative=1e-3) == crumple.default_thickness(m.vertices)
+    det = crumple.Detector("kdop", thickness=h, kinds="vf,ee,tt")
+    det.set_topology(m)
+    run_cli(cli, "detect", data / CUBES, "-r", 0.05, "-k", "vf,ee,tt", "--contacts", tmp_path / "cli.tsv")
+    det.update(m.vertices).write(tmp_path / "mine.tsv")
+    assert (tmp_path / "mine.tsv").read_text() == (tmp_path / "cli.tsv").read_text()
+    with pytest.raises(crumple.InputError, match="relative"):
+        crumple.default_thickness(m.vertices, relative=-1.0)
+
+
 def test_geometry_of_the_arrays(data):
     m = crumple.read_mesh(data / FUNNEL[0])
     _, (c,) = detect_frames([data / FUNNEL[0]], "kdop")

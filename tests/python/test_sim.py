@@ -1,6 +1,9 @@
 """Simulation and rendering from Python against the CLI's `simulate` and `render`, the arrays
 they give, errors and the GIL."""
 
+import re
+import subprocess
+import warnings
 
 import numpy as np
 import pytest
@@ -172,7 +175,9 @@ def test_bad_calls():
 
 
 def test_divergence_error_keeps_the_last_good_frame():
-    s = crumple.Simulation("hanging-cloth:nx=4,ny=4", integrator="explicit-euler", dt=0.05, substeps=1)
+    with pytest.warns(RuntimeWarning, match="stable range"):
+        s = crumple.Simulation("hanging-cloth:nx=4,ny=4", integrator="explicit-euler", dt=0.05,
+                               substeps=1)
     with pytest.raises(crumple.DivergenceError) as caught:
         s.run(100)
     e = caught.value
@@ -202,3 +207,79 @@ def test_fail_safe_setting_and_its_figures():
     assert (a["ccd_queries"] >= 1).all() and a["ccd_ms"].dtype == np.float64
     assert (b["ccd_queries"] == 0).all() and (b["ccd_frozen"] == 0).all()
     assert a["ccd_frozen"].dtype == np.int64
+
+
+def read_stats_csv(path):
+    """stats.csv as {column: list of str}, one entry per frame line (frame 0 first)."""
+    header, *rows = path.read_text().splitlines()
+    names = header.split(",")
+    return {name: [row.split(",")[k] for row in rows] for k, name in enumerate(names)}
+
+
+def test_scene_step_split_for_an_explicit_integrator_as_the_cli(tmp_path, cli):
+    """The scene's own step beyond symplectic Euler's stable range is split into the CLI's
+    substeps (sim::fit_time_step, shared): the same substeps and the same positions."""
+    done = subprocess.run([str(cli), "simulate", "cloth-on-sphere:n=6", "-i", "symplectic-euler",
+                           "-n", "5", "--format", "ply", "--threads", "2", "-q",
+                           "-o", str(tmp_path / "run")], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    said = re.search(r"using (\d+) substeps of", done.stderr)
+    assert said, done.stderr
+    s = crumple.Simulation("cloth-on-sphere:n=6", integrator="symplectic-euler", threads=2)
+    fit = s.time_step_fit
+    assert fit["action"] == "split" and fit["substeps"] == int(said.group(1)) > fit["given_substeps"]
+    assert fit["dt"] < fit["stable_dt"] < fit["given_dt"]
+    assert s.settings["substeps"] == fit["substeps"] and s.settings["dt"] == fit["dt"]
+    assert fit["dt"] * fit["substeps"] == pytest.approx(fit["given_dt"] * fit["given_substeps"])
+    s.run(5)
+    np.testing.assert_array_equal(s.positions,
+                                  crumple.read_mesh(tmp_path / "run/frames/000005.ply").vertices)
+    # Implicit Euler is unconditionally stable: the scene's step as it is.
+    implicit = crumple.Simulation("cloth-on-sphere:n=6").time_step_fit
+    assert implicit["action"] == "stable" and implicit["stable_dt"] == float("inf")
+
+
+def test_a_given_step_beyond_the_stable_range_is_kept_with_a_warning():
+    with pytest.warns(RuntimeWarning, match=r"beyond explicit-euler's stable range.*substeps="):
+        s = crumple.Simulation("hanging-cloth:nx=4,ny=4", integrator="explicit-euler", dt=0.01)
+    assert s.time_step_fit["action"] == "kept" and s.settings["dt"] == 0.01
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a stable given step: no warning
+        s = crumple.Simulation("hanging-cloth:nx=4,ny=4", integrator="explicit-euler", dt=1e-5)
+    assert s.time_step_fit["action"] == "stable" and s.settings["dt"] == 1e-5
+
+
+def test_untangle_figures_same_as_cli_stats(tmp_path, cli):
+    """response_from and untangle as the CLI's --response-from and --untangle: the 8x8 hanging
+    cloth falls through itself until frame 200, then untangles; the per-frame figures
+    intersecting_pairs, contours and untangle_pulls are the CLI's stats.csv columns."""
+    scene, start, frames = "hanging-cloth:nx=8,ny=8", 200, 215
+    run_cli(cli, "simulate", scene, "--response-from", start, "--untangle", "on", "--frames", frames,
+            "--every", 1000, "--threads", 2, "-q", "-o", tmp_path / "on")
+    expected = read_stats_csv(tmp_path / "on/stats.csv")
+    s = crumple.Simulation(scene, response_from=start, untangle=True, threads=2)
+    assert s.settings["response"] is False and s.settings["response_from"] == start
+    stats = s.run(frames)
+    assert s.settings["response"] is True and s.settings["response_from"] is None
+    assert s.settings["untangle"] is True
+    for key in ("intersecting_pairs", "contours", "untangle_pulls", "vf", "ee", "ccd_frozen"):
+        assert stats[key].dtype == np.int64, key
+        np.testing.assert_array_equal(stats[key], np.array(expected[key][1:], dtype=np.int64), key)
+    np.testing.assert_allclose(stats["energy"], np.array(expected["energy"][1:], dtype=float), rtol=1e-8)
+    pairs = stats["intersecting_pairs"]
+    assert (pairs[:start] == -1).all()            # no response: not measured
+    assert pairs[start] > 0 and stats["untangle_pulls"][start] > 0  # tangled, then pushed
+    assert pairs[-1] == 0                         # untangled
+    assert stats["untangle_ms"].dtype == np.float64
+    # Untangling off: nothing measured.
+    off = crumple.Simulation(scene, response_from=start, untangle=False, threads=2).run(start + 3)
+    assert (off["intersecting_pairs"] == -1).all() and (off["untangle_pulls"] == 0).all()
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"response_from": -1}, "response_from must be >= 0"),
+    ({"response_from": 3, "response": False}, "response_from needs the response on"),
+])
+def test_bad_response_from(kwargs, match):
+    with pytest.raises(crumple.InputError, match=match):
+        crumple.Simulation("hanging-cloth:nx=4,ny=4", **kwargs)
