@@ -2,7 +2,7 @@
 
     PYTHONPATH=build/release/python /usr/bin/python3 bench/python/update_vs_cli.py \
         [--cli build/release/apps/cli/crumple] [--method kdop] [--threads 2] [--repeat 5] \
-        [--layout float64|float32|interleaved32]
+        [--layout float64|float32|interleaved32] [--frames DIR]
 
 C++: `crumple detect 92.ply 93.ply --json`, the detector's wall time of frame 93 ("ms": one
 `update(previous, positions, contacts)` with the contact set of frame 92 reused). Python: a new
@@ -15,6 +15,7 @@ vertex buffer: both converted once inside the detector, the conversion timed wit
 
 import argparse
 import json
+import os
 import pathlib
 import statistics
 import subprocess
@@ -66,8 +67,10 @@ def main():
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--layout", choices=["float64", "float32", "interleaved32"], default="float64")
+    p.add_argument("--frames", type=pathlib.Path, default=FRAMES,
+                   help="folder holding cloth_ball92.ply and cloth_ball93.ply")
     args = p.parse_args()
-    frames = [FRAMES / "cloth_ball92.ply", FRAMES / "cloth_ball93.ply"]
+    frames = [args.frames / "cloth_ball92.ply", args.frames / "cloth_ball93.ply"]
     meshes = [crumple.read_mesh(f) for f in frames]
     cs, ps = [], []
     for i in range(args.repeat):
@@ -76,8 +79,12 @@ def main():
         ps.append(ms)
         print(f"run {i}: C++ {cs[-1]:.1f} ms, Python {ps[-1]:.1f} ms ({contacts} contacts)")
     c, q = statistics.median(cs), statistics.median(ps)
-    print(f"median: C++ {c:.1f} ms, Python {q:.1f} ms, ratio {q / c:.3f} "
-          f"({args.method}, {args.threads} threads, cloth-ball 93, {args.layout})")
+    # Each round's Python run over the C++ run just before it: the drift of a loaded machine
+    # cancels better within a round than across the medians.
+    paired = statistics.median(p / c for p, c in zip(ps, cs))
+    print(f"median: C++ {c:.1f} ms, Python {q:.1f} ms, ratio {q / c:.3f}, median of the rounds' "
+          f"ratios {paired:.3f} ({args.method}, {args.threads} threads, cloth-ball 93, {args.layout}, "
+          f"{args.repeat} rounds, load average {os.getloadavg()[0]:.2f})")
 
 
 if __name__ == "__main__":
