@@ -8,7 +8,9 @@ C++: `crumple detect 92.ply 93.ply --json`, the detector's wall time of frame 93
 `update(previous, positions, contacts)` with the contact set of frame 92 reused). Python: a new
 detector, `update(x92)`, its result dropped (so the records are reused, as the CLI does), then
 the timed `update(x92, x93)` plus building every result array. Runs alternate (CLI, Python)
-so that the machine's drift hits both; prints each pair and the ratio of the medians.
+so that the machine's drift hits both; prints each pair and the ratio of the medians. Also the
+Python call's time over the time of the library call inside it (`Detector.last_update_ms`, the
+CLI's measure): the binding's own share, which a loaded machine's drift does not blur.
 --layout float32 passes float32 arrays, interleaved32 the [:, 0:3] columns of an (n, 8) float32
 vertex buffer: both converted once inside the detector, the conversion timed with the update.
 """
@@ -57,7 +59,7 @@ def python_ms(meshes, method, threads, layout):
               c.ee.vertices, c.ee.s, c.ee.t, c.ee.distance, c.ee.normal, c.tt.faces]
     ms = (time.perf_counter() - start) * 1e3
     assert det.last_positions_conversion == ("none" if layout == "float64" else "detector")
-    return ms, len(c), len(arrays)
+    return ms, det.last_update_ms, len(c)
 
 
 def main():
@@ -72,12 +74,14 @@ def main():
     args = p.parse_args()
     frames = [args.frames / "cloth_ball92.ply", args.frames / "cloth_ball93.ply"]
     meshes = [crumple.read_mesh(f) for f in frames]
-    cs, ps = [], []
+    cs, ps, inner = [], [], []
     for i in range(args.repeat):
         cs.append(cli_ms(args.cli, frames, args.method, args.threads))
-        ms, contacts, _ = python_ms(meshes, args.method, args.threads, args.layout)
+        ms, library_ms, contacts = python_ms(meshes, args.method, args.threads, args.layout)
         ps.append(ms)
-        print(f"run {i}: C++ {cs[-1]:.1f} ms, Python {ps[-1]:.1f} ms ({contacts} contacts)")
+        inner.append(ms / library_ms)
+        print(f"run {i}: C++ {cs[-1]:.1f} ms, Python {ps[-1]:.1f} ms, of which the library call "
+              f"{library_ms:.1f} ms ({contacts} contacts)")
     c, q = statistics.median(cs), statistics.median(ps)
     # Each round's Python run over the C++ run just before it: the drift of a loaded machine
     # cancels better within a round than across the medians.
@@ -85,6 +89,10 @@ def main():
     print(f"median: C++ {c:.1f} ms, Python {q:.1f} ms, ratio {q / c:.3f}, median of the rounds' "
           f"ratios {paired:.3f} ({args.method}, {args.threads} threads, cloth-ball 93, {args.layout}, "
           f"{args.repeat} rounds, load average {os.getloadavg()[0]:.2f})")
+    # The same call from inside: the Python call's time over its own library call's (the CLI's
+    # measure); what the binding adds (argument checks, result arrays), whatever the load.
+    print(f"Python call / its library call: median {statistics.median(inner):.4f}, "
+          f"max {max(inner):.4f}")
 
 
 if __name__ == "__main__":

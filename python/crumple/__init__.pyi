@@ -164,6 +164,9 @@ class Detector:
         """'none' (read in place), 'detector' (converted once inside the detector, no copy
         by the binding) or 'binding' (copied first)."""
     @property
+    def last_update_ms(self) -> float:
+        """Wall time of the last update's library call alone (the CLI's detect --json 'ms')."""
+    @property
     def method(self) -> str: ...
     @property
     def thickness(self) -> float: ...

@@ -11,6 +11,7 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <chrono>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -106,7 +107,9 @@ class PyDetector {
       py::gil_scoped_release release;
       check_finite(current.view);
       check_finite(before.view);
+      const auto start = std::chrono::steady_clock::now();
       detector_->update(before.view, current.view, *out);
+      last_update_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     }
     buffer_ = out;
     return PyContacts{std::move(out)};
@@ -116,6 +119,7 @@ class PyDetector {
   Detector& detector() { return *detector_; }
   const MethodSpec& spec() const { return spec_; }
   const char* last_conversion() const { return last_conversion_; }
+  double last_update_ms() const { return last_update_ms_; }
   bool has_topology() const { return has_topology_; }
 
  private:
@@ -125,6 +129,7 @@ class PyDetector {
   std::mutex busy_;
   bool has_topology_ = false;
   const char* last_conversion_ = "none";
+  double last_update_ms_ = 0;
 };
 
 py::dict capabilities_dict(const Capabilities& c) {
@@ -274,6 +279,10 @@ RuntimeError before set_topology. Returns a Contacts.
           "place), 'detector' (float32, or float64 rows at a stride: read in place and converted "
           "once inside the detector, no copy made by the binding), 'binding' (other dtypes, "
           "Fortran order, sequences: one copy made first).")
+      .def_property_readonly(
+          "last_update_ms", [](const PyDetector& d) { return d.last_update_ms(); },
+          "Wall time (ms) of the last update's library call alone, as the CLI's detect --json "
+          "'ms' (the binding's own work, argument checks and result wrapping, excluded).")
       .def_property_readonly("method", [](const PyDetector& d) { return d.spec().to_string(); },
                              "The canonical method spec.")
       .def_property_readonly("thickness", [](const PyDetector& d) { return d.detector().options().thickness; })

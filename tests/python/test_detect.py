@@ -72,6 +72,7 @@ def test_kdop_funnel_two_frames_same_as_cli(tmp_path, cli, data):
     det, (c0, c1) = check_same_as_cli(tmp_path, cli, [data / p for p in FUNNEL], "kdop")
     assert len(c0.vf) > 1000 and len(c1.ee) > 1000  # a real workload, not an empty set
     assert det.stats["candidates"] > 0
+    assert det.last_update_ms > 0  # the library call alone, as the CLI's --json "ms"
 
 
 @pytest.mark.parametrize("method", ["hash", "sap:axis=y"])
