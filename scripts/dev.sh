@@ -80,7 +80,7 @@ EOF
     if [ -n "$PYTHON_TARGET" ]; then
       cat <<EOF
 Python (module built in build/release/python, nothing installed; README.md "Python"):
-  PYTHONPATH=$PWD/build/release/python /usr/bin/python3 -c "import crumple; print(crumple.Simulation('hanging-cloth').run(10)['vf'])"
+  PYTHONPATH=$PWD/build/release/python /usr/bin/python3 -c "import crumple; print(crumple.Simulation('hanging-cloth').run(200)['ee'][::20])"
 EOF
     else
       echo "Python: module not built (CRUMPLE_BUILD_PYTHON is off: pybind11-dev or python3-dev missing)"

@@ -65,4 +65,5 @@ def test_the_demo_prints_a_working_import_line():
     command = line.group(1).replace("$PWD/build/release/python", str(module_dir))
     done = subprocess.run(["bash", "-c", command], capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stderr
-    assert re.fullmatch(r"\[[\d\s]+\]\n", done.stdout), done.stdout  # ten frames' VF counts
+    counts = [int(v) for v in re.fullmatch(r"\[([\d\s]+)\]\n", done.stdout).group(1).split()]
+    assert len(counts) == 10 and max(counts) > 0, done.stdout  # edge-edge contacts as it falls
