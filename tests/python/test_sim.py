@@ -191,6 +191,12 @@ def test_gil_released_while_stepping():
     assert refused >= 100, refused
 
 
+def test_gil_released_while_drawing():
+    s = crumple.Simulation(SPHERE, threads=1)
+    refused = probes_refused_during(lambda: s.frame, lambda: s.render(400, 300))
+    assert refused >= 100, refused
+
+
 def test_scenes_lists_every_scene_and_its_keys():
     names = [d["name"] for d in crumple.scenes()]
     assert names[-1] == "file" and "cloth-on-sphere" in names
