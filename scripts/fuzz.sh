@@ -5,8 +5,9 @@
 #                                                   the corpus grows in WORKDIR/corpus (default
 #                                                   fuzz-out/TARGET), findings land in WORKDIR
 #   bash scripts/fuzz.sh ci SECONDS                 every target for SECONDS over a temporary
-#                                                   copy of its seed corpus; one summary line per
-#                                                   target; exits 1 on any finding
+#                                                   copy of its seed corpus, one per core at a
+#                                                   time; one summary line per target; exits 1
+#                                                   on any finding
 # The repository's seed corpus (tests/fuzz/corpus/TARGET) is read, never written.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -31,10 +32,18 @@ case "${1:-}" in
     seconds=${2:?usage: scripts/fuzz.sh ci SECONDS}
     tmp=$(mktemp -d)
     trap 'rm -rf "$tmp"' EXIT
+    # One target per core at a time (FUZZ_JOBS, default nproc): each fuzzer is one process on
+    # one core, so running them side by side gives each the executions it would get alone.
+    parallel=${FUZZ_JOBS:-$(nproc)}
+    for target in obj ply off x3d; do
+      while (($(jobs -rp | wc -l) >= parallel)); do wait -n || true; done
+      { run_target "$target" "$seconds" "$tmp/$target" "$tmp/$target.log" && echo ok || echo FINDING; } \
+        >"$tmp/$target.result" &
+    done
+    wait
     status=0
     for target in obj ply off x3d; do
-      result=ok
-      run_target "$target" "$seconds" "$tmp/$target" "$tmp/$target.log" || result=FINDING
+      result=$(cat "$tmp/$target.result")
       execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$tmp/$target.log" | tail -1)
       echo "fuzz_$target: ${execs:-?} executions in ${seconds} s: $result"
       if [ "$result" != ok ]; then

@@ -10,6 +10,7 @@
 #include <crumple/detect/hybrid.hpp>
 #include <crumple/mesh/shapes.hpp>
 #include <crumple/sim/scene.hpp>
+#include <support/run_cache.hpp>
 
 #include <gtest/gtest.h>
 
@@ -40,16 +41,19 @@ const FoldingSequence& folding() {
 
 /// Frames 120..219 (..159 under sanitizers) of the simulator's `hanging-cloth` (the thesis'
 /// scene: a 10×10 cloth falling through itself, 15–55% of the edges in collision).
+/// Recorded once per build of this program (support/run_cache.hpp).
 const VectorFrames& cloth() {
-  static const VectorFrames f = [] {
 #ifdef CRUMPLE_SANITIZED
-    sim::Recording r = sim::record_scene("hanging-cloth", 159, 1);
+  constexpr std::int64_t kLast = 159;
 #else
-    sim::Recording r = sim::record_scene("hanging-cloth", 219, 1);
+  constexpr std::int64_t kLast = 219;
 #endif
-    std::vector<Positions> kept(r.frames.begin() + 120, r.frames.end());
-    return VectorFrames(std::move(r.mesh), std::move(kept), "hanging-cloth");
-  }();
+  static const VectorFrames f =
+      testing::cached_frames("hanging-cloth-1-120-" + std::to_string(kLast), "hanging-cloth", [] {
+        sim::Recording r = sim::record_scene("hanging-cloth", kLast, 1);
+        std::vector<Positions> kept(r.frames.begin() + 120, r.frames.end());
+        return VectorFrames(std::move(r.mesh), std::move(kept), "hanging-cloth");
+      });
   return f;
 }
 
@@ -62,8 +66,8 @@ const ReferenceRun& reference(const FrameSource& frames, Scalar h, ContactKinds 
   const auto key = std::make_tuple(&frames, kinds.vf, kinds.ee, kinds.tt);
   auto it = cache.find(key);
   if (it == cache.end()) {
-    auto naive = make("naive", h, kinds);
-    it = cache.emplace(key, run_reference(*naive, frames)).first;
+    // Once per build of this program too (support/run_cache.hpp): each test runs in a process of its own.
+    it = cache.emplace(key, testing::cached_naive_reference(frames, h, kinds)).first;
   }
   return it->second;
 }

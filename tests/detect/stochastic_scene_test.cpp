@@ -6,6 +6,7 @@
 #include <crumple/detect/compare.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/sim/scene.hpp>
+#include <support/run_cache.hpp>
 
 #include <gtest/gtest.h>
 
@@ -15,12 +16,13 @@ namespace crumple {
 namespace {
 
 /// Frames 120..219 of the default hanging cloth (seed 1): 15% to 55% of the edges in collision.
+/// Recorded, and their reference computed, once per build of this program (support/run_cache.hpp).
 const VectorFrames& frames() {
-  static const VectorFrames f = [] {
+  static const VectorFrames f = testing::cached_frames("hanging-cloth-1-120-219", "hanging-cloth", [] {
     sim::Recording r = sim::record_scene("hanging-cloth", 219, 1);
     std::vector<Positions> kept(r.frames.begin() + 120, r.frames.end());
     return VectorFrames(std::move(r.mesh), std::move(kept), "hanging-cloth");
-  }();
+  });
   return f;
 }
 
@@ -29,10 +31,7 @@ Scalar thickness() {
 }
 
 const ReferenceRun& reference() {
-  static const ReferenceRun run = [] {
-    auto naive = make_detector(MethodSpec::parse("naive"), {.thickness = thickness()});
-    return run_reference(*naive, frames());
-  }();
+  static const ReferenceRun run = testing::cached_naive_reference(frames(), thickness());
   return run;
 }
 

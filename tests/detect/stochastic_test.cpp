@@ -13,6 +13,7 @@
 #include <crumple/geometry/triangle_intersection.hpp>
 #include <crumple/mesh/shapes.hpp>
 #include <support/meshes.hpp>
+#include <support/run_cache.hpp>
 
 #include <gtest/gtest.h>
 
@@ -38,12 +39,10 @@ const FoldingSequence& sequence() {
   return s;
 }
 
-/// Reference contacts of `sequence()`, computed once.
+/// Reference contacts of `sequence()`, computed once per build of this program
+/// (support/run_cache.hpp: most tests here need them, and each runs in a process of its own).
 const ReferenceRun& reference_run() {
-  static const ReferenceRun run = [] {
-    auto naive = make("naive", sequence().thickness());
-    return run_reference(*naive, sequence());
-  }();
+  static const ReferenceRun run = testing::cached_naive_reference(sequence(), sequence().thickness());
   return run;
 }
 
