@@ -120,6 +120,13 @@ struct Step {
   /// sub-pairs that the narrow phase's own hull filter rejects (certified apart).
   Scalar hull_bound;
   geometry::CcdOptions narrow;
+  /// #V flags of `ContinuousQuery::query_moved`, or null: then every sub-pair is tested.
+  const char* moved = nullptr;
+  /// Whether the sub-pair of these four vertices is tested (one of them flagged).
+  bool wanted(Index a, Index b, Index c, Index d) const {
+    const auto flagged = [&](Index v) { return moved[static_cast<std::size_t>(v)] != 0; };
+    return moved == nullptr || flagged(a) || flagged(b) || flagged(c) || flagged(d);
+  }
 };
 
 /// The slabs of a face record's three corners.
@@ -264,6 +271,7 @@ struct Tester {
   void vertex_face(Index v, Index f) {
     if (done()) return;
     const Face& t = step.topo.face(f);
+    if (!step.wanted(v, t[0], t[1], t[2])) return;
     const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
     const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
     const geometry::CcdPoints start{s(v), s(t[0]), s(t[1]), s(t[2])}, end{e(v), e(t[0]), e(t[1]), e(t[2])};
@@ -278,6 +286,7 @@ struct Tester {
   void edge_edge(Index e0, Index e1) {
     if (done()) return;
     Edge a = step.topo.edge(e0), b = step.topo.edge(e1);
+    if (!step.wanted(a[0], a[1], b[0], b[1])) return;
     if (b < a) {
       std::swap(a, b);
       std::swap(e0, e1);
@@ -342,6 +351,7 @@ struct Tester {
   void vertex_face(const OwnedFace& f, const FaceFrame& rf, int k, Index gi, const FaceFrame& rg,
                    const geometry::CcdSlabs& gs) {
     const auto uk = static_cast<std::size_t>(k);
+    if (!step.wanted(f.v[uk], rg.own.v[0], rg.own.v[1], rg.own.v[2])) return;
     geometry::CcdSlabs vs;
     vs.lo = vs.hi = {rf.x[0][uk], rf.x[1][uk]};
     if (geometry::ccd_slabs_apart(vs, gs, step.hull_bound)) {
@@ -357,6 +367,7 @@ struct Tester {
   /// Side i of face f (corners ci, vertex ids increasing) against side j of face g.
   void edge_edge(const OwnedFace& f, const FaceFrame& rf, int i, const std::array<std::uint8_t, 2>& ci,
                  const OwnedFace& g, const FaceFrame& rg, int j, const std::array<std::uint8_t, 2>& cj) {
+    if (!step.wanted(f.v[ci[0]], f.v[ci[1]], g.v[cj[0]], g.v[cj[1]])) return;
     Index e0 = f.e[static_cast<std::size_t>(i)], e1 = g.e[static_cast<std::size_t>(j)];
     Edge a{f.v[ci[0]], f.v[ci[1]]}, b{g.v[cj[0]], g.v[cj[1]]};
     const FaceFrame* ra = &rf;
@@ -406,6 +417,12 @@ std::unique_ptr<BroadPhase> make_broad_phase(const MethodSpec& spec) {
                        " has no broad phase; expected kdop, hash or sap");
   }
 }
+
+/// The impact sets' order (`ImpactSet`).
+bool vf_less(const VertexFaceImpact& x, const VertexFaceImpact& y) {
+  return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face);
+}
+bool ee_less(const EdgeEdgeImpact& x, const EdgeEdgeImpact& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); }
 
 void put_double(std::ostream& out, double value) {
   char buffer[32];
@@ -535,19 +552,58 @@ std::size_t ContinuousQuery::count_candidates(PositionsView previous, PositionsV
 }
 
 void ContinuousQuery::query(PositionsView previous, PositionsView current, ImpactSet& out) {
-  run(previous, current, out, nullptr);
+  run(previous, current, {}, out, nullptr);
+}
+
+void ContinuousQuery::query_moved(PositionsView previous, PositionsView current, std::span<const char> moved,
+                                  ImpactSet& out) {
+  const auto nv = static_cast<std::size_t>(topology_->num_vertices());
+  if (moved.size() != nv) {
+    out.clear();
+    throw InputError("continuous query: " + std::to_string(moved.size()) + " moved flags for " + std::to_string(nv) +
+                     " vertices");
+  }
+  // Empty means "all" to `run`: a mesh with no vertex has no impact either way.
+  run(previous, current, moved, out, nullptr);
+}
+
+void ContinuousQuery::update_moved(PositionsView previous, PositionsView current, std::span<const char> moved,
+                                   ImpactSet& impacts) {
+  try {
+    query_moved(previous, current, moved, fresh_);
+  } catch (...) {
+    impacts.clear();
+    throw;
+  }
+  const Topology& topo = *topology_;
+  const auto flagged = [&](Index u) { return moved[static_cast<std::size_t>(u)] != 0; };
+  std::erase_if(impacts.vf, [&](const VertexFaceImpact& i) {
+    const Face& t = topo.face(i.face);
+    return flagged(i.vertex) || flagged(t[0]) || flagged(t[1]) || flagged(t[2]);
+  });
+  std::erase_if(impacts.ee, [&](const EdgeEdgeImpact& i) {
+    return flagged(i.a[0]) || flagged(i.a[1]) || flagged(i.b[0]) || flagged(i.b[1]);
+  });
+  // Both sorted and disjoint (a kept impact has no flagged vertex, a fresh one has one).
+  const auto merge_into = [](auto& kept, const auto& added, const auto& less) {
+    const auto middle = static_cast<std::ptrdiff_t>(kept.size());
+    kept.insert(kept.end(), added.begin(), added.end());
+    std::inplace_merge(kept.begin(), kept.begin() + middle, kept.end(), less);
+  };
+  merge_into(impacts.vf, fresh_.vf, vf_less);
+  merge_into(impacts.ee, fresh_.ee, ee_less);
 }
 
 Scalar ContinuousQuery::collision_free_step(PositionsView previous, PositionsView current) {
   std::atomic<Scalar> earliest{1};
   ImpactSet none;
-  run(previous, current, none, &earliest);
+  run(previous, current, {}, none, &earliest);
   stats_.set("collision_free_step", earliest.load());
   return earliest.load();
 }
 
-void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactSet& out,
-                          std::atomic<Scalar>* earliest) {
+void ContinuousQuery::run(PositionsView previous, PositionsView current, std::span<const char> moved,
+                          ImpactSet& out, std::atomic<Scalar>* earliest) {
   out.clear();
   State& s = *state_;
   const Topology& topo = *topology_;
@@ -577,46 +633,110 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
       }
     }
   });
-  const Step step{topo, previous, current, s.frames, geometry::ccd_hull_bound(magnitude, options_.min_separation),
-                  options_.narrow};
+  const Step step{topo,
+                  previous,
+                  current,
+                  s.frames,
+                  geometry::ccd_hull_bound(magnitude, options_.min_separation),
+                  options_.narrow,
+                  moved.empty() ? nullptr : moved.data()};
   Sink sink;
+  const Scalar half = reach / 2;
+  const auto swept_box = [&](Index u) { return s.vertex_box[static_cast<std::size_t>(u)]; };
+  const auto face_box = [&](Index f) {
+    Box b = Box::empty();
+    for (const Index u : topo.face(f)) b.merge(swept_box(u));
+    b.inflate(half);
+    return b;
+  };
+  const auto flagged = [&](Index u) { return moved[static_cast<std::size_t>(u)] != 0; };
 
-  // Broad phase, its candidates streamed to the narrow phase on its threads.
-  const auto t0 = std::chrono::steady_clock::now();
-  FrameInput in{previous, current, reach / 2, threads, false, s.face_owns, true};
-  s.broad->update(in, stats_);
-  stats_.set("update_ms", ms_since(t0));
-  const auto t1 = std::chrono::steady_clock::now();
-  s.candidates.clear();
-  s.candidates.set_consumer([&](std::span<const FacePair> chunk) {
-    const auto c0 = std::chrono::steady_clock::now();
-    Tester tester{step, {}, {}, earliest};
-    // The records of a pair a few pairs ahead are fetched while this one is tested (the face
-    // ids of a chunk are scattered: the loop is otherwise bound by memory latency).
-    constexpr std::size_t kAhead = 16;
-    for (std::size_t i = 0; i < chunk.size(); ++i) {
-      if (i + kAhead < chunk.size()) {
-        for (const Index f : chunk[i + kAhead]) {
-          const auto* line = reinterpret_cast<const char*>(&s.frames[static_cast<std::size_t>(f)]);
-          for (std::size_t b = 0; b < sizeof(FaceFrame); b += 64) __builtin_prefetch(line + b);
-        }
-      }
-      tester.face_pair(chunk[i][0], chunk[i][1]);
+  if (step.moved != nullptr) {
+    // One-sided: a sub-pair with a flagged vertex lies in the face pair that owns it, and one
+    // face of that pair holds the flagged vertex (the vertex of a VF pair is a corner of its
+    // owner; an edge, of its owner). So the faces touching a flagged vertex (their swept boxes
+    // in a tree) against every face's swept box, grown as in the broad phase, find every such
+    // face pair whose features may come within δ; pairs sharing a vertex are the orphans'.
+    const auto t1 = std::chrono::steady_clock::now();
+    const auto nf = static_cast<std::size_t>(topo.num_faces());
+    std::vector<char> face_moved(nf, 0);
+    std::vector<Index> touched;
+    std::vector<Box> touched_box;
+    for (std::size_t f = 0; f < nf; ++f) {
+      const Face& t = topo.face(static_cast<Index>(f));
+      if (!(flagged(t[0]) || flagged(t[1]) || flagged(t[2]))) continue;
+      face_moved[f] = 1;
+      touched.push_back(static_cast<Index>(f));
+      touched_box.push_back(face_box(static_cast<Index>(f)));
     }
-    sink.take(tester, ms_since(c0));
-  });
-  try {
-    s.broad->self_pairs(s.candidates, stats_);
-  } catch (...) {
-    s.candidates.set_consumer({});
+    detail::BoxTree tree;
+    tree.build(touched_box);
+    std::atomic<std::size_t> candidates{0};
+    if (!touched.empty()) {
+      parallel_for_chunks(nf, threads, 1024, [&](std::size_t begin, std::size_t end) {
+        const auto c0 = std::chrono::steady_clock::now();
+        Tester tester{step, {}, {}, earliest};
+        std::size_t found = 0;
+        for (std::size_t gu = begin; gu < end; ++gu) {
+          const auto g = static_cast<Index>(gu);
+          const Face& tg = topo.face(g);
+          tree.query(face_box(g), [&](std::uint32_t k) {
+            const Index f = touched[k];
+            // Each unordered pair once: a pair of two touching faces is found from both.
+            if (f == g || (face_moved[gu] && f > g)) return;
+            for (const Index u : topo.face(f)) {
+              if (u == tg[0] || u == tg[1] || u == tg[2]) return;
+            }
+            ++found;
+            tester.face_pair(f, g);
+          });
+        }
+        candidates += found;
+        sink.take(tester, ms_since(c0));
+      });
+    }
+    stats_.set("moved_faces", static_cast<double>(touched.size()));
+    stats_.set("candidates", static_cast<double>(candidates.load()));
+    stats_.set("stream_ms", ms_since(t1));
+    stats_.set("narrow_cpu_ms", sink.narrow_cpu_ms);
+  } else {
+    // Broad phase, its candidates streamed to the narrow phase on its threads.
+    const auto t0 = std::chrono::steady_clock::now();
+    FrameInput in{previous, current, reach / 2, threads, false, s.face_owns, true};
+    s.broad->update(in, stats_);
+    stats_.set("update_ms", ms_since(t0));
+    const auto t1 = std::chrono::steady_clock::now();
     s.candidates.clear();
-    throw;
+    s.candidates.set_consumer([&](std::span<const FacePair> chunk) {
+      const auto c0 = std::chrono::steady_clock::now();
+      Tester tester{step, {}, {}, earliest};
+      // The records of a pair a few pairs ahead are fetched while this one is tested (the face
+      // ids of a chunk are scattered: the loop is otherwise bound by memory latency).
+      constexpr std::size_t kAhead = 16;
+      for (std::size_t i = 0; i < chunk.size(); ++i) {
+        if (i + kAhead < chunk.size()) {
+          for (const Index f : chunk[i + kAhead]) {
+            const auto* line = reinterpret_cast<const char*>(&s.frames[static_cast<std::size_t>(f)]);
+            for (std::size_t b = 0; b < sizeof(FaceFrame); b += 64) __builtin_prefetch(line + b);
+          }
+        }
+        tester.face_pair(chunk[i][0], chunk[i][1]);
+      }
+      sink.take(tester, ms_since(c0));
+    });
+    try {
+      s.broad->self_pairs(s.candidates, stats_);
+    } catch (...) {
+      s.candidates.set_consumer({});
+      s.candidates.clear();
+      throw;
+    }
+    s.candidates.set_consumer({});
+    stats_.set("candidates", static_cast<double>(s.candidates.total()));
+    s.candidates.clear();
+    stats_.set("stream_ms", ms_since(t1));
+    stats_.set("narrow_cpu_ms", sink.narrow_cpu_ms);
   }
-  s.candidates.set_consumer({});
-  stats_.set("candidates", static_cast<double>(s.candidates.total()));
-  s.candidates.clear();
-  stats_.set("stream_ms", ms_since(t1));
-  stats_.set("narrow_cpu_ms", sink.narrow_cpu_ms);
 
   // Orphans (sub-pairs of faces sharing a vertex) and the vertices of no face.
   const auto t2 = std::chrono::steady_clock::now();
@@ -634,20 +754,21 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
   });
   // Around the stars, the orphan sub-pairs of the face pairs whose swept boxes meet
   // (exact/stars.hpp); the vertices of no face against the faces whose swept boxes they meet.
-  const Scalar half = reach / 2;
-  const auto swept_box = [&](Index u) { return s.vertex_box[static_cast<std::size_t>(u)]; };
-  const auto face_box = [&](Index f) {
-    Box b = Box::empty();
-    for (const Index u : topo.face(f)) b.merge(swept_box(u));
-    b.inflate(half);
-    return b;
-  };
   std::atomic<std::size_t> star_pairs{0};
   parallel_for_chunks(s.orphans.stars.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
     Tester tester{step, {}, {}, earliest};
     exact::StarScratch scratch;
     for (std::size_t i = begin; i < end; ++i) {
       const Index v = s.orphans.stars[i];
+      // The orphan sub-pairs of star v lie in faces around v: none is wanted unless one of
+      // those faces touches a flagged vertex.
+      if (step.moved != nullptr) {
+        bool any = false;
+        for (const Index f : topo.vertex_faces()[v]) {
+          for (const Index u : topo.face(f)) any = any || flagged(u);
+        }
+        if (!any) continue;
+      }
       star_pairs += exact::star_pairs(
           topo, v, scratch, face_box, [&](Index f) { return exact::owned_far_box(topo, s.own, f, v, half, swept_box); },
           [&](Index f, Index g) {
@@ -678,11 +799,8 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
 
   const auto t3 = std::chrono::steady_clock::now();
   out = std::move(sink.impacts);
-  std::sort(out.vf.begin(), out.vf.end(), [](const VertexFaceImpact& x, const VertexFaceImpact& y) {
-    return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face);
-  });
-  std::sort(out.ee.begin(), out.ee.end(),
-            [](const EdgeEdgeImpact& x, const EdgeEdgeImpact& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); });
+  std::sort(out.vf.begin(), out.vf.end(), vf_less);
+  std::sort(out.ee.begin(), out.ee.end(), ee_less);
   stats_.set("sort_ms", ms_since(t3));
 
   double conservative = 0;
