@@ -430,9 +430,45 @@ void put_double(std::ostream& out, double value) {
   out.write(buffer, result.ptr - buffer);
 }
 
+/// Per vertex, the orphan sub-pairs that hold it (indices into `Orphans::vf` / `ee`, CSR).
+struct OrphansOf {
+  std::vector<std::size_t> vf_begin, ee_begin;  ///< #V + 1 offsets; empty: not built yet
+  std::vector<std::uint32_t> vf, ee;
+};
+
+template <class Vertices>
+void index_by_vertex(std::size_t nv, std::size_t count, const Vertices& vertices, std::vector<std::size_t>& begin,
+                     std::vector<std::uint32_t>& at) {
+  begin.assign(nv + 1, 0);
+  for (std::size_t i = 0; i < count; ++i) {
+    for (const Index v : vertices(i)) ++begin[static_cast<std::size_t>(v) + 1];
+  }
+  for (std::size_t v = 0; v < nv; ++v) begin[v + 1] += begin[v];
+  at.resize(begin[nv]);
+  std::vector<std::size_t> next(begin.begin(), begin.end() - 1);
+  for (std::size_t i = 0; i < count; ++i) {
+    for (const Index v : vertices(i)) at[next[static_cast<std::size_t>(v)]++] = static_cast<std::uint32_t>(i);
+  }
+}
+
+OrphansOf index_orphans(const Topology& topo, const exact::Orphans& orphans) {
+  const auto nv = static_cast<std::size_t>(topo.num_vertices());
+  OrphansOf out;
+  index_by_vertex(nv, orphans.vf.size(), [&](std::size_t i) {
+    const Face& t = topo.face(orphans.vf[i][1]);
+    return std::array<Index, 4>{orphans.vf[i][0], t[0], t[1], t[2]};
+  }, out.vf_begin, out.vf);
+  index_by_vertex(nv, orphans.ee.size(), [&](std::size_t i) {
+    const exact::OrphanEdges& e = orphans.ee[i];
+    return std::array<Index, 4>{e.a[0], e.a[1], e.b[0], e.b[1]};
+  }, out.ee_begin, out.ee);
+  return out;
+}
+
 }  // namespace
 
 struct ContinuousQuery::State {
+  OrphansOf orphans_of;  ///< built at the first `query_moved`
   std::unique_ptr<BroadPhase> broad;
   CandidateBuffer candidates;
   exact::FeatureOwnership own;
@@ -615,24 +651,27 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, std::sp
   // the margin covers the rounding of every box bound (docs/ccd.md, broad phase).
   const Scalar reach = options_.min_separation * (1 + 1e-6) + 1e-9 * magnitude;
   s.frames.resize(static_cast<std::size_t>(topo.num_faces()));
-  parallel_for_chunks(s.frames.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t f = begin; f < end; ++f) {
-      FaceFrame& r = s.frames[f];
-      r.own = s.faces[f];
+  const auto fill_frame = [&](std::size_t f) {
+    FaceFrame& r = s.frames[f];
+    r.own = s.faces[f];
+    for (std::size_t k = 0; k < 3; ++k) {
+      r.x[0][k] = previous[static_cast<std::size_t>(r.own.v[k])];
+      r.x[1][k] = current[static_cast<std::size_t>(r.own.v[k])];
+    }
+    for (std::size_t tau = 0; tau < 2; ++tau) {
+      const Vec3 lo = r.x[tau][0].cwiseMin(r.x[tau][1]).cwiseMin(r.x[tau][2]);
+      const Vec3 hi = r.x[tau][0].cwiseMax(r.x[tau][1]).cwiseMax(r.x[tau][2]);
       for (std::size_t k = 0; k < 3; ++k) {
-        r.x[0][k] = previous[static_cast<std::size_t>(r.own.v[k])];
-        r.x[1][k] = current[static_cast<std::size_t>(r.own.v[k])];
-      }
-      for (std::size_t tau = 0; tau < 2; ++tau) {
-        const Vec3 lo = r.x[tau][0].cwiseMin(r.x[tau][1]).cwiseMin(r.x[tau][2]);
-        const Vec3 hi = r.x[tau][0].cwiseMax(r.x[tau][1]).cwiseMax(r.x[tau][2]);
-        for (std::size_t k = 0; k < 3; ++k) {
-          r.box[tau][k] = down(lo[static_cast<Eigen::Index>(k)]);
-          r.box[tau][k + 3] = up(hi[static_cast<Eigen::Index>(k)]);
-        }
+        r.box[tau][k] = down(lo[static_cast<Eigen::Index>(k)]);
+        r.box[tau][k + 3] = up(hi[static_cast<Eigen::Index>(k)]);
       }
     }
-  });
+  };
+  if (moved.empty()) {  // a restricted query fills the records of the faces it tests only
+    parallel_for_chunks(s.frames.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f) fill_frame(f);
+    });
+  }
   const Step step{topo,
                   previous,
                   current,
@@ -671,12 +710,11 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, std::sp
     }
     detail::BoxTree tree;
     tree.build(touched_box);
-    std::atomic<std::size_t> candidates{0};
+    std::vector<FacePair> pairs;
+    std::mutex pairs_mutex;
     if (!touched.empty()) {
       parallel_for_chunks(nf, threads, 1024, [&](std::size_t begin, std::size_t end) {
-        const auto c0 = std::chrono::steady_clock::now();
-        Tester tester{step, {}, {}, earliest};
-        std::size_t found = 0;
+        std::vector<FacePair> found;
         for (std::size_t gu = begin; gu < end; ++gu) {
           const auto g = static_cast<Index>(gu);
           const Face& tg = topo.face(g);
@@ -687,16 +725,34 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, std::sp
             for (const Index u : topo.face(f)) {
               if (u == tg[0] || u == tg[1] || u == tg[2]) return;
             }
-            ++found;
-            tester.face_pair(f, g);
+            found.push_back({f, g});
           });
         }
-        candidates += found;
-        sink.take(tester, ms_since(c0));
+        const std::lock_guard lock(pairs_mutex);
+        pairs.insert(pairs.end(), found.begin(), found.end());
       });
     }
+    // The records of the faces of these pairs only.
+    std::vector<Index> needed;
+    for (const FacePair& p : pairs) {
+      for (const Index f : p) {
+        if (face_moved[static_cast<std::size_t>(f)] != 2) {
+          face_moved[static_cast<std::size_t>(f)] = 2;
+          needed.push_back(f);
+        }
+      }
+    }
+    parallel_for_chunks(needed.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) fill_frame(static_cast<std::size_t>(needed[i]));
+    });
+    parallel_for_chunks(pairs.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
+      const auto c0 = std::chrono::steady_clock::now();
+      Tester tester{step, {}, {}, earliest};
+      for (std::size_t i = begin; i < end; ++i) tester.face_pair(pairs[i][0], pairs[i][1]);
+      sink.take(tester, ms_since(c0));
+    });
     stats_.set("moved_faces", static_cast<double>(touched.size()));
-    stats_.set("candidates", static_cast<double>(candidates.load()));
+    stats_.set("candidates", static_cast<double>(pairs.size()));
     stats_.set("stream_ms", ms_since(t1));
     stats_.set("narrow_cpu_ms", sink.narrow_cpu_ms);
   } else {
@@ -741,17 +797,44 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, std::sp
   // Orphans (sub-pairs of faces sharing a vertex) and the vertices of no face.
   const auto t2 = std::chrono::steady_clock::now();
   const auto& ovf = s.orphans.vf;
-  parallel_for_chunks(ovf.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    Tester tester{step, {}, {}, earliest};
-    for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[i][0], ovf[i][1]);
-    sink.take(tester, 0);
-  });
   const auto& oee = s.orphans.ee;
-  parallel_for_chunks(oee.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    Tester tester{step, {}, {}, earliest};
-    for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[i].e[0], oee[i].e[1]);
-    sink.take(tester, 0);
-  });
+  if (step.moved == nullptr) {
+    parallel_for_chunks(ovf.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+      Tester tester{step, {}, {}, earliest};
+      for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[i][0], ovf[i][1]);
+      sink.take(tester, 0);
+    });
+    parallel_for_chunks(oee.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+      Tester tester{step, {}, {}, earliest};
+      for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[i].e[0], oee[i].e[1]);
+      sink.take(tester, 0);
+    });
+  } else {
+    // The orphans holding a flagged vertex, from the per-vertex index (built once).
+    if (s.orphans_of.vf_begin.empty()) s.orphans_of = index_orphans(topo, s.orphans);
+    const auto gather = [&](const std::vector<std::size_t>& begin, const std::vector<std::uint32_t>& at) {
+      std::vector<std::uint32_t> list;
+      for (std::size_t v = 0; v < moved.size(); ++v) {
+        if (moved[v]) list.insert(list.end(), at.begin() + static_cast<std::ptrdiff_t>(begin[v]),
+                                  at.begin() + static_cast<std::ptrdiff_t>(begin[v + 1]));
+      }
+      std::sort(list.begin(), list.end());
+      list.erase(std::unique(list.begin(), list.end()), list.end());
+      return list;
+    };
+    const std::vector<std::uint32_t> vf_list = gather(s.orphans_of.vf_begin, s.orphans_of.vf);
+    const std::vector<std::uint32_t> ee_list = gather(s.orphans_of.ee_begin, s.orphans_of.ee);
+    parallel_for_chunks(vf_list.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
+      Tester tester{step, {}, {}, earliest};
+      for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[vf_list[i]][0], ovf[vf_list[i]][1]);
+      sink.take(tester, 0);
+    });
+    parallel_for_chunks(ee_list.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
+      Tester tester{step, {}, {}, earliest};
+      for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[ee_list[i]].e[0], oee[ee_list[i]].e[1]);
+      sink.take(tester, 0);
+    });
+  }
   // Around the stars, the orphan sub-pairs of the face pairs whose swept boxes meet
   // (exact/stars.hpp); the vertices of no face against the faces whose swept boxes they meet.
   std::atomic<std::size_t> star_pairs{0};
