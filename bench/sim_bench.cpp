@@ -200,16 +200,19 @@ void register_all() {
 
 }  // namespace
 
-/// `--check-frames=SPEC [--frames=N] [--fail-safe=off] [--response=on]`: runs N frames (1000)
-/// of the built-in scene SPEC with the `frame/` rows' settings (`--response=on` turns the
-/// response, and with it the fail-safe, on for scenes that have it off, e.g. hanging-cloth),
+/// `--check-frames=SPEC [--frames=N] [--fail-safe=off] [--response=on] [--search-factor=F]`:
+/// runs N frames (1000) of the built-in scene SPEC with the `frame/` rows' settings
+/// (`--response=on` turns the response, and with it the fail-safe, on for scenes that have it
+/// off, e.g. hanging-cloth),
 /// counting the intersecting triangle pairs after every frame with the exact detector (kdop,
-/// kinds tt, as the rows do). Prints every frame with intersections, progress every 100 frames
+/// kinds tt, as the rows do); `--search-factor` sets `Settings::search_factor` (the proximity
+/// radius in thicknesses). Prints every frame with intersections, progress every 100 frames
 /// and a summary line; exit status 1 when some frame intersects.
 int check_frames(int argc, char** argv) {
   std::string spec;
   int frames = 1000;
   bool fail_safe = true, response = false;
+  double search_factor = 0;  // 0: the scene's
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a.rfind("--check-frames=", 0) == 0) {
@@ -220,6 +223,8 @@ int check_frames(int argc, char** argv) {
       fail_safe = false;
     } else if (a == "--response=on") {
       response = true;
+    } else if (a.rfind("--search-factor=", 0) == 0) {
+      search_factor = std::stod(a.substr(16));
     } else {
       std::fprintf(stderr, "sim_bench --check-frames: unknown argument '%s'\n", a.c_str());
       return 2;
@@ -230,6 +235,7 @@ int check_frames(int argc, char** argv) {
   settings.method = MethodSpec::parse("kdop");
   settings.response = settings.response || response;
   settings.fail_safe = fail_safe;
+  if (search_factor > 0) settings.search_factor = search_factor;
   Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
                  settings);
   DetectorOptions tt_options;
@@ -243,7 +249,7 @@ int check_frames(int argc, char** argv) {
               intersections.tt.size());
   int bad = 0, run = 0;
   std::size_t most = 0, impacts = 0, frozen = 0;
-  double ms = 0, ccd_ms = 0, queries = 0;
+  double ms = 0, ccd_ms = 0, queries = 0, integrate_ms = 0, detect_ms = 0, response_ms = 0, contacts = 0;
   std::string diverged;
   for (int f = 1; f <= frames; ++f) {
     FrameStats st;
@@ -256,6 +262,10 @@ int check_frames(int argc, char** argv) {
     ++run;
     ms += st.integrate_ms + st.detect_ms + st.response_ms + st.ccd_ms;
     ccd_ms += st.ccd_ms;
+    integrate_ms += st.integrate_ms;
+    detect_ms += st.detect_ms;
+    response_ms += st.response_ms;
+    contacts += static_cast<double>(st.vf + st.ee);
     impacts += st.ccd_impacts;
     frozen += st.ccd_frozen;
     queries += st.ccd_queries;
@@ -271,9 +281,12 @@ int check_frames(int argc, char** argv) {
     }
   }
   std::printf(
-      "summary %s: %d frames run of %d, %d with intersections (most %zu); %.1f ms/frame (CCD %.1f), "
-      "%.1f live impacts/frame, %.2f queries/frame, %zu frozen in all%s%s\n",
-      spec.c_str(), run, frames, bad, most, ms / std::max(run, 1), ccd_ms / std::max(run, 1),
+      "summary %s: %d frames run of %d, %d with intersections (most %zu); %.1f ms/frame (integrate %.1f, "
+      "detect %.1f, response %.1f, CCD %.1f), %.0f contacts/frame, %.1f live impacts/frame, %.2f queries/frame, "
+      "%zu frozen in all%s%s\n",
+      spec.c_str(), run, frames, bad, most, ms / std::max(run, 1), integrate_ms / std::max(run, 1),
+      detect_ms / std::max(run, 1), response_ms / std::max(run, 1), ccd_ms / std::max(run, 1),
+      contacts / std::max(run, 1),
       static_cast<double>(impacts) / std::max(run, 1), queries / std::max(run, 1), frozen,
       diverged.empty() ? "" : "; DIVERGED: ", diverged.c_str());
   return bad > 0 || !diverged.empty() ? 1 : 0;
