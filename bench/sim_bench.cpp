@@ -200,7 +200,8 @@ void register_all() {
 
 }  // namespace
 
-/// `--check-frames=SPEC [--frames=N] [--fail-safe=off] [--response=on] [--search-factor=F]`:
+/// `--check-frames=SPEC [--frames=N] [--fail-safe=off] [--response=on] [--search-factor=F]
+/// [--verbose]` (`--verbose`: a line for every frame):
 /// runs N frames (1000) of the built-in scene SPEC with the `frame/` rows' settings
 /// (`--response=on` turns the response, and with it the fail-safe, on for scenes that have it
 /// off, e.g. hanging-cloth),
@@ -211,7 +212,7 @@ void register_all() {
 int check_frames(int argc, char** argv) {
   std::string spec;
   int frames = 1000;
-  bool fail_safe = true, response = false;
+  bool fail_safe = true, response = false, verbose = false;
   double search_factor = 0;  // 0: the scene's
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -223,6 +224,8 @@ int check_frames(int argc, char** argv) {
       fail_safe = false;
     } else if (a == "--response=on") {
       response = true;
+    } else if (a == "--verbose") {
+      verbose = true;
     } else if (a.rfind("--search-factor=", 0) == 0) {
       search_factor = std::stod(a.substr(16));
     } else {
@@ -271,6 +274,14 @@ int check_frames(int argc, char** argv) {
     queries += st.ccd_queries;
     tt->update(sim.state().x, intersections);
     const std::size_t pairs = intersections.tt.size();
+    if (verbose) {
+      Scalar fastest = 0;
+      for (const Vec3& v : sim.state().v) fastest = std::max(fastest, v.norm());
+      std::printf("frame %d: %.1f ms, CCD %.1f ms, %zu live impacts, %d queries, %zu zone vertices, %zu frozen, "
+                  "%zu contacts, fastest %.3g m/s, %zu intersecting pairs\n",
+                  f, st.integrate_ms + st.detect_ms + st.response_ms + st.ccd_ms, st.ccd_ms, st.ccd_impacts,
+                  st.ccd_queries, st.ccd_zone_vertices, st.ccd_frozen, st.vf + st.ee, fastest, pairs);
+    }
     if (pairs > 0) {
       ++bad;
       most = std::max(most, pairs);
