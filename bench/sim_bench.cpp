@@ -10,13 +10,17 @@
 // (docs/benchmarks/simulation.md):
 //   ./build/release/bench/sim_bench --benchmark_filter=frame/ --benchmark_out=sim.json
 //   ./build/release/bench/sim_bench --benchmark_format=json
+// `--check-frames=SPEC --frames=N`: N frames of one scene, intersections counted at every frame
+// (see `check_frames`).
 #include <crumple/sim/scene.hpp>
 
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <map>
 #include <memory>
+#include <string>
 
 namespace {
 
@@ -196,7 +200,111 @@ void register_all() {
 
 }  // namespace
 
+/// `--check-frames=SPEC [--frames=N] [--fail-safe=off] [--response=on] [--search-factor=F]
+/// [--verbose]` (`--verbose`: a line for every frame):
+/// runs N frames (1000) of the built-in scene SPEC with the `frame/` rows' settings
+/// (`--response=on` turns the response, and with it the fail-safe, on for scenes that have it
+/// off, e.g. hanging-cloth),
+/// counting the intersecting triangle pairs after every frame with the exact detector (kdop,
+/// kinds tt, as the rows do); `--search-factor` sets `Settings::search_factor` (the proximity
+/// radius in thicknesses). Prints every frame with intersections, progress every 100 frames
+/// and a summary line; exit status 1 when some frame intersects.
+int check_frames(int argc, char** argv) {
+  std::string spec;
+  int frames = 1000;
+  bool fail_safe = true, response = false, verbose = false;
+  double search_factor = 0;  // 0: the scene's
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a.rfind("--check-frames=", 0) == 0) {
+      spec = a.substr(15);
+    } else if (a.rfind("--frames=", 0) == 0) {
+      frames = std::stoi(a.substr(9));
+    } else if (a == "--fail-safe=off") {
+      fail_safe = false;
+    } else if (a == "--response=on") {
+      response = true;
+    } else if (a == "--verbose") {
+      verbose = true;
+    } else if (a.rfind("--search-factor=", 0) == 0) {
+      search_factor = std::stod(a.substr(16));
+    } else {
+      std::fprintf(stderr, "sim_bench --check-frames: unknown argument '%s'\n", a.c_str());
+      return 2;
+    }
+  }
+  Scene s = make_scene(SceneSpec::parse(spec), 1);
+  Settings settings = s.settings;
+  settings.method = MethodSpec::parse("kdop");
+  settings.response = settings.response || response;
+  settings.fail_safe = fail_safe;
+  if (search_factor > 0) settings.search_factor = search_factor;
+  Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
+                 settings);
+  DetectorOptions tt_options;
+  tt_options.kinds = ContactKinds::parse("tt");
+  auto tt = make_detector(MethodSpec::parse("kdop"), tt_options);
+  tt->set_topology(sim.model().topology_ptr());
+  ContactSet intersections;
+  tt->update(sim.state().x, intersections);
+  std::printf("%s: %d vertices, response %s, fail-safe %s, start: %zu intersecting pairs\n", spec.c_str(),
+              sim.model().num_particles(), settings.response ? "on" : "off", fail_safe ? "on" : "off",
+              intersections.tt.size());
+  int bad = 0, run = 0;
+  std::size_t most = 0, impacts = 0, frozen = 0;
+  double ms = 0, ccd_ms = 0, queries = 0, integrate_ms = 0, detect_ms = 0, response_ms = 0, contacts = 0;
+  std::string diverged;
+  for (int f = 1; f <= frames; ++f) {
+    FrameStats st;
+    try {
+      st = sim.advance_frame();
+    } catch (const DivergenceError& e) {
+      diverged = e.what();
+      break;
+    }
+    ++run;
+    ms += st.integrate_ms + st.detect_ms + st.response_ms + st.ccd_ms;
+    ccd_ms += st.ccd_ms;
+    integrate_ms += st.integrate_ms;
+    detect_ms += st.detect_ms;
+    response_ms += st.response_ms;
+    contacts += static_cast<double>(st.vf + st.ee);
+    impacts += st.ccd_impacts;
+    frozen += st.ccd_frozen;
+    queries += st.ccd_queries;
+    tt->update(sim.state().x, intersections);
+    const std::size_t pairs = intersections.tt.size();
+    if (verbose) {
+      Scalar fastest = 0;
+      for (const Vec3& v : sim.state().v) fastest = std::max(fastest, v.norm());
+      std::printf("frame %d: %.1f ms, CCD %.1f ms, %zu live impacts, %d queries, %zu zone vertices, %zu frozen, "
+                  "%zu contacts, fastest %.3g m/s, %zu intersecting pairs\n",
+                  f, st.integrate_ms + st.detect_ms + st.response_ms + st.ccd_ms, st.ccd_ms, st.ccd_impacts,
+                  st.ccd_queries, st.ccd_zone_vertices, st.ccd_frozen, st.vf + st.ee, fastest, pairs);
+    }
+    if (pairs > 0) {
+      ++bad;
+      most = std::max(most, pairs);
+      std::printf("frame %d: %zu intersecting pairs\n", f, pairs);
+    }
+    if (f % 100 == 0) {
+      std::fprintf(stderr, "%s: frame %d, %d with intersections\n", spec.c_str(), f, bad);
+    }
+  }
+  std::printf(
+      "summary %s: %d frames run of %d, %d with intersections (most %zu); %.1f ms/frame (integrate %.1f, "
+      "detect %.1f, response %.1f, CCD %.1f), %.0f contacts/frame, %.1f live impacts/frame, %.2f queries/frame, "
+      "%zu frozen in all%s%s\n",
+      spec.c_str(), run, frames, bad, most, ms / std::max(run, 1), integrate_ms / std::max(run, 1),
+      detect_ms / std::max(run, 1), response_ms / std::max(run, 1), ccd_ms / std::max(run, 1),
+      contacts / std::max(run, 1),
+      static_cast<double>(impacts) / std::max(run, 1), queries / std::max(run, 1), frozen,
+      diverged.empty() ? "" : "; DIVERGED: ", diverged.c_str());
+  return bad > 0 || !diverged.empty() ? 1 : 0;
+}
+
 int main(int argc, char** argv) {
+  if (argc > 1 && std::string(argv[1]).rfind("--check-frames=", 0) == 0) return check_frames(argc, argv);
   register_all();
   benchmark::Initialize(&argc, argv);
   benchmark::RunSpecifiedBenchmarks();

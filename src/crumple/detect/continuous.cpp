@@ -120,6 +120,13 @@ struct Step {
   /// sub-pairs that the narrow phase's own hull filter rejects (certified apart).
   Scalar hull_bound;
   geometry::CcdOptions narrow;
+  /// #V flags of `ContinuousQuery::query_moved`, or null: then every sub-pair is tested.
+  const char* moved = nullptr;
+  /// Whether the sub-pair of these four vertices is tested (one of them flagged).
+  bool wanted(Index a, Index b, Index c, Index d) const {
+    const auto flagged = [&](Index v) { return moved[static_cast<std::size_t>(v)] != 0; };
+    return moved == nullptr || flagged(a) || flagged(b) || flagged(c) || flagged(d);
+  }
 };
 
 /// The slabs of a face record's three corners.
@@ -264,6 +271,7 @@ struct Tester {
   void vertex_face(Index v, Index f) {
     if (done()) return;
     const Face& t = step.topo.face(f);
+    if (!step.wanted(v, t[0], t[1], t[2])) return;
     const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
     const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
     const geometry::CcdPoints start{s(v), s(t[0]), s(t[1]), s(t[2])}, end{e(v), e(t[0]), e(t[1]), e(t[2])};
@@ -278,6 +286,7 @@ struct Tester {
   void edge_edge(Index e0, Index e1) {
     if (done()) return;
     Edge a = step.topo.edge(e0), b = step.topo.edge(e1);
+    if (!step.wanted(a[0], a[1], b[0], b[1])) return;
     if (b < a) {
       std::swap(a, b);
       std::swap(e0, e1);
@@ -342,6 +351,7 @@ struct Tester {
   void vertex_face(const OwnedFace& f, const FaceFrame& rf, int k, Index gi, const FaceFrame& rg,
                    const geometry::CcdSlabs& gs) {
     const auto uk = static_cast<std::size_t>(k);
+    if (!step.wanted(f.v[uk], rg.own.v[0], rg.own.v[1], rg.own.v[2])) return;
     geometry::CcdSlabs vs;
     vs.lo = vs.hi = {rf.x[0][uk], rf.x[1][uk]};
     if (geometry::ccd_slabs_apart(vs, gs, step.hull_bound)) {
@@ -357,6 +367,7 @@ struct Tester {
   /// Side i of face f (corners ci, vertex ids increasing) against side j of face g.
   void edge_edge(const OwnedFace& f, const FaceFrame& rf, int i, const std::array<std::uint8_t, 2>& ci,
                  const OwnedFace& g, const FaceFrame& rg, int j, const std::array<std::uint8_t, 2>& cj) {
+    if (!step.wanted(f.v[ci[0]], f.v[ci[1]], g.v[cj[0]], g.v[cj[1]])) return;
     Index e0 = f.e[static_cast<std::size_t>(i)], e1 = g.e[static_cast<std::size_t>(j)];
     Edge a{f.v[ci[0]], f.v[ci[1]]}, b{g.v[cj[0]], g.v[cj[1]]};
     const FaceFrame* ra = &rf;
@@ -407,15 +418,57 @@ std::unique_ptr<BroadPhase> make_broad_phase(const MethodSpec& spec) {
   }
 }
 
+/// The impact sets' order (`ImpactSet`).
+bool vf_less(const VertexFaceImpact& x, const VertexFaceImpact& y) {
+  return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face);
+}
+bool ee_less(const EdgeEdgeImpact& x, const EdgeEdgeImpact& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); }
+
 void put_double(std::ostream& out, double value) {
   char buffer[32];
   const auto result = std::to_chars(buffer, buffer + sizeof buffer, value, std::chars_format::general, 17);
   out.write(buffer, result.ptr - buffer);
 }
 
+/// Per vertex, the orphan sub-pairs that hold it (indices into `Orphans::vf` / `ee`, CSR).
+struct OrphansOf {
+  std::vector<std::size_t> vf_begin, ee_begin;  ///< #V + 1 offsets; empty: not built yet
+  std::vector<std::uint32_t> vf, ee;
+};
+
+template <class Vertices>
+void index_by_vertex(std::size_t nv, std::size_t count, const Vertices& vertices, std::vector<std::size_t>& begin,
+                     std::vector<std::uint32_t>& at) {
+  begin.assign(nv + 1, 0);
+  for (std::size_t i = 0; i < count; ++i) {
+    for (const Index v : vertices(i)) ++begin[static_cast<std::size_t>(v) + 1];
+  }
+  for (std::size_t v = 0; v < nv; ++v) begin[v + 1] += begin[v];
+  at.resize(begin[nv]);
+  std::vector<std::size_t> next(begin.begin(), begin.end() - 1);
+  for (std::size_t i = 0; i < count; ++i) {
+    for (const Index v : vertices(i)) at[next[static_cast<std::size_t>(v)]++] = static_cast<std::uint32_t>(i);
+  }
+}
+
+OrphansOf index_orphans(const Topology& topo, const exact::Orphans& orphans) {
+  const auto nv = static_cast<std::size_t>(topo.num_vertices());
+  OrphansOf out;
+  index_by_vertex(nv, orphans.vf.size(), [&](std::size_t i) {
+    const Face& t = topo.face(orphans.vf[i][1]);
+    return std::array<Index, 4>{orphans.vf[i][0], t[0], t[1], t[2]};
+  }, out.vf_begin, out.vf);
+  index_by_vertex(nv, orphans.ee.size(), [&](std::size_t i) {
+    const exact::OrphanEdges& e = orphans.ee[i];
+    return std::array<Index, 4>{e.a[0], e.a[1], e.b[0], e.b[1]};
+  }, out.ee_begin, out.ee);
+  return out;
+}
+
 }  // namespace
 
 struct ContinuousQuery::State {
+  OrphansOf orphans_of;  ///< built at the first `query_moved`
   std::unique_ptr<BroadPhase> broad;
   CandidateBuffer candidates;
   exact::FeatureOwnership own;
@@ -535,19 +588,58 @@ std::size_t ContinuousQuery::count_candidates(PositionsView previous, PositionsV
 }
 
 void ContinuousQuery::query(PositionsView previous, PositionsView current, ImpactSet& out) {
-  run(previous, current, out, nullptr);
+  run(previous, current, {}, out, nullptr);
+}
+
+void ContinuousQuery::query_moved(PositionsView previous, PositionsView current, std::span<const char> moved,
+                                  ImpactSet& out) {
+  const auto nv = static_cast<std::size_t>(topology_->num_vertices());
+  if (moved.size() != nv) {
+    out.clear();
+    throw InputError("continuous query: " + std::to_string(moved.size()) + " moved flags for " + std::to_string(nv) +
+                     " vertices");
+  }
+  // Empty means "all" to `run`: a mesh with no vertex has no impact either way.
+  run(previous, current, moved, out, nullptr);
+}
+
+void ContinuousQuery::update_moved(PositionsView previous, PositionsView current, std::span<const char> moved,
+                                   ImpactSet& impacts) {
+  try {
+    query_moved(previous, current, moved, fresh_);
+  } catch (...) {
+    impacts.clear();
+    throw;
+  }
+  const Topology& topo = *topology_;
+  const auto flagged = [&](Index u) { return moved[static_cast<std::size_t>(u)] != 0; };
+  std::erase_if(impacts.vf, [&](const VertexFaceImpact& i) {
+    const Face& t = topo.face(i.face);
+    return flagged(i.vertex) || flagged(t[0]) || flagged(t[1]) || flagged(t[2]);
+  });
+  std::erase_if(impacts.ee, [&](const EdgeEdgeImpact& i) {
+    return flagged(i.a[0]) || flagged(i.a[1]) || flagged(i.b[0]) || flagged(i.b[1]);
+  });
+  // Both sorted and disjoint (a kept impact has no flagged vertex, a fresh one has one).
+  const auto merge_into = [](auto& kept, const auto& added, const auto& less) {
+    const auto middle = static_cast<std::ptrdiff_t>(kept.size());
+    kept.insert(kept.end(), added.begin(), added.end());
+    std::inplace_merge(kept.begin(), kept.begin() + middle, kept.end(), less);
+  };
+  merge_into(impacts.vf, fresh_.vf, vf_less);
+  merge_into(impacts.ee, fresh_.ee, ee_less);
 }
 
 Scalar ContinuousQuery::collision_free_step(PositionsView previous, PositionsView current) {
   std::atomic<Scalar> earliest{1};
   ImpactSet none;
-  run(previous, current, none, &earliest);
+  run(previous, current, {}, none, &earliest);
   stats_.set("collision_free_step", earliest.load());
   return earliest.load();
 }
 
-void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactSet& out,
-                          std::atomic<Scalar>* earliest) {
+void ContinuousQuery::run(PositionsView previous, PositionsView current, std::span<const char> moved,
+                          ImpactSet& out, std::atomic<Scalar>* earliest) {
   out.clear();
   State& s = *state_;
   const Topology& topo = *topology_;
@@ -559,81 +651,35 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
   // the margin covers the rounding of every box bound (docs/ccd.md, broad phase).
   const Scalar reach = options_.min_separation * (1 + 1e-6) + 1e-9 * magnitude;
   s.frames.resize(static_cast<std::size_t>(topo.num_faces()));
-  parallel_for_chunks(s.frames.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t f = begin; f < end; ++f) {
-      FaceFrame& r = s.frames[f];
-      r.own = s.faces[f];
+  const auto fill_frame = [&](std::size_t f) {
+    FaceFrame& r = s.frames[f];
+    r.own = s.faces[f];
+    for (std::size_t k = 0; k < 3; ++k) {
+      r.x[0][k] = previous[static_cast<std::size_t>(r.own.v[k])];
+      r.x[1][k] = current[static_cast<std::size_t>(r.own.v[k])];
+    }
+    for (std::size_t tau = 0; tau < 2; ++tau) {
+      const Vec3 lo = r.x[tau][0].cwiseMin(r.x[tau][1]).cwiseMin(r.x[tau][2]);
+      const Vec3 hi = r.x[tau][0].cwiseMax(r.x[tau][1]).cwiseMax(r.x[tau][2]);
       for (std::size_t k = 0; k < 3; ++k) {
-        r.x[0][k] = previous[static_cast<std::size_t>(r.own.v[k])];
-        r.x[1][k] = current[static_cast<std::size_t>(r.own.v[k])];
-      }
-      for (std::size_t tau = 0; tau < 2; ++tau) {
-        const Vec3 lo = r.x[tau][0].cwiseMin(r.x[tau][1]).cwiseMin(r.x[tau][2]);
-        const Vec3 hi = r.x[tau][0].cwiseMax(r.x[tau][1]).cwiseMax(r.x[tau][2]);
-        for (std::size_t k = 0; k < 3; ++k) {
-          r.box[tau][k] = down(lo[static_cast<Eigen::Index>(k)]);
-          r.box[tau][k + 3] = up(hi[static_cast<Eigen::Index>(k)]);
-        }
+        r.box[tau][k] = down(lo[static_cast<Eigen::Index>(k)]);
+        r.box[tau][k + 3] = up(hi[static_cast<Eigen::Index>(k)]);
       }
     }
-  });
-  const Step step{topo, previous, current, s.frames, geometry::ccd_hull_bound(magnitude, options_.min_separation),
-                  options_.narrow};
-  Sink sink;
-
-  // Broad phase, its candidates streamed to the narrow phase on its threads.
-  const auto t0 = std::chrono::steady_clock::now();
-  FrameInput in{previous, current, reach / 2, threads, false, s.face_owns, true};
-  s.broad->update(in, stats_);
-  stats_.set("update_ms", ms_since(t0));
-  const auto t1 = std::chrono::steady_clock::now();
-  s.candidates.clear();
-  s.candidates.set_consumer([&](std::span<const FacePair> chunk) {
-    const auto c0 = std::chrono::steady_clock::now();
-    Tester tester{step, {}, {}, earliest};
-    // The records of a pair a few pairs ahead are fetched while this one is tested (the face
-    // ids of a chunk are scattered: the loop is otherwise bound by memory latency).
-    constexpr std::size_t kAhead = 16;
-    for (std::size_t i = 0; i < chunk.size(); ++i) {
-      if (i + kAhead < chunk.size()) {
-        for (const Index f : chunk[i + kAhead]) {
-          const auto* line = reinterpret_cast<const char*>(&s.frames[static_cast<std::size_t>(f)]);
-          for (std::size_t b = 0; b < sizeof(FaceFrame); b += 64) __builtin_prefetch(line + b);
-        }
-      }
-      tester.face_pair(chunk[i][0], chunk[i][1]);
-    }
-    sink.take(tester, ms_since(c0));
-  });
-  try {
-    s.broad->self_pairs(s.candidates, stats_);
-  } catch (...) {
-    s.candidates.set_consumer({});
-    s.candidates.clear();
-    throw;
+  };
+  if (moved.empty()) {  // a restricted query fills the records of the faces it tests only
+    parallel_for_chunks(s.frames.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f) fill_frame(f);
+    });
   }
-  s.candidates.set_consumer({});
-  stats_.set("candidates", static_cast<double>(s.candidates.total()));
-  s.candidates.clear();
-  stats_.set("stream_ms", ms_since(t1));
-  stats_.set("narrow_cpu_ms", sink.narrow_cpu_ms);
-
-  // Orphans (sub-pairs of faces sharing a vertex) and the vertices of no face.
-  const auto t2 = std::chrono::steady_clock::now();
-  const auto& ovf = s.orphans.vf;
-  parallel_for_chunks(ovf.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    Tester tester{step, {}, {}, earliest};
-    for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[i][0], ovf[i][1]);
-    sink.take(tester, 0);
-  });
-  const auto& oee = s.orphans.ee;
-  parallel_for_chunks(oee.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-    Tester tester{step, {}, {}, earliest};
-    for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[i].e[0], oee[i].e[1]);
-    sink.take(tester, 0);
-  });
-  // Around the stars, the orphan sub-pairs of the face pairs whose swept boxes meet
-  // (exact/stars.hpp); the vertices of no face against the faces whose swept boxes they meet.
+  const Step step{topo,
+                  previous,
+                  current,
+                  s.frames,
+                  geometry::ccd_hull_bound(magnitude, options_.min_separation),
+                  options_.narrow,
+                  moved.empty() ? nullptr : moved.data()};
+  Sink sink;
   const Scalar half = reach / 2;
   const auto swept_box = [&](Index u) { return s.vertex_box[static_cast<std::size_t>(u)]; };
   const auto face_box = [&](Index f) {
@@ -642,12 +688,170 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
     b.inflate(half);
     return b;
   };
+  const auto flagged = [&](Index u) { return moved[static_cast<std::size_t>(u)] != 0; };
+
+  if (step.moved != nullptr) {
+    // One-sided: a sub-pair with a flagged vertex lies in the face pair that owns it, and one
+    // face of that pair holds the flagged vertex (the vertex of a VF pair is a corner of its
+    // owner; an edge, of its owner). So the faces touching a flagged vertex (their swept boxes
+    // in a tree) against every face's swept box, grown as in the broad phase, find every such
+    // face pair whose features may come within δ; pairs sharing a vertex are the orphans'.
+    const auto t1 = std::chrono::steady_clock::now();
+    const auto nf = static_cast<std::size_t>(topo.num_faces());
+    std::vector<char> face_moved(nf, 0);
+    std::vector<Index> touched;
+    std::vector<Box> touched_box;
+    for (std::size_t f = 0; f < nf; ++f) {
+      const Face& t = topo.face(static_cast<Index>(f));
+      if (!(flagged(t[0]) || flagged(t[1]) || flagged(t[2]))) continue;
+      face_moved[f] = 1;
+      touched.push_back(static_cast<Index>(f));
+      touched_box.push_back(face_box(static_cast<Index>(f)));
+    }
+    detail::BoxTree tree;
+    tree.build(touched_box);
+    std::vector<FacePair> pairs;
+    std::mutex pairs_mutex;
+    if (!touched.empty()) {
+      parallel_for_chunks(nf, threads, 1024, [&](std::size_t begin, std::size_t end) {
+        std::vector<FacePair> found;
+        for (std::size_t gu = begin; gu < end; ++gu) {
+          const auto g = static_cast<Index>(gu);
+          const Face& tg = topo.face(g);
+          tree.query(face_box(g), [&](std::uint32_t k) {
+            const Index f = touched[k];
+            // Each unordered pair once: a pair of two touching faces is found from both.
+            if (f == g || (face_moved[gu] && f > g)) return;
+            for (const Index u : topo.face(f)) {
+              if (u == tg[0] || u == tg[1] || u == tg[2]) return;
+            }
+            found.push_back({f, g});
+          });
+        }
+        const std::lock_guard lock(pairs_mutex);
+        pairs.insert(pairs.end(), found.begin(), found.end());
+      });
+    }
+    // The records of the faces of these pairs only.
+    std::vector<Index> needed;
+    for (const FacePair& p : pairs) {
+      for (const Index f : p) {
+        if (face_moved[static_cast<std::size_t>(f)] != 2) {
+          face_moved[static_cast<std::size_t>(f)] = 2;
+          needed.push_back(f);
+        }
+      }
+    }
+    parallel_for_chunks(needed.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) fill_frame(static_cast<std::size_t>(needed[i]));
+    });
+    parallel_for_chunks(pairs.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
+      const auto c0 = std::chrono::steady_clock::now();
+      Tester tester{step, {}, {}, earliest};
+      for (std::size_t i = begin; i < end; ++i) tester.face_pair(pairs[i][0], pairs[i][1]);
+      sink.take(tester, ms_since(c0));
+    });
+    stats_.set("moved_faces", static_cast<double>(touched.size()));
+    stats_.set("candidates", static_cast<double>(pairs.size()));
+    stats_.set("stream_ms", ms_since(t1));
+    stats_.set("narrow_cpu_ms", sink.narrow_cpu_ms);
+  } else {
+    // Broad phase, its candidates streamed to the narrow phase on its threads.
+    const auto t0 = std::chrono::steady_clock::now();
+    FrameInput in{previous, current, reach / 2, threads, false, s.face_owns, true};
+    s.broad->update(in, stats_);
+    stats_.set("update_ms", ms_since(t0));
+    const auto t1 = std::chrono::steady_clock::now();
+    s.candidates.clear();
+    s.candidates.set_consumer([&](std::span<const FacePair> chunk) {
+      const auto c0 = std::chrono::steady_clock::now();
+      Tester tester{step, {}, {}, earliest};
+      // The records of a pair a few pairs ahead are fetched while this one is tested (the face
+      // ids of a chunk are scattered: the loop is otherwise bound by memory latency).
+      constexpr std::size_t kAhead = 16;
+      for (std::size_t i = 0; i < chunk.size(); ++i) {
+        if (i + kAhead < chunk.size()) {
+          for (const Index f : chunk[i + kAhead]) {
+            const auto* line = reinterpret_cast<const char*>(&s.frames[static_cast<std::size_t>(f)]);
+            for (std::size_t b = 0; b < sizeof(FaceFrame); b += 64) __builtin_prefetch(line + b);
+          }
+        }
+        tester.face_pair(chunk[i][0], chunk[i][1]);
+      }
+      sink.take(tester, ms_since(c0));
+    });
+    try {
+      s.broad->self_pairs(s.candidates, stats_);
+    } catch (...) {
+      s.candidates.set_consumer({});
+      s.candidates.clear();
+      throw;
+    }
+    s.candidates.set_consumer({});
+    stats_.set("candidates", static_cast<double>(s.candidates.total()));
+    s.candidates.clear();
+    stats_.set("stream_ms", ms_since(t1));
+    stats_.set("narrow_cpu_ms", sink.narrow_cpu_ms);
+  }
+
+  // Orphans (sub-pairs of faces sharing a vertex) and the vertices of no face.
+  const auto t2 = std::chrono::steady_clock::now();
+  const auto& ovf = s.orphans.vf;
+  const auto& oee = s.orphans.ee;
+  if (step.moved == nullptr) {
+    parallel_for_chunks(ovf.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+      Tester tester{step, {}, {}, earliest};
+      for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[i][0], ovf[i][1]);
+      sink.take(tester, 0);
+    });
+    parallel_for_chunks(oee.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
+      Tester tester{step, {}, {}, earliest};
+      for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[i].e[0], oee[i].e[1]);
+      sink.take(tester, 0);
+    });
+  } else {
+    // The orphans holding a flagged vertex, from the per-vertex index (built once).
+    if (s.orphans_of.vf_begin.empty()) s.orphans_of = index_orphans(topo, s.orphans);
+    const auto gather = [&](const std::vector<std::size_t>& begin, const std::vector<std::uint32_t>& at) {
+      std::vector<std::uint32_t> list;
+      for (std::size_t v = 0; v < moved.size(); ++v) {
+        if (moved[v]) list.insert(list.end(), at.begin() + static_cast<std::ptrdiff_t>(begin[v]),
+                                  at.begin() + static_cast<std::ptrdiff_t>(begin[v + 1]));
+      }
+      std::sort(list.begin(), list.end());
+      list.erase(std::unique(list.begin(), list.end()), list.end());
+      return list;
+    };
+    const std::vector<std::uint32_t> vf_list = gather(s.orphans_of.vf_begin, s.orphans_of.vf);
+    const std::vector<std::uint32_t> ee_list = gather(s.orphans_of.ee_begin, s.orphans_of.ee);
+    parallel_for_chunks(vf_list.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
+      Tester tester{step, {}, {}, earliest};
+      for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[vf_list[i]][0], ovf[vf_list[i]][1]);
+      sink.take(tester, 0);
+    });
+    parallel_for_chunks(ee_list.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
+      Tester tester{step, {}, {}, earliest};
+      for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[ee_list[i]].e[0], oee[ee_list[i]].e[1]);
+      sink.take(tester, 0);
+    });
+  }
+  // Around the stars, the orphan sub-pairs of the face pairs whose swept boxes meet
+  // (exact/stars.hpp); the vertices of no face against the faces whose swept boxes they meet.
   std::atomic<std::size_t> star_pairs{0};
   parallel_for_chunks(s.orphans.stars.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
     Tester tester{step, {}, {}, earliest};
     exact::StarScratch scratch;
     for (std::size_t i = begin; i < end; ++i) {
       const Index v = s.orphans.stars[i];
+      // The orphan sub-pairs of star v lie in faces around v: none is wanted unless one of
+      // those faces touches a flagged vertex.
+      if (step.moved != nullptr) {
+        bool any = false;
+        for (const Index f : topo.vertex_faces()[v]) {
+          for (const Index u : topo.face(f)) any = any || flagged(u);
+        }
+        if (!any) continue;
+      }
       star_pairs += exact::star_pairs(
           topo, v, scratch, face_box, [&](Index f) { return exact::owned_far_box(topo, s.own, f, v, half, swept_box); },
           [&](Index f, Index g) {
@@ -678,11 +882,8 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, ImpactS
 
   const auto t3 = std::chrono::steady_clock::now();
   out = std::move(sink.impacts);
-  std::sort(out.vf.begin(), out.vf.end(), [](const VertexFaceImpact& x, const VertexFaceImpact& y) {
-    return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face);
-  });
-  std::sort(out.ee.begin(), out.ee.end(),
-            [](const EdgeEdgeImpact& x, const EdgeEdgeImpact& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); });
+  std::sort(out.vf.begin(), out.vf.end(), vf_less);
+  std::sort(out.ee.begin(), out.ee.end(), ee_less);
   stats_.set("sort_ms", ms_since(t3));
 
   double conservative = 0;

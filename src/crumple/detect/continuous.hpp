@@ -35,6 +35,7 @@
 #include <filesystem>
 #include <memory>
 #include <ostream>
+#include <span>
 #include <vector>
 
 namespace crumple {
@@ -129,6 +130,24 @@ class ContinuousQuery {
   /// or a coordinate is not finite (naming the vertex and the frame); `out` is then empty.
   void query(PositionsView previous, PositionsView current, ImpactSet& out);
 
+  /// The impacts of `query(previous, current)` whose pair has at least one vertex flagged in
+  /// `moved` (#V flags: the vertex of a VF pair or a corner of its face, an end of either edge
+  /// of an EE pair), bit for bit the same, in the same order; `moved` all zero gives none.
+  /// Such a pair is owned by a face pair of which one face touches a flagged vertex, so only
+  /// those faces are swept against every face (a box tree over them, queried by every face's
+  /// swept box) and the orphans with a flagged vertex are tested: the cost follows the flagged
+  /// region, not the mesh. The broad phase's own structure is neither refitted nor rebuilt (the
+  /// next `query` refits it). Same errors as `query`, and `InputError` when `moved` does not
+  /// have #V entries.
+  void query_moved(PositionsView previous, PositionsView current, std::span<const char> moved, ImpactSet& out);
+
+  /// Turns `impacts`, the query (`query`, or this call) of a motion that differs from the one
+  /// from `previous` to `current` only at vertices flagged in `moved`, into the query of this
+  /// one, bit for bit and in order: the impacts of pairs with a flagged vertex are replaced by
+  /// `query_moved`'s, the others are kept (the narrow phase's answer for a pair depends only on
+  /// its four vertices' motions). Same errors as `query_moved` (`impacts` is then empty).
+  void update_moved(PositionsView previous, PositionsView current, std::span<const char> moved, ImpactSet& impacts);
+
   /// Counters and timings of the last `query`: `candidates` (face pairs from the broad
   /// phase), `vf_box_rejected` / `ee_box_rejected` (sub-pairs the slab test drops: the narrow
   /// phase's difference-hull filter, run first from per-time boxes), `face_pairs_apart`
@@ -157,12 +176,14 @@ class ContinuousQuery {
   struct State;
 
  private:
-  void run(PositionsView previous, PositionsView current, ImpactSet& out, std::atomic<Scalar>* earliest);
+  void run(PositionsView previous, PositionsView current, std::span<const char> moved, ImpactSet& out,
+           std::atomic<Scalar>* earliest);
 
   std::shared_ptr<const Topology> topology_;
   ContinuousOptions options_;
   DetectorStats stats_;
   std::unique_ptr<State> state_;
+  ImpactSet fresh_;  ///< `update_moved`'s scratch
 };
 
 /// One-shot helpers: a `ContinuousQuery` for a single step.

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace crumple::response {
 
@@ -88,7 +89,21 @@ CcdFailSafe::CcdFailSafe(std::shared_ptr<const Topology> topology, FailSafeOptio
     : topology_(topology), options_(checked(std::move(options))), query_(topology, options_.query) {}
 
 std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> positions, FailSafeStats& stats) {
-  query_.query(start, PositionsView(positions.data(), positions.size()), impacts_);
+  const PositionsView end(positions.data(), positions.size());
+  if (stats.queries == 0 || !options_.restrict_queries) {
+    query_.query(start, end, impacts_);
+  } else {
+    // Only the pairs holding a vertex whose end moved since the last query can have changed
+    // (compared bit for bit: the narrow phase sees bits, and -0 is not 0 to it).
+    moved_.resize(positions.size());
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < positions.size(); ++i) {
+      moved_[i] = std::memcmp(positions[i].data(), queried_[i].data(), sizeof(Vec3)) != 0;
+      count += static_cast<std::size_t>(moved_[i]);
+    }
+    if (count > 0) query_.update_moved(start, end, moved_, impacts_);
+  }
+  if (options_.restrict_queries) queried_.assign(positions.begin(), positions.end());
   ++stats.queries;
   live_.clear();
   const Scalar delta = options_.min_separation;

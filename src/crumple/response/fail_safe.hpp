@@ -50,6 +50,10 @@ struct FailSafeOptions {
   int zone_rounds = 8;     ///< rounds of impact zones (>= 0)
   /// The continuous query's broad phase, threads and narrow-phase options.
   ContinuousOptions query{};
+  /// After the first query of a frame, query only the pairs holding a vertex whose proposed
+  /// end moved since the last query (`ContinuousQuery::update_moved`): the same impacts, bit
+  /// for bit, at a cost that follows the corrected region. Off: every query sweeps the mesh.
+  bool restrict_queries = true;
 };
 
 /// What one `apply` did.
@@ -96,6 +100,8 @@ class CcdFailSafe {
   ImpactSet impacts_;
   std::vector<Stencil> live_;
   std::vector<char> tangle_;
+  std::vector<Vec3> queried_;  ///< the end positions of the last query (`restrict_queries`)
+  std::vector<char> moved_;    ///< per vertex, whether its end moved since the last query
 };
 
 }  // namespace crumple::response
