@@ -205,12 +205,14 @@ int main(int argc, char** argv) {
   const std::vector<Family> budgeted = {
       {"hybrid (stochastic zones)", "hybrid"},
       {"hybrid, exact zones (cut-off exact)", "hybrid:search=exact"},
+      {"hybrid, exact zones of 16 faces (cut-off exact)", "hybrid:search=exact,leaf=16"},
       {"stochastic direct, 1000 pairs + propagation", "stochastic:variant=direct,active=1000,propagation=linear"},
   };
   const std::vector<Family> free = {
       {"hybrid, thesis rule: no propagation above 50% (no budget)", "hybrid:propagation=auto"},
       {"hybrid (no budget)", "hybrid"},
       {"hybrid, exact zones (no budget)", "hybrid:search=exact"},
+      {"hybrid, exact zones of 16 faces (no budget)", "hybrid:search=exact,leaf=16"},
       {"hybrid, every=4 (no budget)", "hybrid:every=4"},
       {"stochastic vertex, setting 1 (no budget)", "stochastic:variant=vertex,setting=1"},
   };

@@ -15,6 +15,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
+#include <ctime>
 #include <map>
 #include <set>
 #include <tuple>
@@ -269,6 +271,51 @@ TEST(Hybrid, BudgetStopsTheWorkAndResumesWhereItStopped) {
     generous->update(folding().positions(i), b);
     ASSERT_EQ(match_contacts(b, a).missed + match_contacts(b, a).false_contacts, 0u) << i;
   }
+}
+
+// A time budget is kept within a generous bound, on a sheet whose unbudgeted frames cost many
+// times the budget (the budget bites: zones are left unexamined). The processor time of the
+// median frame stays within twice the budget: the search stops at the first check past the
+// deadline, at most one walk or zone row later, and the fixed costs (refit, zones, kept pairs)
+// are a small part of it. Wall-clock time, which the deadline counts, also holds the time a
+// loaded machine gives to other processes (a frame preempted near its deadline resumes a
+// scheduler slice or more later: 40 ms medians were seen with a 4 ms budget at load 16 on 2
+// cores), so it is only held to a loose bound; the processor-time bound is the check (the
+// unbudgeted median is 3x it). Contacts stay true.
+TEST(Hybrid, TimeBudgetKeptWithinAGenerousBound) {
+#ifdef CRUMPLE_SANITIZED
+  const FoldingSequence seq({.n = 40, .frames = 6, .seed = 2});
+#else
+  const FoldingSequence seq({.n = 48, .frames = 10, .seed = 2});
+#endif
+  constexpr double kBudgetMs = 10, kWallMarginMs = 200;
+  // The reference: exact, and fast enough on this sheet; one thread, gone before the timing.
+  const ReferenceRun ref = run_reference(
+      *make_detector(MethodSpec::parse("kdop"), {.thickness = seq.thickness(), .threads = 1}), seq);
+  auto d = make("hybrid:budget=" + std::to_string(kBudgetMs), seq.thickness());
+  d->set_topology(seq.mesh().topology_ptr());
+  std::vector<double> wall, cpu;
+  std::size_t bitten = 0, found = 0;
+  ContactSet got;
+  Positions previous;
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    const Positions x = seq.positions(i);
+    const std::clock_t cpu_start = std::clock();
+    const auto start = std::chrono::steady_clock::now();
+    d->update(previous.empty() ? PositionsView{} : PositionsView(previous), x, got);
+    wall.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+    cpu.push_back(1000.0 * static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC);
+    expect_true_contacts(got, ref.contacts[i], i);
+    found += got.size();
+    bitten += d->stats().get("zones_examined") < d->stats().get("zones") ? 1 : 0;
+    previous = x;
+  }
+  EXPECT_GE(bitten, seq.size() / 2) << "the budget must bite on most frames";
+  EXPECT_GT(found, 0u) << "a budget that bites still finds contacts";
+  std::sort(wall.begin(), wall.end());
+  std::sort(cpu.begin(), cpu.end());
+  EXPECT_LE(cpu[cpu.size() / 2], 2 * kBudgetMs);
+  EXPECT_LE(wall[wall.size() / 2], kBudgetMs + kWallMarginMs);
 }
 
 TEST(Hybrid, SavedStateReplaysTheLastUpdateAndContinuesIdentically) {

@@ -232,7 +232,10 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
   EngineConfig base;
   base.direct = true;
   base.by_convergence = true;
-  base.cache = true;
+  // No distance cache: a walk's neighbour pairs are scattered over a table of tens of thousands
+  // of pairs, and a probe that misses the processor cache costs more than the distance kernel.
+  // Same contacts either way (distances are deterministic); only `distance_evals` grows.
+  base.cache = false;
   base.steps = params_.steps;
   base.has_deadline = budget;
   base.deadline = deadline;

@@ -30,10 +30,19 @@
 
 namespace crumple::stochastic_detail {
 
-/// Open-addressing hash map from a 64-bit pair key to a double, cleared in O(1) by bumping a
-/// generation stamp (per-frame tables must not cost O(capacity) to reset, nor O(mesh size)).
+/// Open-addressing hash map from a 64-bit pair key to a double and 32 bits of flags, cleared in
+/// O(1) by bumping a generation stamp (per-frame tables must not cost O(capacity) to reset, nor
+/// O(mesh size)). Multiplicative (Fibonacci) hashing, linear probing, at most half full.
 class PairTable {
  public:
+  /// A slot: callers read and write `flags` and `value` (both zero when inserted by `entry`).
+  struct Entry {
+    std::uint64_t key = 0;
+    std::uint32_t gen = 0;
+    std::uint32_t flags = 0;
+    double value = 0;
+  };
+
   PairTable() : slots_(64) {}
 
   void clear() {
@@ -49,7 +58,7 @@ class PairTable {
   /// Pointer to the value of `key`, or null.
   const double* find(std::uint64_t key) const {
     const std::size_t mask = slots_.size() - 1;
-    for (std::size_t i = mix(key) & mask;; i = (i + 1) & mask) {
+    for (std::size_t i = index(key);; i = (i + 1) & mask) {
       const Slot& s = slots_[i];
       if (s.gen != gen_) return nullptr;
       if (s.key == key) return &s.value;
@@ -60,46 +69,52 @@ class PairTable {
   /// Inserts `key` with `value` unless present; returns the stored value slot and whether it
   /// was inserted.
   std::pair<double*, bool> insert(std::uint64_t key, double value) {
-    if (2 * (size_ + 1) > slots_.size()) grow();
-    const std::size_t mask = slots_.size() - 1;
-    for (std::size_t i = mix(key) & mask;; i = (i + 1) & mask) {
-      Slot& s = slots_[i];
-      if (s.gen != gen_) {
-        s = {key, gen_, value};
-        ++size_;
-        return {&s.value, true};
-      }
-      if (s.key == key) return {&s.value, false};
-    }
+    const auto [e, inserted] = emplace(key);
+    if (inserted) e->value = value;
+    return {&e->value, inserted};
   }
 
+  /// The entry of `key`, inserted with zero flags and value when absent: one probe for a
+  /// lookup and its update. The reference is valid until the next call of `entry` or `insert`.
+  Entry& entry(std::uint64_t key) { return *emplace(key).first; }
+
  private:
-  struct Slot {
-    std::uint64_t key = 0;
-    std::uint32_t gen = 0;
-    double value = 0;
-  };
-  static std::size_t mix(std::uint64_t k) {  // splitmix64 finaliser
-    k ^= k >> 30;
-    k *= 0xbf58476d1ce4e5b9ULL;
-    k ^= k >> 27;
-    k *= 0x94d049bb133111ebULL;
-    k ^= k >> 31;
-    return static_cast<std::size_t>(k);
+  using Slot = Entry;
+  std::size_t index(std::uint64_t k) const {
+    return static_cast<std::size_t>((k * 0x9e3779b97f4a7c15ULL) >> shift_);
+  }
+  std::pair<Entry*, bool> emplace(std::uint64_t key) {
+    if (2 * (size_ + 1) > slots_.size()) grow();
+    const std::size_t mask = slots_.size() - 1;
+    for (std::size_t i = index(key);; i = (i + 1) & mask) {
+      Slot& s = slots_[i];
+      if (s.gen != gen_) {
+        s = {key, gen_, 0, 0};
+        ++size_;
+        return {&s, true};
+      }
+      if (s.key == key) return {&s, false};
+    }
   }
   void grow() {
     std::vector<Slot> old;
     old.swap(slots_);
     slots_.assign(old.size() * 2, Slot{});
+    --shift_;
     const std::uint32_t live = gen_;
     gen_ = 1;
     size_ = 0;
     for (const Slot& s : old) {
-      if (s.gen == live) insert(s.key, s.value);
+      if (s.gen == live) {
+        Slot& t = *emplace(s.key).first;
+        t.flags = s.flags;
+        t.value = s.value;
+      }
     }
   }
 
   std::vector<Slot> slots_;
+  int shift_ = 64 - 6;  ///< 64 - log2(slots_.size())
   std::uint32_t gen_ = 1;
   std::size_t size_ = 0;
 };
@@ -228,10 +243,7 @@ class PairEngine {
   void start_frame(const EngineConfig& config) {
     config_ = config;
     stats_ = {};
-    cache_.clear();
-    path_.clear();
-    prop_.clear();
-    verdict_.clear();
+    marks_.clear();
     colliding_.clear();
     previous_.swap(near_);
     near_.clear();
@@ -281,27 +293,29 @@ class PairEngine {
   }
 
   Scalar distance(const Context& ctx, PrimitivePair p) {
-    if (config_.cache) {
-      if (const double* d = cache_.find(key(p))) {
-        ++stats_.cache_hits;
-        return *d;
-      }
+    if (!config_.cache) {
+      ++stats_.distance_evals;
+      return Traits::distance(ctx, p.a, p.b);
+    }
+    PairTable::Entry& m = mark(p);
+    if ((m.flags & kHasDistance) != 0) {
+      ++stats_.cache_hits;
+      return m.value;
     }
     ++stats_.distance_evals;
-    const Scalar d = Traits::distance(ctx, p.a, p.b);
-    if (config_.cache) cache_.insert(key(p), d);
-    return d;
+    m.value = Traits::distance(ctx, p.a, p.b);
+    m.flags |= kHasDistance;
+    return m.value;
   }
 
   /// Classifies a pair once per frame (contacts recorded by the traits); colliding pairs join
   /// the colliding list, which is also the propagation queue.
   Verdict classify(Context& ctx, PrimitivePair p, Scalar d) {
-    if (const double* v = verdict_.find(key(p))) {
-      const int bits = static_cast<int>(*v);
-      return {(bits & 1) != 0, (bits & 2) != 0};
-    }
+    PairTable::Entry& m = mark(p);
+    if ((m.flags & kClassified) != 0) return {(m.flags & kColliding) != 0, (m.flags & kNear) != 0};
+    // The traits record contacts in the sink's own tables: `m` stays valid.
     const Verdict v = Traits::classify(ctx, p.a, p.b, d);
-    verdict_.insert(key(p), (v.colliding ? 1 : 0) + (v.near ? 2 : 0));
+    m.flags |= kClassified | (v.colliding ? kColliding : 0u) | (v.near ? kNear : 0u);
     if (v.colliding) {
       colliding_.push_back(p);
       ++stats_.colliding;
@@ -309,8 +323,16 @@ class PairEngine {
     return v;
   }
 
+  /// Sets `flag` on `p`; false when it was already set this frame.
+  bool first_time(PrimitivePair p, std::uint32_t flag) {
+    PairTable::Entry& m = mark(p);
+    if ((m.flags & flag) != 0) return false;
+    m.flags |= flag;
+    return true;
+  }
+
   /// Moves to `q` unless another walk reached it this frame (then this walk is a duplicate).
-  bool enter(PrimitivePair q) { return path_.insert(key(q), 0).second; }
+  bool enter(PrimitivePair q) { return first_time(q, kVisited); }
 
   /// Walks from p to a local minimum of the distance over the pair graph
   /// {(a', b) : a' ~ a} ∪ {(a, b') : b' ~ b} minus excluded pairs (thesis fig. 3.4).
@@ -410,7 +432,7 @@ class PairEngine {
     const auto visit = [&](Index a, Index b) {
       if (Traits::excluded(topo, a, b)) return;
       const PrimitivePair q = canon(a, b);
-      if (!prop_.insert(key(q), 0).second) return;
+      if (!first_time(q, kPropagated)) return;
       ++stats_.propagation_visits;
       if (config_.by_convergence) {
         const WalkResult r = converge(ctx, q);
@@ -433,10 +455,13 @@ class PairEngine {
   EngineConfig config_;
   EngineStats stats_;
   std::vector<PrimitivePair> near_, previous_, walking_, previous_walking_, colliding_;
-  PairTable cache_;    ///< distances computed this frame (direct and vertex variants)
-  PairTable path_;     ///< pairs reached by a convergence this frame ("visited" hash set)
-  PairTable prop_;     ///< pairs visited by propagation this frame
-  PairTable verdict_;  ///< pairs classified this frame
+  // What this frame knows of a pair, in one table so that a pair costs one probe however many
+  // of these it has: its distance (direct and vertex variants cache it), whether a convergence
+  // reached it (the "visited" set), whether propagation visited it, and its verdict.
+  static constexpr std::uint32_t kHasDistance = 1, kVisited = 2, kPropagated = 4, kClassified = 8,
+                                 kColliding = 16, kNear = 32;
+  PairTable::Entry& mark(PrimitivePair p) { return marks_.entry(key(p)); }
+  PairTable marks_;
 };
 
 }  // namespace crumple::stochastic_detail
