@@ -439,17 +439,21 @@ class Projective final : public Integrator {
     // Pinned particles move by h v₀; free ones start from the inertial prediction.
     next_.resize(n);
     for (std::size_t i = 0; i < n; ++i) next_[i] = s.x[i] + h * s.v[i];
-    // The constant part of the right-hand side.
-    base_.resize(static_cast<Eigen::Index>(free_.size()), 3);
-    for (std::size_t r = 0; r < free_.size(); ++r) {
+    // The constant part of the right-hand side (pinned ends of springs included).
+    const std::size_t m = free_.size();
+    base_.resize(m);
+    for (std::size_t r = 0; r < m; ++r) {
       const std::size_t i = free_[r];
-      const Vec3 b = mass[i] * (inv_h2 * next_[i] + (field.air_damping / h) * s.x[i] + field.gravity);
-      base_.row(static_cast<Eigen::Index>(r)) = b.transpose();
+      base_[r] = mass[i] * (inv_h2 * next_[i] + (field.air_damping / h) * s.x[i] + field.gravity);
     }
     if (field.drag && row_[static_cast<std::size_t>(field.drag->vertex)] >= 0) {
       const auto i = static_cast<std::size_t>(field.drag->vertex);
-      const Vec3 b = field.drag->stiffness * field.drag->target + (field.drag->damping / h) * s.x[i];
-      base_.row(row_[i]) += b.transpose();
+      base_[static_cast<std::size_t>(row_[i])] += field.drag->stiffness * field.drag->target + (field.drag->damping / h) * s.x[i];
+    }
+    for (const Spring& sp : springs) {
+      const Eigen::Index ra = row_[static_cast<std::size_t>(sp.a)], rb = row_[static_cast<std::size_t>(sp.b)];
+      if (ra >= 0 && rb < 0) base_[static_cast<std::size_t>(ra)] += sp.stiffness * next_[static_cast<std::size_t>(sp.b)];
+      if (rb >= 0 && ra < 0) base_[static_cast<std::size_t>(rb)] += sp.stiffness * next_[static_cast<std::size_t>(sp.a)];
     }
     for (const Hinge& hg : hinges) {
       Vec3 rest = Vec3::Zero(), fixed = Vec3::Zero();
@@ -461,34 +465,57 @@ class Projective final : public Integrator {
       const Vec3 g = (hg.damping / h) * rest - (hg.stiffness + hg.damping / h) * fixed;
       for (std::size_t k = 0; k < 4; ++k) {
         const Eigen::Index r = row_[static_cast<std::size_t>(hg.vertex[k])];
-        if (r >= 0) base_.row(r) += (hg.weight[k] * g).transpose();
+        if (r >= 0) base_[static_cast<std::size_t>(r)] += hg.weight[k] * g;
       }
     }
+    const auto& p = solver_.permutationP().indices();
+    pull_.resize(springs.size());
+    tmp_.resize(m);
+    older_.resize(n);
+    const std::size_t spring_grain = balanced_grain(springs.size(), threads_, 1024, 1 << 16);
+    const std::size_t row_grain = balanced_grain(m, threads_, 512, 1 << 15);
     Scalar omega = 1;
     for (int it = 0; it < options_.projective_iterations; ++it) {
-      rhs_ = base_;
-      for (const Spring& sp : springs) {
-        const auto a = static_cast<std::size_t>(sp.a), b = static_cast<std::size_t>(sp.b);
-        const Vec3 d = next_[a] - next_[b];
-        const Scalar l = d.norm();
-        const Vec3 target = l > 0 ? Vec3(sp.rest_length / l * d) : Vec3::Zero();
-        const Eigen::Index ra = row_[a], rb = row_[b];
-        if (ra >= 0) rhs_.row(ra) += (sp.stiffness * (rb >= 0 ? target : Vec3(target + next_[b]))).transpose();
-        if (rb >= 0) rhs_.row(rb) -= (sp.stiffness * (ra >= 0 ? target : Vec3(target - next_[a]))).transpose();
-      }
+      // Local step: each spring's pull k d_s at the current positions (d_s its rest-length
+      // projection); then each free row's right-hand side, gathered over its springs in a fixed
+      // order and placed at its permuted row for the solve.
+      parallel_for_chunks(springs.size(), threads_, spring_grain, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t k = begin; k < end; ++k) {
+          const Spring& sp = springs[k];
+          const Vec3 d = next_[static_cast<std::size_t>(sp.a)] - next_[static_cast<std::size_t>(sp.b)];
+          const Scalar l = d.norm();
+          pull_[k] = l > 0 ? Vec3(sp.stiffness * Vec3(sp.rest_length / l * d)) : Vec3::Zero();
+        }
+      });
+      parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t r = begin; r < end; ++r) {
+          Vec3 b = base_[r];
+          for (int e = incident_start_[r]; e < incident_start_[r + 1]; ++e) {
+            const int k = incident_[static_cast<std::size_t>(e)];
+            if (k >= 0) {
+              b += pull_[static_cast<std::size_t>(k)];
+            } else {
+              b -= pull_[static_cast<std::size_t>(~k)];
+            }
+          }
+          tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(r)])] = b;
+        }
+      });
       solve();
       // Chebyshev semi-iterative acceleration (Wang, *A Chebyshev semi-iterative approach for
       // accelerating projective and position-based dynamics*, SIGGRAPH Asia 2015):
       // x⁽ᵏ⁺¹⁾ = ω (x̂ − x⁽ᵏ⁻¹⁾) + x⁽ᵏ⁻¹⁾ with ω from the spectral radius estimate ρ.
       const Scalar rho = options_.projective_rho;
       omega = it == 0 ? 1 : it == 1 ? 2 / (2 - rho * rho) : 4 / (4 - rho * rho * omega);
-      if (it == 0) older_.assign(next_.begin(), next_.end());
-      for (std::size_t r = 0; r < free_.size(); ++r) {
-        const std::size_t i = free_[r];
-        const Vec3 accelerated = omega * (work_[r] - older_[i]) + older_[i];
-        older_[i] = next_[i];
-        next_[i] = accelerated;
-      }
+      parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t r = begin; r < end; ++r) {
+          const std::size_t i = free_[r];
+          const Vec3 solved = tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(r)])];
+          const Vec3 previous = it == 0 ? next_[i] : older_[i];
+          older_[i] = next_[i];
+          next_[i] = omega * (solved - previous) + previous;
+        }
+      });
     }
     last_iterations_ = options_.projective_iterations;
     for (std::size_t r = 0; r < free_.size(); ++r) {
@@ -501,7 +528,6 @@ class Projective final : public Integrator {
 
  private:
   using Sparse = Eigen::SparseMatrix<Scalar>;
-  using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, 3>;
 
   /// What the factored matrix depends on: the model (its revision names its masses, springs
   /// and hinges), h, the air damping and the drag's spring.
@@ -536,6 +562,23 @@ class Projective final : public Integrator {
       if (!model.pinned(static_cast<Index>(i))) {
         row_[i] = static_cast<Eigen::Index>(free_.size());
         free_.push_back(i);
+      }
+    }
+    const auto springs = model.springs();
+    incident_start_.assign(free_.size() + 1, 0);
+    for (const Spring& sp : springs) {
+      for (const Index end : {sp.a, sp.b}) {
+        if (const Eigen::Index r = row_[static_cast<std::size_t>(end)]; r >= 0) ++incident_start_[static_cast<std::size_t>(r) + 1];
+      }
+    }
+    for (std::size_t r = 0; r < free_.size(); ++r) incident_start_[r + 1] += incident_start_[r];
+    incident_.resize(static_cast<std::size_t>(incident_start_.back()));
+    {
+      std::vector<int> at(incident_start_.begin(), incident_start_.end() - 1);
+      for (std::size_t k = 0; k < springs.size(); ++k) {
+        const Eigen::Index ra = row_[static_cast<std::size_t>(springs[k].a)], rb = row_[static_cast<std::size_t>(springs[k].b)];
+        if (ra >= 0) incident_[static_cast<std::size_t>(at[static_cast<std::size_t>(ra)]++)] = static_cast<int>(k);
+        if (rb >= 0) incident_[static_cast<std::size_t>(at[static_cast<std::size_t>(rb)]++)] = ~static_cast<int>(k);
       }
     }
     std::vector<Eigen::Triplet<Scalar>> t;
@@ -773,16 +816,10 @@ class Projective final : public Integrator {
     }
   }
 
-  /// work_ = A⁻¹ rhs_ from the factors A = Pᵀ L D Lᵀ P, the three coordinates at once (one
-  /// pass over L per triangle solve instead of one per column), the two forests on two threads.
+  /// tmp_ = (L D Lᵀ)⁻¹ tmp_: with tmp_ = P b on entry, P A⁻¹ b on return (A = Pᵀ L D Lᵀ P), the
+  /// three coordinates at once (one pass over L per triangle solve instead of one per column),
+  /// the two forests on two threads.
   void solve() {
-    const auto& p = solver_.permutationP().indices();
-    const std::size_t m = free_.size();
-    tmp_.resize(m);
-    work_.resize(m);
-    for (std::size_t i = 0; i < m; ++i) {
-      tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(i)])] = rhs_.row(static_cast<Eigen::Index>(i)).transpose();
-    }
     parallel_for_chunks(2, threads_, 1, [this](std::size_t begin, std::size_t end) {
       for (std::size_t f = begin; f < end; ++f) forward_forest(f);
     });
@@ -791,7 +828,6 @@ class Projective final : public Integrator {
     parallel_for_chunks(2, threads_, 1, [this](std::size_t begin, std::size_t end) {
       for (std::size_t f = begin; f < end; ++f) backward(backward_[f]);
     });
-    for (std::size_t i = 0; i < m; ++i) work_[i] = tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(i)])];
   }
 
   IntegratorOptions options_;
@@ -807,8 +843,8 @@ class Projective final : public Integrator {
   Sweep top_forward_, top_backward_;                 // the top's rows and columns
   std::array<std::vector<Vec3>, 2> partial_;         // per top row: Σ over forest f's columns
   std::vector<Scalar> diagonal_;                     // D
-  std::vector<Vec3> next_, older_, tmp_, work_;
-  Matrix base_, rhs_;
+  std::vector<int> incident_start_, incident_;  // per free row: its springs, ~k where it is end b
+  std::vector<Vec3> next_, older_, tmp_, base_, pull_;
 };
 
 }  // namespace
