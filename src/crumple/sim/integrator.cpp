@@ -328,7 +328,7 @@ struct NestedDissection {
     g.level.assign(n, 0);
     std::vector<int> all(n);
     for (std::size_t i = 0; i < n; ++i) all[i] = static_cast<int>(i);
-    g.dissect(std::move(all));
+    g.dissect(all);
     inverse.resize(static_cast<Eigen::Index>(n));
     for (std::size_t k = 0; k < n; ++k) inverse.indices()[static_cast<Eigen::Index>(k)] = g.order[k];
   }
@@ -364,30 +364,32 @@ struct NestedDissection {
       return queue;
     }
 
-    void dissect(std::vector<int> part) {
+    /// Orders `part`: its connected components in turn, each searched from its vertex of least
+    /// degree (the first in `part`'s order among equals), in the order of those vertices.
+    void dissect(const std::vector<int>& part) {
       const int tag = ++stamp;
       for (const int v : part) mark[static_cast<std::size_t>(v)] = tag;
       const auto degree = [&](int v) { return start[static_cast<std::size_t>(v) + 1] - start[static_cast<std::size_t>(v)]; };
-      int source = part.front();
-      for (const int v : part) {
-        if (degree(v) < degree(source)) source = v;
+      std::vector<int> sources = part;
+      std::stable_sort(sources.begin(), sources.end(), [&](int x, int y) { return degree(x) < degree(y); });
+      for (const int source : sources) {
+        if (mark[static_cast<std::size_t>(source)] != tag) continue;  // in a component done
+        std::vector<int> component = search(source, tag);
+        const int done = ++stamp;
+        for (const int w : component) mark[static_cast<std::size_t>(w)] = done;
+        dissect_connected(std::move(component));
       }
-      std::vector<int> queue = search(source, tag);
-      if (queue.size() < part.size()) {  // two parts: this component, and the rest
-        const int in = ++stamp;
-        for (const int v : queue) mark[static_cast<std::size_t>(v)] = in;
-        std::vector<int> rest;
-        for (const int v : part) {
-          if (mark[static_cast<std::size_t>(v)] != in) rest.push_back(v);
-        }
-        dissect(std::move(queue));
-        dissect(std::move(rest));
-        return;
-      }
-      if (part.size() <= kLeaf) {
+    }
+
+    /// Orders a connected part given in breadth-first order: both sides of a separating level,
+    /// then the level; a small part as it is.
+    void dissect_connected(std::vector<int> queue) {
+      if (queue.size() <= kLeaf) {
         order.insert(order.end(), queue.begin(), queue.end());
         return;
       }
+      const int tag = ++stamp;
+      for (const int v : queue) mark[static_cast<std::size_t>(v)] = tag;
       // Pseudo-peripheral source: the last vertex reached, twice.
       queue = search(queue.back(), tag);
       queue = search(queue.back(), tag);
@@ -410,8 +412,8 @@ struct NestedDissection {
         const auto l = static_cast<std::size_t>(level[static_cast<std::size_t>(v)]);
         (l < separator ? low : l > separator ? high : middle).push_back(v);
       }
-      if (!low.empty()) dissect(std::move(low));
-      if (!high.empty()) dissect(std::move(high));
+      dissect(low);
+      dissect(high);
       order.insert(order.end(), middle.begin(), middle.end());
     }
   };
