@@ -10,6 +10,8 @@
 // (docs/benchmarks/simulation.md):
 //   ./build/release/bench/sim_bench --benchmark_filter=frame/ --benchmark_out=sim.json
 //   ./build/release/bench/sim_bench --benchmark_format=json
+// `integrate-frame/SCENE/threads:T`: one frame's integration steps alone (the scene's model and
+// integrator options, T threads).
 // `--check-frames=SPEC --frames=N`: N frames of one scene, intersections counted at every frame
 // (see `check_frames`).
 #include <crumple/sim/scene.hpp>
@@ -164,6 +166,26 @@ void BM_Frame(benchmark::State& bench, const std::string& spec, bool fail_safe) 
   bench.counters["fps"] = benchmark::Counter(frames, benchmark::Counter::kIsRate);
 }
 
+/// One frame's integration (the scene's steps per frame, nothing else) of a built-in scene's
+/// model from its initial state, with its default integrator options on `threads` threads: the
+/// integrator alone, outside the frame's other parts (the factorization is paid before timing).
+void BM_IntegrateFrame(benchmark::State& bench, const std::string& spec, int threads) {
+  const Scene s = make_scene(SceneSpec::parse(spec), 1);
+  IntegratorOptions options = s.settings.integrator_options;
+  options.threads = threads;
+  auto integrator = make_integrator(s.settings.integrator, options);
+  State state = s.state;
+  integrator->step(s.model, s.field, state, s.settings.dt);
+  for (auto _ : bench) {
+    bench.PauseTiming();
+    state = s.state;
+    bench.ResumeTiming();
+    for (int k = 0; k < s.settings.substeps; ++k) integrator->step(s.model, s.field, state, s.settings.dt);
+    benchmark::DoNotOptimize(state.x.data());
+  }
+  bench.counters["factorizations"] = static_cast<double>(integrator->factorizations());
+}
+
 void register_all() {
   for (const char* scene : {"cloth-on-sphere", "crumple", "cloth-on-sphere:sweep-speed=5"}) {
     for (int n : {32, 64, 100}) {
@@ -177,6 +199,17 @@ void register_all() {
         benchmark::RegisterBenchmark(("frame-no-fail-safe/" + spec).c_str(), BM_Frame, spec, false)
             ->Unit(benchmark::kMillisecond)
             ->Iterations(20)
+            ->UseRealTime();
+      }
+    }
+  }
+  for (const char* scene : {"cloth-on-sphere", "crumple"}) {
+    for (int n : {64, 100}) {
+      for (int threads : {1, 2}) {
+        const std::string spec = std::string(scene) + ":n=" + std::to_string(n);
+        benchmark::RegisterBenchmark(("integrate-frame/" + spec + "/threads:" + std::to_string(threads)).c_str(),
+                                     BM_IntegrateFrame, spec, threads)
+            ->Unit(benchmark::kMillisecond)
             ->UseRealTime();
       }
     }

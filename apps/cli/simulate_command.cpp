@@ -409,6 +409,7 @@ int run_simulate(const SimulateArgs& args) {
     settings.response = true;
   }
   settings.detector.threads = args.detection.threads;
+  settings.integrator_options.threads = args.detection.threads;  // projective solves: same bits on any count
   if (!(settings.dt > 0 && std::isfinite(settings.dt))) throw InputError("--dt must be > 0");
   if (settings.substeps < 1) throw InputError("--substeps must be >= 1");
   if (settings.passes < 1) throw InputError("--passes must be >= 1");

@@ -1,4 +1,5 @@
 #include <crumple/core/error.hpp>
+#include <crumple/core/parallel.hpp>
 #include <crumple/sim/integrator.hpp>
 
 #include <Eigen/IterativeLinearSolvers>
@@ -8,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <string>
 
@@ -296,12 +298,133 @@ class ImplicitEuler final : public Integrator {
   Eigen::ConjugateGradient<Sparse, Eigen::Lower | Eigen::Upper> cg_;
 };
 
+/// Nested dissection (George, *Nested dissection of a regular finite element mesh*, SIAM J.
+/// Numer. Anal. 1973) as a fill-reducing ordering for Eigen's simplicial Cholesky, from the
+/// matrix pattern only: in each connected part, a breadth-first level structure from a
+/// pseudo-peripheral vertex; the smallest level with 35–65 % of the part before it separates
+/// the two sides, which are ordered first (recursively), the level last; parts of at most
+/// `kLeaf` vertices keep their breadth-first order. Every separator then splits the
+/// elimination tree below it into two subtrees of similar size, which the parallel solve runs
+/// side by side (AMD leaves a long, nearly dense chain on top instead).
+struct NestedDissection {
+  using PermutationType = Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int>;
+
+  /// `a`: the full symmetric pattern. Sets `inverse` to the permutation Eigen expects from an
+  /// ordering (entry k: the vertex eliminated k-th).
+  template <class MatrixType>
+  void operator()(const MatrixType& a, PermutationType& inverse) const {
+    const auto n = static_cast<std::size_t>(a.rows());
+    Graph g;
+    g.start.assign(n + 1, 0);
+    for (std::size_t j = 0; j < n; ++j) {
+      for (typename MatrixType::InnerIterator it(a, static_cast<Eigen::Index>(j)); it; ++it) {
+        if (static_cast<std::size_t>(it.index()) != j) g.adjacent.push_back(static_cast<int>(it.index()));
+      }
+      g.start[j + 1] = static_cast<int>(g.adjacent.size());
+    }
+    g.mark.assign(n, 0);
+    g.level.assign(n, 0);
+    std::vector<int> all(n);
+    for (std::size_t i = 0; i < n; ++i) all[i] = static_cast<int>(i);
+    g.dissect(all);
+    inverse.resize(static_cast<Eigen::Index>(n));
+    for (std::size_t k = 0; k < n; ++k) inverse.indices()[static_cast<Eigen::Index>(k)] = g.order[k];
+  }
+
+ private:
+  static constexpr std::size_t kLeaf = 32;
+
+  struct Graph {
+    std::vector<int> start, adjacent;  // symmetric adjacency, by vertex
+    std::vector<int> mark;             // the stamp of the part a vertex is in
+    std::vector<int> level;
+    std::vector<int> order;            // vertices in elimination order
+    int stamp = 0;
+
+    /// Breadth-first order of the vertices of part `tag` reachable from `source`, their levels
+    /// in `level`.
+    std::vector<int> search(int source, int tag) {
+      const int seen = ++stamp;
+      std::vector<int> queue{source};
+      mark[static_cast<std::size_t>(source)] = seen;
+      level[static_cast<std::size_t>(source)] = 0;
+      for (std::size_t head = 0; head < queue.size(); ++head) {
+        const auto v = static_cast<std::size_t>(queue[head]);
+        for (int k = start[v]; k < start[v + 1]; ++k) {
+          const auto w = static_cast<std::size_t>(adjacent[static_cast<std::size_t>(k)]);
+          if (mark[w] != tag) continue;
+          mark[w] = seen;
+          level[w] = level[v] + 1;
+          queue.push_back(static_cast<int>(w));
+        }
+      }
+      for (const int v : queue) mark[static_cast<std::size_t>(v)] = tag;
+      return queue;
+    }
+
+    /// Orders `part`: its connected components in turn, each searched from its vertex of least
+    /// degree (the first in `part`'s order among equals), in the order of those vertices.
+    void dissect(const std::vector<int>& part) {
+      const int tag = ++stamp;
+      for (const int v : part) mark[static_cast<std::size_t>(v)] = tag;
+      const auto degree = [&](int v) { return start[static_cast<std::size_t>(v) + 1] - start[static_cast<std::size_t>(v)]; };
+      std::vector<int> sources = part;
+      std::stable_sort(sources.begin(), sources.end(), [&](int x, int y) { return degree(x) < degree(y); });
+      for (const int source : sources) {
+        if (mark[static_cast<std::size_t>(source)] != tag) continue;  // in a component done
+        std::vector<int> component = search(source, tag);
+        const int done = ++stamp;
+        for (const int w : component) mark[static_cast<std::size_t>(w)] = done;
+        dissect_connected(std::move(component));
+      }
+    }
+
+    /// Orders a connected part given in breadth-first order: both sides of a separating level,
+    /// then the level; a small part as it is.
+    void dissect_connected(std::vector<int> queue) {
+      if (queue.size() <= kLeaf) {
+        order.insert(order.end(), queue.begin(), queue.end());
+        return;
+      }
+      const int tag = ++stamp;
+      for (const int v : queue) mark[static_cast<std::size_t>(v)] = tag;
+      // Pseudo-peripheral source: the last vertex reached, twice.
+      queue = search(queue.back(), tag);
+      queue = search(queue.back(), tag);
+      const auto levels = static_cast<std::size_t>(level[static_cast<std::size_t>(queue.back())]) + 1;
+      std::vector<std::size_t> count(levels, 0);
+      for (const int v : queue) ++count[static_cast<std::size_t>(level[static_cast<std::size_t>(v)])];
+      const std::size_t total = queue.size();
+      std::size_t separator = levels, before = 0;
+      for (std::size_t l = 0; l < levels; ++l) {
+        const bool balanced = 100 * before >= 35 * total && 100 * before <= 65 * total;
+        if (balanced && (separator == levels || count[l] < count[separator])) separator = l;
+        before += count[l];
+      }
+      if (separator == levels) {  // no level in the window (few, wide levels): the median one
+        before = 0;
+        for (separator = 0; 2 * (before + count[separator]) < total; ++separator) before += count[separator];
+      }
+      std::vector<int> low, high, middle;
+      for (const int v : queue) {
+        const auto l = static_cast<std::size_t>(level[static_cast<std::size_t>(v)]);
+        (l < separator ? low : l > separator ? high : middle).push_back(v);
+      }
+      dissect(low);
+      dissect(high);
+      order.insert(order.end(), middle.begin(), middle.end());
+    }
+  };
+};
+
 /// Projective dynamics (see the header). The system is over the free particles only: a pinned
 /// particle's known new position moves to the right-hand side.
 class Projective final : public Integrator {
  public:
   explicit Projective(const IntegratorOptions& options) : options_(options) {
     CRUMPLE_CHECK(options.projective_iterations >= 1, "projective iterations must be >= 1");
+    CRUMPLE_CHECK(options.threads >= 0, "threads must be >= 0");
+    threads_ = std::min(2, resolve_threads(options.threads));
   }
   IntegratorKind kind() const override { return IntegratorKind::Projective; }
 
@@ -316,17 +439,21 @@ class Projective final : public Integrator {
     // Pinned particles move by h v₀; free ones start from the inertial prediction.
     next_.resize(n);
     for (std::size_t i = 0; i < n; ++i) next_[i] = s.x[i] + h * s.v[i];
-    // The constant part of the right-hand side.
-    base_.resize(static_cast<Eigen::Index>(free_.size()), 3);
-    for (std::size_t r = 0; r < free_.size(); ++r) {
+    // The constant part of the right-hand side (pinned ends of springs included).
+    const std::size_t m = free_.size();
+    base_.resize(m);
+    for (std::size_t r = 0; r < m; ++r) {
       const std::size_t i = free_[r];
-      const Vec3 b = mass[i] * (inv_h2 * next_[i] + (field.air_damping / h) * s.x[i] + field.gravity);
-      base_.row(static_cast<Eigen::Index>(r)) = b.transpose();
+      base_[r] = mass[i] * (inv_h2 * next_[i] + (field.air_damping / h) * s.x[i] + field.gravity);
     }
     if (field.drag && row_[static_cast<std::size_t>(field.drag->vertex)] >= 0) {
       const auto i = static_cast<std::size_t>(field.drag->vertex);
-      const Vec3 b = field.drag->stiffness * field.drag->target + (field.drag->damping / h) * s.x[i];
-      base_.row(row_[i]) += b.transpose();
+      base_[static_cast<std::size_t>(row_[i])] += field.drag->stiffness * field.drag->target + (field.drag->damping / h) * s.x[i];
+    }
+    for (const Spring& sp : springs) {
+      const Eigen::Index ra = row_[static_cast<std::size_t>(sp.a)], rb = row_[static_cast<std::size_t>(sp.b)];
+      if (ra >= 0 && rb < 0) base_[static_cast<std::size_t>(ra)] += sp.stiffness * next_[static_cast<std::size_t>(sp.b)];
+      if (rb >= 0 && ra < 0) base_[static_cast<std::size_t>(rb)] += sp.stiffness * next_[static_cast<std::size_t>(sp.a)];
     }
     for (const Hinge& hg : hinges) {
       Vec3 rest = Vec3::Zero(), fixed = Vec3::Zero();
@@ -338,34 +465,57 @@ class Projective final : public Integrator {
       const Vec3 g = (hg.damping / h) * rest - (hg.stiffness + hg.damping / h) * fixed;
       for (std::size_t k = 0; k < 4; ++k) {
         const Eigen::Index r = row_[static_cast<std::size_t>(hg.vertex[k])];
-        if (r >= 0) base_.row(r) += (hg.weight[k] * g).transpose();
+        if (r >= 0) base_[static_cast<std::size_t>(r)] += hg.weight[k] * g;
       }
     }
+    const auto& p = solver_.permutationP().indices();
+    pull_.resize(springs.size());
+    tmp_.resize(m);
+    older_.resize(n);
+    const std::size_t spring_grain = balanced_grain(springs.size(), threads_, 1024, 1 << 16);
+    const std::size_t row_grain = balanced_grain(m, threads_, 512, 1 << 15);
     Scalar omega = 1;
     for (int it = 0; it < options_.projective_iterations; ++it) {
-      rhs_ = base_;
-      for (const Spring& sp : springs) {
-        const auto a = static_cast<std::size_t>(sp.a), b = static_cast<std::size_t>(sp.b);
-        const Vec3 d = next_[a] - next_[b];
-        const Scalar l = d.norm();
-        const Vec3 target = l > 0 ? Vec3(sp.rest_length / l * d) : Vec3::Zero();
-        const Eigen::Index ra = row_[a], rb = row_[b];
-        if (ra >= 0) rhs_.row(ra) += (sp.stiffness * (rb >= 0 ? target : Vec3(target + next_[b]))).transpose();
-        if (rb >= 0) rhs_.row(rb) -= (sp.stiffness * (ra >= 0 ? target : Vec3(target - next_[a]))).transpose();
-      }
+      // Local step: each spring's pull k d_s at the current positions (d_s its rest-length
+      // projection); then each free row's right-hand side, gathered over its springs in a fixed
+      // order and placed at its permuted row for the solve.
+      parallel_for_chunks(springs.size(), threads_, spring_grain, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t k = begin; k < end; ++k) {
+          const Spring& sp = springs[k];
+          const Vec3 d = next_[static_cast<std::size_t>(sp.a)] - next_[static_cast<std::size_t>(sp.b)];
+          const Scalar l = d.norm();
+          pull_[k] = l > 0 ? Vec3(sp.stiffness * Vec3(sp.rest_length / l * d)) : Vec3::Zero();
+        }
+      });
+      parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t r = begin; r < end; ++r) {
+          Vec3 b = base_[r];
+          for (int e = incident_start_[r]; e < incident_start_[r + 1]; ++e) {
+            const int k = incident_[static_cast<std::size_t>(e)];
+            if (k >= 0) {
+              b += pull_[static_cast<std::size_t>(k)];
+            } else {
+              b -= pull_[static_cast<std::size_t>(~k)];
+            }
+          }
+          tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(r)])] = b;
+        }
+      });
       solve();
       // Chebyshev semi-iterative acceleration (Wang, *A Chebyshev semi-iterative approach for
       // accelerating projective and position-based dynamics*, SIGGRAPH Asia 2015):
       // x⁽ᵏ⁺¹⁾ = ω (x̂ − x⁽ᵏ⁻¹⁾) + x⁽ᵏ⁻¹⁾ with ω from the spectral radius estimate ρ.
       const Scalar rho = options_.projective_rho;
       omega = it == 0 ? 1 : it == 1 ? 2 / (2 - rho * rho) : 4 / (4 - rho * rho * omega);
-      if (it == 0) older_.assign(next_.begin(), next_.end());
-      for (std::size_t r = 0; r < free_.size(); ++r) {
-        const std::size_t i = free_[r];
-        const Vec3 accelerated = omega * (work_[r] - older_[i]) + older_[i];
-        older_[i] = next_[i];
-        next_[i] = accelerated;
-      }
+      parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t r = begin; r < end; ++r) {
+          const std::size_t i = free_[r];
+          const Vec3 solved = tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(r)])];
+          const Vec3 previous = it == 0 ? next_[i] : older_[i];
+          older_[i] = next_[i];
+          next_[i] = omega * (solved - previous) + previous;
+        }
+      });
     }
     last_iterations_ = options_.projective_iterations;
     for (std::size_t r = 0; r < free_.size(); ++r) {
@@ -378,44 +528,33 @@ class Projective final : public Integrator {
 
  private:
   using Sparse = Eigen::SparseMatrix<Scalar>;
-  using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, 3>;
 
-  /// What the factored matrix depends on.
+  /// What the factored matrix depends on: the model (its revision names its masses, springs
+  /// and hinges), h, the air damping and the drag's spring.
   struct Key {
+    std::uint64_t revision = 0;
+    Index particles = -1;
     Scalar h = 0, air = 0;
     Index drag_vertex = -1;
     Scalar drag_stiffness = 0, drag_damping = 0;
-    std::vector<Scalar> mass;
-    std::vector<std::array<Scalar, 3>> springs;  // a, b, k
-    std::vector<Hinge> hinges;
-    bool operator==(const Key& o) const {
-      const auto same_hinge = [](const Hinge& p, const Hinge& q) {
-        return p.vertex == q.vertex && p.weight == q.weight && p.stiffness == q.stiffness && p.damping == q.damping;
-      };
-      return h == o.h && air == o.air && drag_vertex == o.drag_vertex && drag_stiffness == o.drag_stiffness &&
-             drag_damping == o.drag_damping && mass == o.mass && springs == o.springs &&
-             std::equal(hinges.begin(), hinges.end(), o.hinges.begin(), o.hinges.end(), same_hinge);
-    }
+    bool operator==(const Key&) const = default;
   };
 
   void prepare(const Model& model, const ForceField& field, Scalar h) {
-    Key key;
-    key.h = h;
-    key.air = field.air_damping;
     CRUMPLE_CHECK(!field.drag || (field.drag->vertex >= 0 && field.drag->vertex < model.num_particles()),
                   "drag vertex out of range");
+    Key key;
+    key.revision = model.revision();
+    key.particles = model.num_particles();
+    key.h = h;
+    key.air = field.air_damping;
     if (field.drag && !model.pinned(field.drag->vertex)) {
       key.drag_vertex = field.drag->vertex;
       key.drag_stiffness = field.drag->stiffness;
       key.drag_damping = field.drag->damping;
     }
-    key.mass.assign(model.mass().begin(), model.mass().end());
-    for (const Spring& sp : model.springs()) {
-      key.springs.push_back({static_cast<Scalar>(sp.a), static_cast<Scalar>(sp.b), sp.stiffness});
-    }
-    key.hinges.assign(model.hinges().begin(), model.hinges().end());
     if (factored_ && key == key_) return;
-    key_ = std::move(key);
+    key_ = key;
     const std::size_t n = static_cast<std::size_t>(model.num_particles());
     row_.assign(n, -1);
     free_.clear();
@@ -423,6 +562,23 @@ class Projective final : public Integrator {
       if (!model.pinned(static_cast<Index>(i))) {
         row_[i] = static_cast<Eigen::Index>(free_.size());
         free_.push_back(i);
+      }
+    }
+    const auto springs = model.springs();
+    incident_start_.assign(free_.size() + 1, 0);
+    for (const Spring& sp : springs) {
+      for (const Index end : {sp.a, sp.b}) {
+        if (const Eigen::Index r = row_[static_cast<std::size_t>(end)]; r >= 0) ++incident_start_[static_cast<std::size_t>(r) + 1];
+      }
+    }
+    for (std::size_t r = 0; r < free_.size(); ++r) incident_start_[r + 1] += incident_start_[r];
+    incident_.resize(static_cast<std::size_t>(incident_start_.back()));
+    {
+      std::vector<int> at(incident_start_.begin(), incident_start_.end() - 1);
+      for (std::size_t k = 0; k < springs.size(); ++k) {
+        const Eigen::Index ra = row_[static_cast<std::size_t>(springs[k].a)], rb = row_[static_cast<std::size_t>(springs[k].b)];
+        if (ra >= 0) incident_[static_cast<std::size_t>(at[static_cast<std::size_t>(ra)]++)] = static_cast<int>(k);
+        if (rb >= 0) incident_[static_cast<std::size_t>(at[static_cast<std::size_t>(rb)]++)] = ~static_cast<int>(k);
       }
     }
     std::vector<Eigen::Triplet<Scalar>> t;
@@ -456,47 +612,239 @@ class Projective final : public Integrator {
     const auto m = static_cast<Eigen::Index>(free_.size());
     Sparse a(m, m);
     a.setFromTriplets(t.begin(), t.end());
+    factored_ = false;
     solver_.compute(a);
     CRUMPLE_CHECK(solver_.info() == Eigen::Success, "projective dynamics: the system matrix is not positive definite");
+    ++factorizations_;
     factored_ = true;
+    plan_solve();
   }
 
-  /// work_ = A⁻¹ rhs_ from the factors A = Pᵀ L D Lᵀ P, the three coordinates at once (one
-  /// pass over L per triangle solve instead of one per column).
-  void solve() {
+  /// Splits the elimination tree into two disjoint forests and the rest, `top_` (the
+  /// separators above them), and stores L by rows for the forward solve. Row i of L refers
+  /// only to i's descendants, column j only to j's ancestors, so the forward solve runs each
+  /// forest on its own thread, with the top rows' sums over that forest's columns
+  /// (`cross_`), then the top; the backward solve the top, then the forests. The split
+  /// depends on the factor only, never on the thread count: the same bits on any number.
+  void plan_solve() {
     const auto& l = solver_.matrixL().nestedExpression();
-    const auto& d = solver_.vectorD();
-    const auto& p = solver_.permutationP().indices();
-    const std::size_t m = free_.size();
-    tmp_.resize(m);
-    work_.resize(m);
-    for (std::size_t i = 0; i < m; ++i) {
-      tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(i)])] = rhs_.row(static_cast<Eigen::Index>(i)).transpose();
-    }
+    const auto m = static_cast<std::size_t>(l.cols());
     const int* outer = l.outerIndexPtr();
     const int* inner = l.innerIndexPtr();
+    // Elimination tree: the parent of j is the first row below the diagonal in column j (Eigen
+    // keeps each column's rows increasing). Work of a node: its row and its column; of a
+    // subtree, the sum over it (parents come after their children).
+    std::vector<int> parent(m, -1);
+    std::vector<std::size_t> row_count(m, 0), work(m), subtree(m, 0);
+    for (std::size_t j = 0; j < m; ++j) {
+      for (int k = outer[j]; k < outer[j + 1]; ++k) ++row_count[static_cast<std::size_t>(inner[k])];
+    }
+    for (std::size_t j = 0; j < m; ++j) {
+      if (outer[j] < outer[j + 1]) parent[j] = inner[outer[j]];
+      work[j] = 1 + static_cast<std::size_t>(outer[j + 1] - outer[j]) + row_count[j];
+      subtree[j] += work[j];
+      if (parent[j] >= 0) subtree[static_cast<std::size_t>(parent[j])] += subtree[j];
+    }
+    std::vector<int> child_start(m + 1, 0), children(m), roots;
+    for (std::size_t j = 0; j < m; ++j) {
+      if (parent[j] >= 0) ++child_start[static_cast<std::size_t>(parent[j]) + 1];
+    }
+    for (std::size_t j = 0; j < m; ++j) child_start[j + 1] += child_start[j];
+    {
+      std::vector<int> at(child_start.begin(), child_start.end() - 1);
+      for (std::size_t j = 0; j < m; ++j) {
+        if (parent[j] >= 0) {
+          children[static_cast<std::size_t>(at[static_cast<std::size_t>(parent[j])]++)] = static_cast<int>(j);
+        } else {
+          roots.push_back(static_cast<int>(j));
+        }
+      }
+    }
+    std::size_t total = 0;
+    for (const int r : roots) total += subtree[static_cast<std::size_t>(r)];
+    // Greedy: pack the candidate subtrees into two bins (largest first, into the lighter one);
+    // while that is unbalanced, move the heaviest candidate's root to the top and its children
+    // into the candidates. Keep the packing of least cost (top + heavier bin).
+    std::vector<int> candidates = roots, best_roots;
+    std::vector<char> best_bin;
+    std::size_t top_work = 0, best_cost = total;
+    const auto heavier = [&](int x, int y) {
+      return subtree[static_cast<std::size_t>(x)] > subtree[static_cast<std::size_t>(y)];
+    };
+    for (int expansion = 0; expansion < 4096 && !candidates.empty(); ++expansion) {
+      std::sort(candidates.begin(), candidates.end(), heavier);
+      std::array<std::size_t, 2> load{0, 0};
+      std::vector<char> bin(candidates.size());
+      for (std::size_t c = 0; c < candidates.size(); ++c) {
+        const std::size_t into = load[0] <= load[1] ? 0 : 1;
+        bin[c] = static_cast<char>(into);
+        load[into] += subtree[static_cast<std::size_t>(candidates[c])];
+      }
+      if (const std::size_t cost = top_work + std::max(load[0], load[1]); cost < best_cost) {
+        best_cost = cost;
+        best_roots = candidates;
+        best_bin = bin;
+      }
+      const std::size_t heaviest = subtree[static_cast<std::size_t>(candidates[0])];
+      if (std::max(load[0], load[1]) - std::min(load[0], load[1]) < total / 64 || heaviest < total / 64) break;
+      const auto r = static_cast<std::size_t>(candidates[0]);
+      candidates.erase(candidates.begin());
+      top_work += work[r];
+      candidates.insert(candidates.end(), children.begin() + child_start[r], children.begin() + child_start[r + 1]);
+    }
+    // Forests only where they save a fifth of the work at least (else everything is top).
+    std::vector<char> label(m, 2);
+    if (5 * best_cost < 4 * total) {
+      std::vector<int> stack;
+      for (std::size_t c = 0; c < best_roots.size(); ++c) {
+        stack.push_back(best_roots[c]);
+        while (!stack.empty()) {
+          const auto j = static_cast<std::size_t>(stack.back());
+          stack.pop_back();
+          label[j] = best_bin[c];
+          stack.insert(stack.end(), children.begin() + child_start[j], children.begin() + child_start[j + 1]);
+        }
+      }
+    }
+    for (auto& list : forest_) list.clear();
+    top_.clear();
+    std::vector<int> top_slot(m, -1);
+    for (std::size_t j = 0; j < m; ++j) {
+      if (label[j] == 2) {
+        top_slot[j] = static_cast<int>(top_.size());
+        top_.push_back(static_cast<int>(j));
+      } else {
+        forest_[static_cast<std::size_t>(label[j])].push_back(static_cast<int>(j));
+      }
+    }
+    // L by rows (each row's columns increasing), then the sweeps in the order they run.
     const Scalar* value = l.valuePtr();
-    for (std::size_t j = 0; j < m; ++j) {  // L y = P b (unit diagonal)
-      const Vec3 yj = tmp_[j];
-      for (int k = outer[j]; k < outer[j + 1]; ++k) tmp_[static_cast<std::size_t>(inner[k])] -= value[k] * yj;
+    std::vector<int> row_start(m + 1, 0), row_column(static_cast<std::size_t>(outer[m]));
+    std::vector<Scalar> row_value(row_column.size());
+    for (std::size_t i = 0; i < m; ++i) row_start[i + 1] = row_start[i] + static_cast<int>(row_count[i]);
+    {
+      std::vector<int> at(row_start.begin(), row_start.end() - 1);
+      for (std::size_t j = 0; j < m; ++j) {
+        for (int k = outer[j]; k < outer[j + 1]; ++k) {
+          const auto slot = static_cast<std::size_t>(at[static_cast<std::size_t>(inner[k])]++);
+          row_column[slot] = static_cast<int>(j);
+          row_value[slot] = value[k];
+        }
+      }
     }
-    for (std::size_t j = 0; j < m; ++j) tmp_[j] /= d[static_cast<Eigen::Index>(j)];
-    for (std::size_t j = m; j-- > 0;) {  // Lᵀ z = D⁻¹ y
-      Vec3 zj = tmp_[j];
-      for (int k = outer[j]; k < outer[j + 1]; ++k) zj -= value[k] * tmp_[static_cast<std::size_t>(inner[k])];
-      tmp_[j] = zj;
+    // A forest row's entries all lie in its forest; a top row's go to the top sweep (top
+    // columns) and to cross_[f] (forest f's columns).
+    const auto add_row = [&](Sweep& sweep, std::size_t i, int only_label) {
+      sweep.node.push_back(static_cast<int>(i));
+      for (int k = row_start[i]; k < row_start[i + 1]; ++k) {
+        const auto c = static_cast<std::size_t>(k);
+        if (label[static_cast<std::size_t>(row_column[c])] == only_label) sweep.add(row_column[c], row_value[c]);
+      }
+      sweep.close();
+    };
+    const auto add_column = [&](Sweep& sweep, std::size_t j) {
+      sweep.node.push_back(static_cast<int>(j));
+      for (int k = outer[j]; k < outer[j + 1]; ++k) sweep.add(inner[k], value[k]);
+      sweep.close();
+    };
+    top_forward_.clear();
+    top_backward_.clear();
+    for (std::size_t f = 0; f < 2; ++f) {
+      forward_[f].clear();
+      cross_[f].clear();
+      backward_[f].clear();
+      for (const int i : forest_[f]) add_row(forward_[f], static_cast<std::size_t>(i), static_cast<int>(f));
+      for (const int i : top_) add_row(cross_[f], static_cast<std::size_t>(i), static_cast<int>(f));
+      for (auto it = forest_[f].rbegin(); it != forest_[f].rend(); ++it) add_column(backward_[f], static_cast<std::size_t>(*it));
+      partial_[f].resize(top_.size());
     }
-    for (std::size_t i = 0; i < m; ++i) work_[i] = tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(i)])];
+    for (const int i : top_) add_row(top_forward_, static_cast<std::size_t>(i), 2);
+    for (auto it = top_.rbegin(); it != top_.rend(); ++it) add_column(top_backward_, static_cast<std::size_t>(*it));
+    const auto d = solver_.vectorD();
+    diagonal_.assign(d.data(), d.data() + d.size());
+  }
+
+  /// Rows or columns of L in the order a sweep visits them, stored in that order: a sweep
+  /// reads its entries front to back.
+  struct Sweep {
+    std::vector<int> node, start{0}, index;
+    std::vector<Scalar> value;
+    void clear() {
+      node.clear();
+      start.assign(1, 0);
+      index.clear();
+      value.clear();
+    }
+    void add(int i, Scalar v) {
+      index.push_back(i);
+      value.push_back(v);
+    }
+    void close() { start.push_back(static_cast<int>(index.size())); }
+    /// x[node] − Σ value · x[index] over line `t`, subtracted in stored order.
+    Vec3 reduce(std::size_t t, Vec3 y, const std::vector<Vec3>& x) const {
+      for (int k = start[t]; k < start[t + 1]; ++k) {
+        y -= value[static_cast<std::size_t>(k)] * x[static_cast<std::size_t>(index[static_cast<std::size_t>(k)])];
+      }
+      return y;
+    }
+  };
+
+  /// L y = b over forest `f` (unit diagonal, in place in tmp_), then the top rows' sums over
+  /// its columns into partial_[f].
+  void forward_forest(std::size_t f) {
+    const Sweep& rows = forward_[f];
+    for (std::size_t t = 0; t < rows.node.size(); ++t) {
+      const auto i = static_cast<std::size_t>(rows.node[t]);
+      tmp_[i] = rows.reduce(t, tmp_[i], tmp_);
+    }
+    for (std::size_t t = 0; t < top_.size(); ++t) partial_[f][t] = -cross_[f].reduce(t, Vec3::Zero(), tmp_);
+  }
+
+  /// L y = b over the top rows, after both forests.
+  void forward_top() {
+    for (std::size_t t = 0; t < top_.size(); ++t) {
+      const auto i = static_cast<std::size_t>(top_[t]);
+      tmp_[i] = top_forward_.reduce(t, tmp_[i] - partial_[0][t] - partial_[1][t], tmp_);
+    }
+  }
+
+  /// Lᵀ z = D⁻¹ y over the columns of `columns`, in place in tmp_.
+  void backward(const Sweep& columns) {
+    for (std::size_t t = 0; t < columns.node.size(); ++t) {
+      const auto j = static_cast<std::size_t>(columns.node[t]);
+      tmp_[j] = columns.reduce(t, tmp_[j] / diagonal_[j], tmp_);
+    }
+  }
+
+  /// tmp_ = (L D Lᵀ)⁻¹ tmp_: with tmp_ = P b on entry, P A⁻¹ b on return (A = Pᵀ L D Lᵀ P), the
+  /// three coordinates at once (one pass over L per triangle solve instead of one per column),
+  /// the two forests on two threads.
+  void solve() {
+    parallel_for_chunks(2, threads_, 1, [this](std::size_t begin, std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f) forward_forest(f);
+    });
+    forward_top();
+    backward(top_backward_);
+    parallel_for_chunks(2, threads_, 1, [this](std::size_t begin, std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f) backward(backward_[f]);
+    });
   }
 
   IntegratorOptions options_;
+  int threads_ = 1;
   Key key_;
   bool factored_ = false;
   std::vector<Eigen::Index> row_;  // free row of each particle, -1 when pinned
   std::vector<std::size_t> free_;  // particle of each free row
-  Eigen::SimplicialLDLT<Sparse> solver_;
-  std::vector<Vec3> next_, older_, tmp_, work_;
-  Matrix base_, rhs_;
+  Eigen::SimplicialLDLT<Sparse, Eigen::Lower, NestedDissection> solver_;
+  std::array<std::vector<int>, 2> forest_;  // nodes of each thread's forest, increasing
+  std::vector<int> top_;                    // the other nodes, increasing
+  std::array<Sweep, 2> forward_, cross_, backward_;  // per forest: its rows; top rows; its columns
+  Sweep top_forward_, top_backward_;                 // the top's rows and columns
+  std::array<std::vector<Vec3>, 2> partial_;         // per top row: Σ over forest f's columns
+  std::vector<Scalar> diagonal_;                     // D
+  std::vector<int> incident_start_, incident_;  // per free row: its springs, ~k where it is end b
+  std::vector<Vec3> next_, older_, tmp_, base_, pull_;
 };
 
 }  // namespace

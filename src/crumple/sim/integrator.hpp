@@ -23,15 +23,18 @@
 ///    alternating a local step (d_s = L (x_a − x_b)/|x_a − x_b|, the spring's rest-length
 ///    projection) and a global step, a linear solve with the constant matrix
 ///    M/h² + air M/h + Σ k GᵀG + Σ (s + c/h) w wᵀ (+ drag), one matrix for x, y and z, factored
-///    once by sparse Cholesky (Eigen's SimplicialLDLT, AMD ordering) and refactored only when
-///    h, the model or the field's linear terms change. Starts from the inertial prediction
-///    x₀ + h v₀ (warm start: the last step's velocity), runs `projective_iterations` local/global
-///    iterations, v₁ = (x₁ − x₀)/h. Unconditionally stable and dissipative; the springs' own
+///    once by sparse Cholesky (Eigen's SimplicialLDLT, nested-dissection ordering) and refactored
+///    only when h, the model (`Model::revision`) or the field's linear terms change; the
+///    triangular solves run the two halves of the elimination tree on two threads. Starts from
+///    the inertial prediction x₀ + h v₀ (warm start: the last step's velocity), runs
+///    `projective_iterations` local/global iterations, v₁ = (x₁ − x₀)/h. Unconditionally stable and dissipative; the springs' own
 ///    damping (along the spring) is not modelled, the hinges' is. Pinned particles move by h v₀.
-/// Every integrator is deterministic (same input, same bits) and single-threaded.
+/// Every integrator is deterministic (same input, same bits, whatever the thread count);
+/// projective dynamics' triangular solves run on up to two threads, the rest on one.
 
 #include <crumple/sim/forces.hpp>
 
+#include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
@@ -55,6 +58,9 @@ struct IntegratorOptions {
   int projective_iterations = 10;  ///< local/global iterations per step (projective, >= 1)
   /// Chebyshev acceleration's spectral radius estimate ρ (projective; 0 = none, < 1).
   Scalar projective_rho = 0;
+  /// Threads of the projective solve's triangular sweeps (0 = all hardware threads, at most 2
+  /// used; 1 = serial). The result is the same bits on any number.
+  int threads = 0;
 };
 
 class Integrator {
@@ -66,9 +72,13 @@ class Integrator {
   /// CG iterations of the last step (implicit Euler), local/global iterations (projective), 0
   /// for explicit schemes.
   int last_iterations() const { return last_iterations_; }
+  /// Sparse factorizations so far (projective dynamics: one per model, step or field change;
+  /// 0 for the other schemes).
+  std::int64_t factorizations() const { return factorizations_; }
 
  protected:
   int last_iterations_ = 0;
+  std::int64_t factorizations_ = 0;
 };
 
 /// The largest step h that `kind` is expected to keep stable on `model`'s springs (s): the linear

@@ -1,6 +1,7 @@
 #include <crumple/core/error.hpp>
 #include <crumple/sim/mass_spring.hpp>
 
+#include <atomic>
 #include <cmath>
 #include <utility>
 #include <string>
@@ -10,6 +11,10 @@ namespace crumple::sim {
 namespace {
 inline std::size_t at(Index i) { return static_cast<std::size_t>(i); }
 bool finite_non_negative(Scalar x) { return std::isfinite(x) && x >= 0; }
+std::uint64_t next_revision() {
+  static std::atomic<std::uint64_t> last{0};
+  return ++last;
+}
 }  // namespace
 
 namespace {
@@ -35,6 +40,7 @@ Model Model::with_hinges(std::vector<Hinge> hinges) const {
   check_hinges(hinges, num_particles());
   Model m = *this;
   m.hinges_ = std::move(hinges);
+  m.revision_ = next_revision();
   return m;
 }
 
@@ -71,6 +77,7 @@ Model Model::create(std::vector<Scalar> masses, std::vector<Spring> springs, std
   }
   m.mass_ = std::move(masses);
   m.springs_ = std::move(springs);
+  m.revision_ = next_revision();
   return m;
 }
 

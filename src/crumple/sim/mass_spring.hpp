@@ -9,6 +9,7 @@
 #include <crumple/mesh/mesh.hpp>
 
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <span>
 #include <vector>
@@ -79,8 +80,13 @@ class Model {
   std::shared_ptr<const Topology> topology_ptr() const { return topology_; }
   /// Total mass of the free particles.
   Scalar free_mass() const;
+  /// Names the model's contents: copies share it, every model made by `create` or
+  /// `with_hinges` in this process gets a new one (0: a default-constructed, empty model). A
+  /// solver keeps what it derived from a model (a factored matrix) while it is given the same.
+  std::uint64_t revision() const { return revision_; }
 
  private:
+  std::uint64_t revision_ = 0;
   std::vector<Scalar> mass_, inv_mass_, damping_;
   std::vector<Spring> springs_;
   std::vector<Hinge> hinges_;
