@@ -9,6 +9,8 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -144,6 +146,66 @@ TEST(Cli, FramesWithDifferentConnectivityAreRejected) {
   const Result r = run("detect " + (dir / "a.obj").string() + " " + (dir / "b.obj").string());
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.out.find("b.obj"), std::string::npos) << r.out;
+}
+
+// `crumple detect` on mesh files far from unit scale: at 2^1000 and 2^-1000 (squares of the
+// coordinates overflow, underflow) the contact lines of unit scale with their distances scaled
+// exactly; at 1e300 and 1e-300 (each coordinate rounded once) the same counts of each kind. A
+// file whose coordinates span more than the double range is a one-line error, not contacts.
+TEST(Cli, DetectAtExtremeScalesGivesTheUnitScaleContacts) {
+  const testing::TempDir dir;
+  const TriMesh sheet = shapes::lattice(10, 10);
+  Positions unit = testing::crumple_lattice(sheet, 0.35, 5);
+  for (Vec3& p : unit) p += Vec3::Constant(1.5);
+  const auto detect = [&](const std::string& name, const Positions& x, Scalar h) {
+    io::write_obj(dir / (name + ".obj"), x, sheet.topology().faces());
+    char thickness[32];
+    std::snprintf(thickness, sizeof thickness, "%.17g", h);
+    const Result r = run("detect --method kdop --kinds vf,ee,tt --thickness " + std::string(thickness) + " " +
+                         (dir / (name + ".obj")).string() + " --contacts " + (dir / (name + ".tsv")).string());
+    EXPECT_EQ(r.status, 0) << r.out;
+    return testing::read_lines(dir / (name + ".tsv"));
+  };
+  const auto counts = [](const std::vector<std::string>& lines) {
+    std::map<std::string, int> n;
+    for (const std::string& line : lines) ++n[line.substr(0, 2)];
+    return n;
+  };
+  const Scalar h = 0.03;
+  const std::vector<std::string> want = detect("unit", unit, h);
+  ASSERT_GT(counts(want)["tt"], 10) << "the scene should touch in every kind";
+  ASSERT_GT(counts(want)["vf"], 10);
+  for (const int k : {1000, -1000}) {
+    SCOPED_TRACE("2^" + std::to_string(k));
+    Positions x = unit;
+    for (Vec3& p : x) p = Vec3(std::scalbn(p.x(), k), std::scalbn(p.y(), k), std::scalbn(p.z(), k));
+    const std::vector<std::string> got = detect("p" + std::to_string(k), x, std::scalbn(h, k));
+    ASSERT_EQ(got.size(), want.size());
+    for (std::size_t i = 0; i < got.size(); ++i) {
+      // Same ids; the distance (last field of vf and ee lines) times 2^k.
+      const std::size_t cut = want[i].rfind(' '), got_cut = got[i].rfind(' ');
+      if (want[i].starts_with("tt")) {
+        EXPECT_EQ(got[i], want[i]);
+        continue;
+      }
+      ASSERT_EQ(got[i].substr(0, got_cut), want[i].substr(0, cut)) << i;
+      EXPECT_EQ(std::strtod(got[i].c_str() + got_cut, nullptr),
+                std::scalbn(std::strtod(want[i].c_str() + cut, nullptr), k))
+          << got[i] << " vs " << want[i];
+    }
+  }
+  for (const Scalar scale : {1e300, 1e-300}) {
+    Positions x = unit;
+    for (Vec3& p : x) p *= scale;
+    EXPECT_EQ(counts(detect(scale > 1 ? "big" : "small", x, h * scale)), counts(want));
+  }
+  Positions wide = unit;
+  for (Vec3& p : wide) p *= 1e300;
+  wide[7].y() = 1e-300;
+  io::write_obj(dir / "wide.obj", wide, sheet.topology().faces());
+  const Result r = run("detect " + (dir / "wide.obj").string());
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("span more than the double range: vertex 7's y coordinate"), std::string::npos) << r.out;
 }
 
 /// The acceptance check: naive on funnel frame 227 at thickness 1e-3 of the diagonal,

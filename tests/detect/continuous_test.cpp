@@ -218,6 +218,60 @@ TEST(Continuous, ScaledLatticesBeyondFloatRangeMatchBruteForce) {
   EXPECT_GT(total, 50u);
 }
 
+// Scaling a step's positions and δ by 2^k (exact while they stay normal) changes no impact: the
+// same pairs, TOIs and outcomes, from brute force (the narrow phase computes a query outside
+// [2^-300, 2^300] scaled into [1, 2)) and from every broad phase (the query computes a step
+// beyond [2^-64, 2^64) scaled, also past the narrow phase's range), distances times 2^k.
+// Before, at 2^-1000 the narrow phase's underflow slack (2^-1000) was a third of the lattice's
+// extent: every pair near contact was a conservative hit; at 2^600 the advancement was off.
+TEST(Continuous, PowerOfTwoScalesGiveTheImpactsOfUnitScale) {
+  const TriMesh mesh = shapes::lattice(7, 6);
+  const auto topo = mesh.topology_ptr();
+  Positions y0 = testing::crumple_lattice(mesh, 0.15, 4);
+  Positions y1 = testing::jitter(testing::crumple_lattice(mesh, 0.25, 14), 0.12, 24);
+  for (Positions* y : {&y0, &y1}) {
+    for (Vec3& p : *y) p += Vec3::Constant(1.5);  // coordinates in [1, 3]: normal at 2^-1020
+  }
+  const auto scaled = [](PositionsView x, int k) {
+    Positions out(x.begin(), x.end());
+    for (Vec3& p : out) {
+      for (int a = 0; a < 3; ++a) p[a] = std::scalbn(p[a], k);
+    }
+    return out;
+  };
+  for (const Scalar delta : {0.0, 0.02}) {
+    const Hits unit = brute_force(*topo, y0, y1, delta);
+    ASSERT_GT(unit.size(), 10u);
+    ContinuousOptions options;
+    options.min_separation = delta;
+    const ImpactSet unit_impacts = continuous_impacts(topo, y0, y1, options);
+    for (const int k : {-1020, -1000, -600, -80, 80, 600, 997, 1020}) {
+      SCOPED_TRACE("2^" + std::to_string(k) + " delta " + std::to_string(delta));
+      if (delta > 0 && k < -1000) continue;  // 0.02 2^k subnormal: another δ
+      const Positions x0 = scaled(y0, k), x1 = scaled(y1, k);
+      if (k < 998) {  // beyond, past the narrow phase's range (2^1000), a query is a conservative hit
+        const Hits got = brute_force(*topo, x0, x1, std::scalbn(delta, k));
+        EXPECT_TRUE(got == unit) << got.size() << " impacts, at unit scale " << unit.size() << "\n"
+                                 << describe(got, unit);
+        check_all("lattice at 2^" + std::to_string(k), topo, x0, x1, std::scalbn(delta, k));
+      }
+      options.min_separation = std::scalbn(delta, k);
+      const ImpactSet impacts = continuous_impacts(topo, x0, x1, options);
+      ASSERT_EQ(impacts.vf.size(), unit_impacts.vf.size());
+      for (std::size_t i = 0; i < impacts.vf.size(); ++i) {
+        EXPECT_EQ(impacts.vf[i].distance, std::scalbn(unit_impacts.vf[i].distance, k));
+        EXPECT_EQ(impacts.vf[i].barycentric, unit_impacts.vf[i].barycentric);
+      }
+      ASSERT_EQ(impacts.ee.size(), unit_impacts.ee.size());
+      for (std::size_t i = 0; i < impacts.ee.size(); ++i) {
+        EXPECT_EQ(impacts.ee[i].distance, std::scalbn(unit_impacts.ee[i].distance, k));
+        EXPECT_EQ(impacts.ee[i].s, unit_impacts.ee[i].s);
+      }
+      if (HasFailure()) return;
+    }
+  }
+}
+
 // Around a vertex of more than 64 faces (a star) the orphan sub-pairs are found each step from
 // the faces' swept boxes, not listed (exact/stars.hpp): a two-turn fan whose turns pass through
 // each other during the step, its centre the last vertex, plus a vertex of no face crossing

@@ -19,6 +19,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <map>
 #include <ostream>
 #include <numbers>
@@ -672,26 +673,230 @@ TEST(ExactDetectors, AdversarialCrumpledSheet) {
 
 // The k-DOP traversal tests its nodes in float: a scene far beyond the float range, one in its
 // subnormal range and one far from the origin with a small thickness must give exactly naive's
-// contacts all the same.
+// contacts all the same. Far beyond the double's comfortable range too (squares of 1e160
+// overflow, of 1e-160 underflow): the detectors compute on the coordinates scaled by a power
+// of two (detect/scale_detail.hpp), so every scale gives the contacts of scale 1 — the same
+// counts, since multiplying by 10^j rounds each coordinate by at most half a unit in the last
+// place, which moves no pair of this scene across h — except in the subnormal range, where the
+// coordinates themselves lose bits (there exact methods must still equal naive). Before the
+// scaling, naive itself found no TT contact at 1e150 and nothing at all from 1e160, and
+// inflated TT to 750 at 1e-160; kdop:sweep=on found 626 TT to naive's 727 at 1e-150.
 TEST(ExactDetectors, CoordinatesBeyondFloatPrecisionAndRange) {
   const TriMesh sheet = shapes::lattice(12, 12);
   const Positions crumpled = testing::crumple_lattice(sheet, 0.35, 5);
   struct Case {
     Scalar scale;
     Vec3 offset;
+    bool same_counts;  // as at scale 1
   };
-  for (const Case& c : {Case{1e45, Vec3::Zero()}, Case{1e-42, Vec3::Zero()}, Case{1, Vec3(3e7, -3e7, 1e8)}}) {
-    SCOPED_TRACE("scale " + std::to_string(c.scale) + " offset " + std::to_string(c.offset.z()));
+  const ContactKinds all = ContactKinds::parse("vf,ee,tt");
+  std::vector<std::array<std::size_t, 3>> unit_counts;
+  for (const Case& c : {Case{1, Vec3::Zero(), true}, Case{1e45, Vec3::Zero(), true}, Case{1e-42, Vec3::Zero(), true},
+                        Case{1, Vec3(3e7, -3e7, 1e8), false}, Case{1e150, Vec3::Zero(), true},
+                        Case{1e160, Vec3::Zero(), true}, Case{1e200, Vec3::Zero(), true},
+                        Case{1e300, Vec3::Zero(), true}, Case{1e-150, Vec3::Zero(), true},
+                        Case{1e-160, Vec3::Zero(), true}, Case{1e-200, Vec3::Zero(), true},
+                        Case{1e-300, Vec3::Zero(), true}, Case{1e-310, Vec3::Zero(), false},
+                        Case{1e-318, Vec3::Zero(), false}}) {
+    SCOPED_TRACE("scale " + std::to_string(c.scale) + " (" + std::to_string(std::ilogb(c.scale)) + ") offset " +
+                 std::to_string(c.offset.z()));
     std::vector<Positions> frames;
     for (const Positions& x : {crumpled, testing::jitter(crumpled, 0.01, 6)}) {
       Positions y(x.size());
       for (std::size_t i = 0; i < x.size(); ++i) y[i] = c.scale * x[i] + c.offset;
       frames.push_back(std::move(y));
     }
-    const std::size_t n = expect_sequence_exact(sheet, frames, 0.03 * c.scale, {"kdop", "kdop:sweep=on", "kdop:k=6"});
+    const Scalar h = 0.03 * c.scale;
+    const std::size_t n = expect_sequence_exact(sheet, frames, h, {"kdop", "kdop:sweep=on", "kdop:k=6", "hash", "sap"});
     if (HasFatalFailure()) return;
     EXPECT_GT(n, 20u);
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      const ContactSet want = run("naive", sheet, {}, frames[i], h, all);
+      const std::array<std::size_t, 3> counts{want.vf.size(), want.ee.size(), want.tt.size()};
+      if (unit_counts.size() < frames.size()) {
+        unit_counts.push_back(counts);
+        EXPECT_GT(counts[0] * counts[1] * counts[2], 0u) << "every kind should touch at scale 1";
+      } else if (c.same_counts) {
+        EXPECT_EQ(counts, unit_counts[i]) << "frame " << i << ": VF, EE, TT as at scale 1";
+      }
+    }
   }
+}
+
+/// `got`, found at positions and thickness 2^k times those of `want`: the same contacts, in the
+/// same order, with the same barycentric coordinates, normals and edge parameters, the
+/// distances 2^k times `want`'s (rounded once where they leave the normal range).
+void expect_scaled(const ContactSet& want, const ContactSet& got, int k, const std::string& what) {
+  SCOPED_TRACE(what);
+  ASSERT_EQ(want.vf.size(), got.vf.size()) << "VF count";
+  ASSERT_EQ(want.ee.size(), got.ee.size()) << "EE count";
+  ASSERT_EQ(want.tt.size(), got.tt.size()) << "TT count";
+  for (std::size_t i = 0; i < want.vf.size(); ++i) {
+    ASSERT_EQ(want.vf[i].vertex, got.vf[i].vertex) << "VF " << i;
+    ASSERT_EQ(want.vf[i].face, got.vf[i].face) << "VF " << i;
+    ASSERT_EQ(std::scalbn(want.vf[i].distance, k), got.vf[i].distance) << "VF " << i;
+    ASSERT_EQ(want.vf[i].barycentric, got.vf[i].barycentric) << "VF " << i;
+    ASSERT_EQ(want.vf[i].normal, got.vf[i].normal) << "VF " << i;
+  }
+  for (std::size_t i = 0; i < want.ee.size(); ++i) {
+    ASSERT_EQ(want.ee[i].edge0, got.ee[i].edge0) << "EE " << i;
+    ASSERT_EQ(want.ee[i].edge1, got.ee[i].edge1) << "EE " << i;
+    ASSERT_EQ(std::scalbn(want.ee[i].distance, k), got.ee[i].distance) << "EE " << i;
+    ASSERT_EQ(want.ee[i].s, got.ee[i].s) << "EE " << i;
+    ASSERT_EQ(want.ee[i].t, got.ee[i].t) << "EE " << i;
+    ASSERT_EQ(want.ee[i].normal, got.ee[i].normal) << "EE " << i;
+  }
+  for (std::size_t i = 0; i < want.tt.size(); ++i) {
+    ASSERT_EQ(want.tt[i].face0, got.tt[i].face0) << "TT " << i;
+    ASSERT_EQ(want.tt[i].face1, got.tt[i].face1) << "TT " << i;
+  }
+}
+
+Positions scaled_by(PositionsView x, int k) {
+  Positions y(x.begin(), x.end());
+  for (Vec3& p : y) {
+    for (int a = 0; a < 3; ++a) p[a] = std::scalbn(p[a], k);
+  }
+  return y;
+}
+
+// Scaling the positions and the thickness by 2^k (exact while they stay in the normal range)
+// changes no contact and scales every distance by 2^k, for every method (the stochastic ones
+// with the same seed draw the same pairs), from far above the double's comfortable range to
+// far below, and across frames whose scale jumps (the k-DOP tree and the orphan blocks keep
+// coordinates from frame to frame: they start over when the detectors' scale changes). The
+// crumpled lattice is moved into [1, 3]^3 so that every coordinate stays normal at 2^-1020.
+TEST(ExactDetectors, PowerOfTwoScalesGiveTheSameContacts) {
+  const TriMesh sheet = shapes::lattice(12, 12);
+  Positions base = testing::crumple_lattice(sheet, 0.35, 5);
+  for (Vec3& p : base) p += Vec3(1.5, 1.5, 1.5);
+  const std::vector<Positions> unit{base, testing::jitter(base, 0.01, 6)};
+  const Scalar h = 0.03;
+  const ContactKinds all = ContactKinds::parse("vf,ee,tt");
+  const std::vector<std::string> specs{"naive", "kdop",       "kdop:sweep=on", "hash", "sap",
+                                       "stochastic",  "hybrid"};
+  std::map<std::string, std::vector<ContactSet>> want;
+  for (const std::string& spec : specs) {
+    auto d = make(spec, h, all);
+    d->set_topology(sheet.topology_ptr());
+    for (std::size_t i = 0; i < unit.size(); ++i) {
+      want[spec].emplace_back();
+      d->update(i == 0 ? PositionsView() : PositionsView(unit[i - 1]), unit[i], want[spec].back());
+    }
+  }
+  ASSERT_GT(want["naive"][0].tt.size(), 20u);
+  ASSERT_GT(want["naive"][1].vf.size(), 20u);
+  for (const int k : {-1020, -70, 64, 1000}) {
+    SCOPED_TRACE("2^" + std::to_string(k));
+    std::vector<Positions> frames;
+    for (const Positions& x : unit) frames.push_back(scaled_by(x, k));
+    for (const std::string& spec : specs) {
+      auto d = make(spec, std::scalbn(h, k), all);
+      d->set_topology(sheet.topology_ptr());
+      for (std::size_t i = 0; i < frames.size(); ++i) {
+        ContactSet got;
+        d->update(i == 0 ? PositionsView() : PositionsView(frames[i - 1]), frames[i], got);
+        expect_scaled(want[spec][i], got, k, spec + " frame " + std::to_string(i));
+        if (HasFatalFailure()) return;
+      }
+    }
+  }
+  // One detector through frames whose scale jumps, compared with naive on each; the previous
+  // frame is given as motion where it has the same scale (one power of two serves both: a
+  // step from 1 to 2^-900 would put the current frame 2^-900 below the scale it is computed at).
+  const std::vector<int> jump_scales{0, 0, 300, 300, 0, -900, -900, 1000, 0};
+  std::vector<Positions> jumps;
+  for (const int k : jump_scales) jumps.push_back(scaled_by(unit[jumps.size() % 2], k));
+  for (const std::string spec : {"kdop", "kdop:sweep=on", "hash", "sap"}) {
+    auto d = make(spec, h, all);
+    d->set_topology(sheet.topology_ptr());
+    std::size_t frame = 0;
+    for (const int k : jump_scales) {
+      SCOPED_TRACE(spec + " frame " + std::to_string(frame) + " at 2^" + std::to_string(k));
+      // The thickness is the detector's: h at every scale, so compare with naive at h.
+      const Positions& x = jumps[frame];
+      ContactSet got, expected;
+      const bool motion = frame > 0 && jump_scales[frame - 1] == k;
+      d->update(motion ? PositionsView(jumps[frame - 1]) : PositionsView(), x, got);
+      auto naive = make("naive", h, all);
+      naive->set_topology(sheet.topology_ptr());
+      naive->update(x, expected);
+      expect_same(expected, got, "jump");
+      if (HasFatalFailure()) return;
+      ++frame;
+    }
+  }
+}
+
+// Positions whose non-zero coordinates span more than the double range cannot be scaled into
+// it without losing bits: every method rejects them with an error that says so, never gives
+// contacts of other positions. Spanning less is accepted, however far from 1.
+TEST(ExactDetectors, PositionsSpanningBeyondTheDoubleRangeAreRejected) {
+  const TriMesh sheet = shapes::lattice(4, 4);
+  const Positions x = testing::crumple_lattice(sheet, 0.35, 5);
+  Positions wide(x.size());
+  for (std::size_t i = 0; i < x.size(); ++i) wide[i] = 1e300 * x[i];
+  Positions accepted = wide;
+  accepted[3] = Vec3(0.1, 1e-7, 0);  // 1e-307 of the largest: kept exactly
+  wide[3] = Vec3(0, 1e-300, 0);
+  for (const char* spec : {"naive", "kdop", "hash", "sap", "stochastic", "hybrid"}) {
+    SCOPED_TRACE(spec);
+    auto d = make(spec, 3e297, ContactKinds::parse("vf,ee,tt"));
+    d->set_topology(sheet.topology_ptr());
+    ContactSet out;
+    out.tt.push_back({0, 1});
+    try {
+      d->update(wide, out);
+      ADD_FAILURE() << "accepted";
+    } catch (const InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("span more than the double range"), std::string::npos) << what;
+      EXPECT_NE(what.find("vertex 3's y coordinate 1e-300"), std::string::npos) << what;
+    }
+    EXPECT_TRUE(out.empty());
+    EXPECT_NO_THROW(d->update(accepted, out));
+    // The previous frame too, where the method uses it (the others ignore it).
+    if (!d->capabilities().uses_motion) {
+      EXPECT_NO_THROW(d->update(wide, accepted, out));
+      continue;
+    }
+    try {
+      d->update(wide, accepted, out);
+      ADD_FAILURE() << "accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("previous positions span"), std::string::npos) << e.what();
+    }
+  }
+}
+
+// A thickness far below or above the mesh's size (1e-200 and 1e100 of it): below, h^2
+// underflows, yet pairs at distance 0 are contacts (0 < h); above, every pair is, without
+// overflow in the broad phases. At scale 1 and far from it.
+TEST(ExactDetectors, ThicknessFarBelowOrAboveTheMeshSize) {
+  // Vertex 3 lies on face 0; edge (4, 5) crosses edge (1, 2) exactly; a third triangle apart.
+  const TriMesh m = TriMesh::create({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0.25, 0.25, 0),
+                                     Vec3(0.5, 0.5, -1), Vec3(0.5, 0.5, 1), Vec3(3, 3, 3), Vec3(4, 3, 3),
+                                     Vec3(3, 4, 3)},
+                                    {{0, 1, 2}, {3, 4, 5}, {6, 7, 8}});
+  const ContactKinds all = ContactKinds::parse("vf,ee,tt");
+  for (const Scalar scale : {1.0, 1e200, 1e-100}) {
+    SCOPED_TRACE("scale " + std::to_string(std::ilogb(scale)));
+    Positions x = m.positions();
+    for (Vec3& p : x) p *= scale;
+    const ContactSet tiny = run("naive", m, {}, x, 1e-200 * scale, all);
+    EXPECT_EQ(tiny.vf.size(), 1u);  // vertex 3 on face 0
+    EXPECT_EQ(tiny.ee.size(), 1u);  // (1, 2) through (4, 5)
+    EXPECT_EQ(tiny.tt.size(), 1u);
+    for (const auto& c : tiny.vf) EXPECT_EQ(c.distance, 0);
+    expect_sequence_exact(m, {x}, 1e-200 * scale, {"kdop", "kdop:sweep=on", "hash", "sap"});
+    if (HasFatalFailure()) return;
+    const ContactSet huge = run("naive", m, {}, x, 1e100 * scale, all);
+    EXPECT_EQ(huge.vf.size(), 3u * 3 * 2);  // every vertex against the two faces it is not in
+    expect_sequence_exact(m, {x}, 1e100 * scale, {"kdop", "kdop:sweep=on", "hash", "sap"});
+    if (HasFatalFailure()) return;
+  }
+  // 1e300 at scale 1 (and h = the largest double): in the scaled frame it is capped.
+  expect_sequence_exact(m, {m.positions()}, std::numeric_limits<Scalar>::max(), {"kdop", "hash", "sap"});
 }
 
 // A vertex just under h above a face, far from the origin: the faces' padded slabs overlap by

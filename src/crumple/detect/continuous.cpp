@@ -11,6 +11,7 @@
 #include <crumple/detect/exact/orphans.hpp>
 #include <crumple/detect/exact/ownership.hpp>
 #include <crumple/detect/exact/stars.hpp>
+#include <crumple/detect/scale_detail.hpp>
 #include <crumple/geometry/distance.hpp>
 
 #include <algorithm>
@@ -477,7 +478,42 @@ struct ContinuousQuery::State {
   std::vector<OwnedFace> faces;
   std::vector<Box> vertex_box;
   std::vector<FaceFrame> frames;  // 64-byte aligned elements (C++17 aligned new)
+  int exponent = 0;       ///< the last step's scale exponent (detect/scale_detail.hpp)
+  Positions x0, x1;       ///< the step's positions times 2^exponent, when it is not 0
 };
+
+namespace {
+
+/// The step as the query computes it: the positions, and δ, times 2^k for the k of the
+/// detectors (detect/scale_detail.hpp), so that far from unit magnitudes the err terms of the
+/// narrow phase stay relative and its squares finite; the distances of its impacts are scaled
+/// back by 2^-k. The broad phase starts over when k changes (its refit keeps coordinates).
+struct ScaledStep {
+  PositionsView x0, x1;
+  Scalar delta;
+  geometry::CcdOptions narrow;
+  int exponent;
+};
+ScaledStep scale_step(ContinuousQuery::State& s, const Topology& topo, const ContinuousOptions& options,
+                      PositionsView previous, PositionsView current) {
+  const int threads = options.threads;
+  const int k = detail::detection_exponent(
+      std::max(detail::finite_magnitude(previous, threads), detail::finite_magnitude(current, threads)));
+  if (k != s.exponent) s.broad->build(topo);
+  s.exponent = k;
+  ScaledStep out{previous, current, options.min_separation, options.narrow, k};
+  if (k != 0) {
+    detail::scale_positions(previous, k, s.x0, threads, "continuous query: previous positions");
+    detail::scale_positions(current, k, s.x1, threads, "continuous query: current positions");
+    out.x0 = s.x0;
+    out.x1 = s.x1;
+    out.delta = detail::scaled_thickness(options.min_separation, k);
+    out.narrow.min_separation = out.delta;
+  }
+  return out;
+}
+
+}  // namespace
 
 ContinuousQuery::ContinuousQuery(std::shared_ptr<const Topology> topology, ContinuousOptions options)
     : topology_(std::move(topology)), options_(std::move(options)), state_(std::make_unique<State>()) {
@@ -565,14 +601,15 @@ Scalar prepare_step(const Topology& topo, PositionsView x0, PositionsView x1, in
 
 }  // namespace
 
-std::size_t ContinuousQuery::count_candidates(PositionsView previous, PositionsView current) {
+std::size_t ContinuousQuery::count_candidates(PositionsView given_previous, PositionsView given_current) {
   State& s = *state_;
   const Topology& topo = *topology_;
   stats_.clear();
-  const Scalar magnitude = prepare_step(topo, previous, current, options_.threads, s.vertex_box);
-  const Scalar reach = options_.min_separation * (1 + 1e-6) + 1e-9 * magnitude;
+  const ScaledStep scaled = scale_step(s, topo, options_, given_previous, given_current);
+  const Scalar magnitude = prepare_step(topo, scaled.x0, scaled.x1, options_.threads, s.vertex_box);
+  const Scalar reach = scaled.delta * (1 + 1e-6) + 1e-9 * magnitude;
   const auto t0 = std::chrono::steady_clock::now();
-  FrameInput in{previous, current, reach / 2, options_.threads, false, s.face_owns, true};
+  FrameInput in{scaled.x0, scaled.x1, reach / 2, options_.threads, false, s.face_owns, true};
   s.broad->update(in, stats_);
   stats_.set("update_ms", ms_since(t0));
   const auto t1 = std::chrono::steady_clock::now();
@@ -638,7 +675,7 @@ Scalar ContinuousQuery::collision_free_step(PositionsView previous, PositionsVie
   return earliest.load();
 }
 
-void ContinuousQuery::run(PositionsView previous, PositionsView current, std::span<const char> moved,
+void ContinuousQuery::run(PositionsView given_previous, PositionsView given_current, std::span<const char> moved,
                           ImpactSet& out, std::atomic<Scalar>* earliest) {
   out.clear();
   State& s = *state_;
@@ -646,10 +683,12 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, std::sp
   const int threads = options_.threads;
   stats_.clear();
   const auto start = std::chrono::steady_clock::now();
+  const ScaledStep scaled = scale_step(s, topo, options_, given_previous, given_current);
+  const PositionsView previous = scaled.x0, current = scaled.x1;
   const Scalar magnitude = prepare_step(topo, previous, current, threads, s.vertex_box);
   // Two features within δ at some t lie in faces whose swept boxes, each grown by δ/2, meet;
   // the margin covers the rounding of every box bound (docs/ccd.md, broad phase).
-  const Scalar reach = options_.min_separation * (1 + 1e-6) + 1e-9 * magnitude;
+  const Scalar reach = scaled.delta * (1 + 1e-6) + 1e-9 * magnitude;
   s.frames.resize(static_cast<std::size_t>(topo.num_faces()));
   const auto fill_frame = [&](std::size_t f) {
     FaceFrame& r = s.frames[f];
@@ -676,8 +715,8 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, std::sp
                   previous,
                   current,
                   s.frames,
-                  geometry::ccd_hull_bound(magnitude, options_.min_separation),
-                  options_.narrow,
+                  geometry::ccd_hull_bound(magnitude, scaled.delta),
+                  scaled.narrow,
                   moved.empty() ? nullptr : moved.data()};
   Sink sink;
   const Scalar half = reach / 2;
@@ -884,6 +923,10 @@ void ContinuousQuery::run(PositionsView previous, PositionsView current, std::sp
   out = std::move(sink.impacts);
   std::sort(out.vf.begin(), out.vf.end(), vf_less);
   std::sort(out.ee.begin(), out.ee.end(), ee_less);
+  if (scaled.exponent != 0) {
+    for (auto& i : out.vf) i.distance = std::scalbn(i.distance, -scaled.exponent);
+    for (auto& i : out.ee) i.distance = std::scalbn(i.distance, -scaled.exponent);
+  }
   stats_.set("sort_ms", ms_since(t3));
 
   double conservative = 0;

@@ -1,6 +1,8 @@
 #include <crumple/core/error.hpp>
 #include <crumple/detect/detector.hpp>
+#include <crumple/detect/scale_detail.hpp>
 
+#include <algorithm>
 #include <cmath>
 
 namespace crumple {
@@ -32,7 +34,7 @@ double DetectorStats::get(std::string_view key) const {
   return 0;
 }
 
-Detector::Detector(DetectorOptions options) : options_(options) {
+Detector::Detector(DetectorOptions options) : options_(options), thickness_(options.thickness) {
   if (!(std::isfinite(options_.thickness) && options_.thickness >= 0)) {
     throw InputError("thickness must be a finite number >= 0, got " +
                      std::to_string(options_.thickness));
@@ -46,6 +48,7 @@ void Detector::set_topology(std::shared_ptr<const Topology> topology) {
   CRUMPLE_CHECK(topology != nullptr, "set_topology: null topology");
   topology_ = std::move(topology);
   stats_.clear();
+  framed_ = false;
   on_topology();
 }
 
@@ -65,7 +68,25 @@ void Detector::update(PositionsView previous, PositionsView positions, ContactSe
                 "update: previous positions count differs from current");
   stats_.clear();
   try {
-    detect(previous, positions, out);
+    // One power of two for both frames, from the larger magnitude (detect/scale_detail.hpp);
+    // the previous frame only for methods that use it (the others are given none).
+    if (!capabilities().uses_motion) previous = {};
+    const int threads = options_.threads;
+    const Scalar magnitude = std::max(detail::finite_magnitude(positions, threads),
+                                      previous.empty() ? Scalar(0) : detail::finite_magnitude(previous, threads));
+    const int k = detail::detection_exponent(magnitude);
+    if (framed_ && k != exponent_) on_rescale();
+    framed_ = true;
+    exponent_ = k;
+    thickness_ = detail::scaled_thickness(options_.thickness, k);
+    if (k == 0) {
+      detect(previous, positions, out);
+    } else {
+      detail::scale_positions(positions, k, scaled_, threads, "positions");
+      if (!previous.empty()) detail::scale_positions(previous, k, scaled_previous_, threads, "previous positions");
+      detect(previous.empty() ? PositionsView() : PositionsView(scaled_previous_), scaled_, out);
+      detail::scale_distances(out, -k);
+    }
   } catch (...) {
     out.clear();
     throw;

@@ -64,8 +64,14 @@ class Detector {
 
   /// Detects the contacts at `positions` (#V entries). `out`'s contents are replaced by them,
   /// sorted canonically (see `ContactSet::sort`); if it throws, `out` is left empty.
+  /// Coordinates of any magnitude: the detection runs on them scaled by a power of two (exact)
+  /// when their largest finite magnitude M is outside [2^-64, 2^64), so the contacts at scale
+  /// 2^j x are those at x, their distances times 2^j. Throws `InputError` when the finite
+  /// coordinates span more than the double range (some non-zero one below about 1e-308 M).
+  /// NaN and infinite coordinates are accepted: no contact involves them.
   void update(PositionsView positions, ContactSet& out);
-  /// Same, with the previous frame's positions for methods that use motion (others ignore them).
+  /// Same, with the previous frame's positions for methods that use motion (others ignore them,
+  /// and are given none).
   void update(PositionsView previous, PositionsView positions, ContactSet& out);
   /// Same, from a host application's buffers (`float` or `double`, packed or strided, see
   /// `VertexView`): a native view is read in place, any other is converted once into the
@@ -94,6 +100,10 @@ class Detector {
  protected:
   /// Called after a new topology is set; detectors build their per-mesh structures here.
   virtual void on_topology() {}
+  /// Called before a frame whose positions are scaled by another power of two than the last
+  /// frame's (`scale_exponent`): state kept in coordinates (boxes, reference positions) must
+  /// be dropped here. Index state (kept pairs) stays valid.
+  virtual void on_rescale() {}
   /// Replaces the contents of `out` by this frame's contacts. `out` holds whatever the caller
   /// passed (typically the set of an earlier frame): its storage, and its size, may be reused
   /// — rewriting records in place avoids constructing tens of MB of them every frame.
@@ -104,12 +114,23 @@ class Detector {
   /// contact), and the tests check the order of their output instead.
   virtual bool sorted_output() const { return false; }
 
+  /// The thickness in the coordinates `detect` is given: 2^scale_exponent() h (h from
+  /// `options()`), capped where every pair would be a contact (detect/scale_detail.hpp).
+  Scalar thickness() const { return thickness_; }
+  /// k such that `detect` is given the positions times 2^k (0 for the usual magnitudes); its
+  /// contacts' distances are multiplied by 2^-k after it returns.
+  int scale_exponent() const { return exponent_; }
+
   DetectorStats stats_;
 
  private:
   DetectorOptions options_;
   std::shared_ptr<const Topology> topology_;
   Positions converted_, converted_previous_;  // non-native `VertexView`s as doubles
+  Scalar thickness_ = 0;
+  int exponent_ = 0;
+  bool framed_ = false;                 // a frame ran since the topology was set
+  Positions scaled_, scaled_previous_;  // the positions times 2^exponent_, when it is not 0
 };
 
 /// Creates the detector for a method spec (the one factory, make_detector.cpp). Throws

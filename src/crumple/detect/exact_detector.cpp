@@ -32,6 +32,31 @@ struct ExactDetector::State {
   exact::GatherBuffers gather;
 };
 
+/// The broad phase's hierarchy as `update`'s caller sees it: node boxes scaled by 2^-k from the
+/// scaled coordinates the detector computes in (k = the last frame's `scale_exponent`).
+class ExactDetector::Unscaled final : public BoundingHierarchy {
+ public:
+  Unscaled(const BoundingHierarchy& inner, const ExactDetector& owner) : inner_(inner), owner_(owner) {}
+  int levels() const override { return inner_.levels(); }
+  std::vector<Bounds> node_boxes(int depth) const override {
+    std::vector<Bounds> boxes = inner_.node_boxes(depth);
+    const int k = owner_.scale_exponent();
+    if (k == 0) return boxes;
+    for (Bounds& b : boxes) {
+      for (int a = 0; a < 3; ++a) {
+        b.min[a] = std::scalbn(b.min[a], -k);
+        b.max[a] = std::scalbn(b.max[a], -k);
+      }
+    }
+    return boxes;
+  }
+  std::vector<std::vector<Index>> leaf_faces() const override { return inner_.leaf_faces(); }
+
+ private:
+  const BoundingHierarchy& inner_;
+  const ExactDetector& owner_;
+};
+
 ExactParams ExactParams::from_spec(const MethodSpec& spec) {
   ExactParams p;
   const long long cap = spec.get_int("max_contacts", 0);
@@ -45,9 +70,19 @@ ExactParams ExactParams::from_spec(const MethodSpec& spec) {
 ExactDetector::ExactDetector(DetectorOptions options, ExactParams params, std::unique_ptr<BroadPhase> broad_phase)
     : Detector(options), params_(params), broad_phase_(std::move(broad_phase)), state_(std::make_unique<State>()) {
   CRUMPLE_CHECK(broad_phase_ != nullptr, "ExactDetector: null broad phase");
+  if (const BoundingHierarchy* inner = broad_phase_->hierarchy()) unscaled_ = std::make_unique<Unscaled>(*inner, *this);
 }
 
 ExactDetector::~ExactDetector() = default;
+
+const BoundingHierarchy* ExactDetector::hierarchy() const {
+  return unscaled_.get();
+}
+
+void ExactDetector::on_rescale() {
+  state_->sleep = {};
+  broad_phase_->build(topology());
+}
 
 void ExactDetector::on_topology() {
   const Topology& topo = topology();
@@ -108,12 +143,16 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
   const auto t0 = std::chrono::steady_clock::now();
   const Scalar magnitude = prepare_frame(previous, x);
   const bool proximity = kinds.vf || kinds.ee;
-  const Scalar h = options().thickness;
+  const Scalar h = thickness();
   const Scalar pad = (proximity ? h * (1 + 1e-6) : 0) + 1e-9 * magnitude;
   FrameInput in{previous, x, pad / 2, threads, !proximity, {}};
   if (!kinds.tt) in.owns = s.face_owns;
   broad_phase_->update(in, stats_);
   broad_phase_->self_pairs(s.candidates, stats_);
+  // The one length among the broad phases' counters, in the caller's units.
+  if (const double cell = stats_.get("cell_size"); cell != 0 && scale_exponent() != 0) {
+    stats_.set("cell_size", std::scalbn(cell, -scale_exponent()));
+  }
   stats_.set("candidates", static_cast<double>(s.candidates.total()));
   stats_.set("broad_ms", ms_since(t0));
 
@@ -137,7 +176,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
       }
     });
   }
-  exact::NarrowFrame frame(topo, x, kinds, threads, options().thickness, pad, magnitude, s.packed, s.face_corners,
+  exact::NarrowFrame frame(topo, x, kinds, threads, thickness(), pad, magnitude, s.packed, s.face_corners,
                            s.coarse_x, s.edge_rank, s.spare_sets);
   exact::narrow_candidates(frame, s.candidates);
 

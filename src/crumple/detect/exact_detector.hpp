@@ -62,7 +62,8 @@ class ExactDetector final : public Detector {
   ~ExactDetector() override;
   Method method() const override { return broad_phase_->method(); }
   const BroadPhase& broad_phase() const { return *broad_phase_; }
-  const BoundingHierarchy* hierarchy() const override { return broad_phase_->hierarchy(); }
+  /// The broad phase's hierarchy (kdop), its boxes in the coordinates given to `update`.
+  const BoundingHierarchy* hierarchy() const override;
   /// True when the last frame had more contacts than `max_contacts` (also in stats:
   /// `overflow` = 1, `contacts_dropped`).
   bool overflowed() const { return overflowed_; }
@@ -73,8 +74,11 @@ class ExactDetector final : public Detector {
 
  private:
   struct State;  // exact_detector.cpp
+  class Unscaled;  // exact_detector.cpp: the hierarchy with its boxes scaled back
 
   void on_topology() final;
+  /// Rebuilds the broad phase and wakes the orphan blocks: both keep coordinates.
+  void on_rescale() final;
   void detect(PositionsView previous, PositionsView positions, ContactSet& out) final;
   /// The frame's largest coordinate magnitude (of `previous` too), and the float positions.
   Scalar prepare_frame(PositionsView previous, PositionsView x);
@@ -86,6 +90,7 @@ class ExactDetector final : public Detector {
   ExactParams params_;
   std::unique_ptr<BroadPhase> broad_phase_;
   std::unique_ptr<State> state_;
+  std::unique_ptr<Unscaled> unscaled_;
   bool overflowed_ = false;
 };
 

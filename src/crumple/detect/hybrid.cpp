@@ -6,6 +6,7 @@
 #include <crumple/core/json.hpp>
 #include <crumple/detect/hybrid.hpp>
 #include <crumple/detect/hybrid_detail.hpp>
+#include <crumple/detect/narrow_phase.hpp>
 
 #include <algorithm>
 #include <array>
@@ -198,7 +199,7 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
   const auto start = Clock::now();
   const Topology& topo = topology();
   Impl& m = *impl_;
-  const Scalar h = options().thickness;
+  const Scalar h = thickness();
   const ContactKinds& kinds = options().kinds;
   const bool has_previous = !previous.empty();
   const bool budget = params_.budget_ms > 0;
@@ -226,9 +227,9 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
 
   // 3. Examine the zones in order.
   const auto search_start = Clock::now();
-  m.sink.begin(topo, x, h * h, kinds, out);
+  m.sink.begin(topo, x, narrow::sqr_thickness(h), kinds, out);
   EngineStats zone_stats;
-  Context ctx{topo, x, h * h, 2 * h, 4 * h * h, m.sink, m.zone_tester, zone_stats};
+  Context ctx{topo, x, narrow::sqr_thickness(h), 2 * h, 4 * h * h, m.sink, m.zone_tester, zone_stats};
   EngineConfig base;
   base.direct = true;
   base.by_convergence = true;

@@ -30,8 +30,7 @@ void collect(std::size_t n, int threads, std::vector<T>& out, const PerRow& per_
 void NaiveDetector::detect(PositionsView /*previous*/, PositionsView x, ContactSet& out) {
   out.clear();
   const Topology& topo = topology();
-  const Scalar h = options().thickness;
-  const Scalar h2 = h * h;
+  const Scalar h2 = narrow::sqr_thickness(thickness());
   const int threads = options().threads;
   const Index nv = topo.num_vertices();
   const Index nf = topo.num_faces();

@@ -16,12 +16,21 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <vector>
 
 namespace crumple::narrow {
 
 inline const Vec3& at(PositionsView x, Index i) { return x[static_cast<std::size_t>(i)]; }
+
+/// What squared distances are compared with (contact when below it) for thickness h: h^2, or,
+/// when that underflows to 0 for h > 0, the smallest positive double, so that pairs at distance
+/// 0 stay contacts (0 < h).
+inline Scalar sqr_thickness(Scalar h) {
+  const Scalar h2 = h * h;
+  return h > 0 && h2 == 0 ? std::numeric_limits<Scalar>::denorm_min() : h2;
+}
 
 /// The normal of a vertex-face contact at distance 0: the geometric normal of the face with
 /// corners a, b, c; zero if the face is degenerate.

@@ -415,8 +415,8 @@ void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, Con
   out.clear();
   const auto start = std::chrono::steady_clock::now();
   const Topology& topo = topology();
-  const Scalar h = options().thickness;
-  const Scalar near = near_distance();
+  const Scalar h = thickness();
+  const Scalar near = params_.near * h;  // near_distance() in the scaled coordinates
   Impl& m = *impl_;
   m.saved_rng = m.rng;
   for (std::size_t i = 0; i < kPairTypes.size(); ++i) {
@@ -426,10 +426,10 @@ void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, Con
     m.saved_walking[i].assign(walking_now.begin(), walking_now.end());
   }
   m.saved = true;
-  m.sink.begin(topo, x, h * h, options().kinds, out);
+  m.sink.begin(topo, x, narrow::sqr_thickness(h), options().kinds, out);
   m.zone.begin_frame();
   EngineStats zone_stats;
-  Context ctx{topo, x, h * h, near, near * near, m.sink, m.zone, zone_stats};
+  Context ctx{topo, x, narrow::sqr_thickness(h), near, near * near, m.sink, m.zone, zone_stats};
 
   EngineConfig config;
   config.propagation = params_.propagation;

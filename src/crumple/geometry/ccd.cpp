@@ -25,6 +25,10 @@ constexpr Scalar kUnderflowSlack = 0x1p-1000;
 constexpr Scalar kMaxMagnitude = 0x1p1000;
 /// The coplanarity filter multiplies three differences: it runs only below this magnitude.
 constexpr Scalar kMaxSignFilterMagnitude = 0x1p300;
+/// Queries whose largest coordinate lies outside [this, kMaxUnscaledMagnitude] are computed
+/// scaled by a power of two (when that is exact).
+constexpr Scalar kMinUnscaledMagnitude = 0x1p-300;
+constexpr Scalar kMaxUnscaledMagnitude = 0x1p300;
 /// Smallest box width that is split again. Keeps every u and v bound a dyadic rational with at
 /// most 40 fractional bits, so midpoints and u + v are exact in binary64. (t bounds start at the
 /// advancement's time, any double: 1 - t and the t midpoints may round; docs/ccd.md.)
@@ -562,13 +566,39 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   CRUMPLE_CHECK(options.distance_tolerance >= 0 && options.time_tolerance >= 0 && options.separation_tolerance >= 0,
                 "ccd: tolerances must be >= 0");
   CcdResult result;
+  const Vec3 m = max_abs_coordinates(start, end);
+  if (const Scalar largest = m.maxCoeff();
+      largest <= kMaxMagnitude && (largest > kMaxUnscaledMagnitude || (largest > 0 && largest < kMinUnscaledMagnitude))) {
+    // The same query scaled by 2^k into [1, 2), when no coordinate loses a bit: the underflow
+    // slack of the error bounds, 2^-1000, no longer dominates tiny coordinates (at 1e-300 it made
+    // err a tenth of the query's extent: hits everywhere near contact), and the filters and the
+    // advancement, which need cubes below overflow, run on huge ones (up to the range, 2^1000;
+    // beyond, and for NaN, the conservative hit below). δ is rounded up.
+    const int k = -std::ilogb(largest);
+    CcdPoints s = start, e = end;
+    bool exact = true;
+    for (int i = 0; i < 4; ++i) {
+      for (int a = 0; a < 3; ++a) {
+        s[i][a] = std::scalbn(s[i][a], k);
+        e[i][a] = std::scalbn(e[i][a], k);
+        exact = exact && std::scalbn(s[i][a], -k) == start[i][a] && std::scalbn(e[i][a], -k) == end[i][a];
+      }
+    }
+    if (exact) {
+      CcdOptions scaled = options;
+      Scalar d = std::scalbn(delta, k);
+      if (std::scalbn(d, -k) < delta) d = std::nextafter(d, INFINITY);
+      // A δ beyond 2^1000 at magnitude 1 keeps every pair within it, as the unscaled δ does.
+      scaled.min_separation = std::min(d, kMaxMagnitude);
+      return ccd(pair, s, e, scaled);
+    }
+  }
   if (!in_range(start, end)) {
     result.hit = true;
     result.toi = 0;
     result.outcome = CcdOutcome::kHitOutOfRange;
     return result;
   }
-  const Vec3 m = max_abs_coordinates(start, end);
   Prepared p;
   set_bounds(p, m, delta);
   Scalar extent = 0;

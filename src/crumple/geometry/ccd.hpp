@@ -34,6 +34,10 @@
 ///    a hit is reported at the earliest time not yet ruled out, which is never before the
 ///    advancement's certified time: a pair apart by more than δ (and the rounding band) at
 ///    t = 0 never gets a TOI of 0.
+///  - Scale: a query whose largest coordinate lies outside [2^-300, 2^300] (and within the
+///    range, 2^1000) is computed on its points and δ (rounded up) scaled by a power of two into
+///    [1, 2) when that loses no bit of a coordinate, so it is decided as at unit scale; err is
+///    then that of the scaled query, scaled back.
 
 #include <crumple/core/types.hpp>
 

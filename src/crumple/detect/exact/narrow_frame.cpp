@@ -15,7 +15,7 @@ NarrowFrame::NarrowFrame(const Topology& topo_, PositionsView x_, ContactKinds k
       proximity(kinds_.vf || kinds_.ee),
       threads(threads_),
       thickness(thickness_),
-      sqr_thickness(thickness_ * thickness_),
+      sqr_thickness(narrow::sqr_thickness(thickness_)),
       pad(pad_),
       packed(packed_),
       face_corners(face_corners_),
