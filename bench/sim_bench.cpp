@@ -91,6 +91,15 @@ void BM_Response(benchmark::State& bench, int n) {
 
 /// Whole frames of a built-in scene with its default settings (`fail_safe` off: the baseline).
 /// Intersecting triangle pairs are counted at every frame, warm-up included, outside the timing.
+/// The exact detector of intersecting triangle pairs (`kdop`, kinds `tt`) over `sim`'s mesh.
+std::unique_ptr<Detector> intersection_counter(const Simulation& sim) {
+  DetectorOptions options;
+  options.kinds = ContactKinds::parse("tt");
+  auto tt = make_detector(MethodSpec::parse("kdop"), options);
+  tt->set_topology(sim.model().topology_ptr());
+  return tt;
+}
+
 void BM_Frame(benchmark::State& bench, const std::string& spec, bool fail_safe) {
   Scene s = make_scene(SceneSpec::parse(spec), 1);
   Settings settings = s.settings;
@@ -101,10 +110,7 @@ void BM_Frame(benchmark::State& bench, const std::string& spec, bool fail_safe) 
   settings.untangle = fail_safe;
   Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
                  settings);
-  DetectorOptions tt_options;
-  tt_options.kinds = ContactKinds::parse("tt");
-  auto tt = make_detector(MethodSpec::parse("kdop"), tt_options);
-  tt->set_topology(sim.model().topology_ptr());
+  auto tt = intersection_counter(sim);
   ContactSet intersections;
   double tt_frames = 0, tt_max = 0, tt_sum = 0, counted = 0;
   const auto count_intersections = [&] {
@@ -274,10 +280,7 @@ int check_frames(int argc, char** argv) {
   if (search_factor > 0) settings.search_factor = search_factor;
   Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
                  settings);
-  DetectorOptions tt_options;
-  tt_options.kinds = ContactKinds::parse("tt");
-  auto tt = make_detector(MethodSpec::parse("kdop"), tt_options);
-  tt->set_topology(sim.model().topology_ptr());
+  auto tt = intersection_counter(sim);
   ContactSet intersections;
   tt->update(sim.state().x, intersections);
   std::printf("%s: %d vertices, response %s, fail-safe %s, start: %zu intersecting pairs\n", spec.c_str(),

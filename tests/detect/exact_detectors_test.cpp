@@ -81,10 +81,40 @@ ContactSet run(const std::string& spec, const TriMesh& mesh, PositionsView previ
   return out;
 }
 
-bool close(Scalar a, Scalar b) { return std::abs(a - b) <= 1e-12 * std::max({std::abs(a), std::abs(b), 1e-300}); }
 
-/// Same pairs in the same (canonical) order, distances equal to 1e-12 relative (the issue's
-/// bar), and in fact every field bit-identical (the design's claim).
+/// `got`, found at positions and thickness 2^k times those of `want`: the same contacts, in the
+/// same order, with the same barycentric coordinates, normals and edge parameters, the
+/// distances 2^k times `want`'s (rounded once where they leave the normal range).
+void expect_scaled(const ContactSet& want, const ContactSet& got, int k, const std::string& what) {
+  SCOPED_TRACE(what);
+  ASSERT_EQ(want.vf.size(), got.vf.size()) << "VF count";
+  ASSERT_EQ(want.ee.size(), got.ee.size()) << "EE count";
+  ASSERT_EQ(want.tt.size(), got.tt.size()) << "TT count";
+  for (std::size_t i = 0; i < want.vf.size(); ++i) {
+    ASSERT_EQ(want.vf[i].vertex, got.vf[i].vertex) << "VF " << i;
+    ASSERT_EQ(want.vf[i].face, got.vf[i].face) << "VF " << i;
+    ASSERT_EQ(std::scalbn(want.vf[i].distance, k), got.vf[i].distance) << "VF " << i;
+    ASSERT_EQ(want.vf[i].barycentric, got.vf[i].barycentric) << "VF " << i;
+    ASSERT_EQ(want.vf[i].normal, got.vf[i].normal) << "VF " << i;
+  }
+  for (std::size_t i = 0; i < want.ee.size(); ++i) {
+    ASSERT_EQ(want.ee[i].a, got.ee[i].a) << "EE " << i;
+    ASSERT_EQ(want.ee[i].b, got.ee[i].b) << "EE " << i;
+    ASSERT_EQ(want.ee[i].edge0, got.ee[i].edge0) << "EE " << i;
+    ASSERT_EQ(want.ee[i].edge1, got.ee[i].edge1) << "EE " << i;
+    ASSERT_EQ(std::scalbn(want.ee[i].distance, k), got.ee[i].distance) << "EE " << i;
+    ASSERT_EQ(want.ee[i].s, got.ee[i].s) << "EE " << i;
+    ASSERT_EQ(want.ee[i].t, got.ee[i].t) << "EE " << i;
+    ASSERT_EQ(want.ee[i].normal, got.ee[i].normal) << "EE " << i;
+  }
+  for (std::size_t i = 0; i < want.tt.size(); ++i) {
+    ASSERT_EQ(want.tt[i].face0, got.tt[i].face0) << "TT " << i;
+    ASSERT_EQ(want.tt[i].face1, got.tt[i].face1) << "TT " << i;
+  }
+}
+
+/// Same pairs in the same (canonical) order and every field bit-identical (the design's claim;
+/// the bar is distances equal to 1e-12 relative).
 void expect_same(const ContactSet& want, const ContactSet& got, const std::string& what) {
   SCOPED_TRACE(what);
   if (want.vf.size() != got.vf.size()) {  // name the pairs that differ
@@ -98,35 +128,7 @@ void expect_same(const ContactSet& want, const ContactSet& got, const std::strin
       if (!a.count({v, f})) ADD_FAILURE() << "false VF " << v << " " << f;
     }
   }
-  ASSERT_EQ(want.vf.size(), got.vf.size()) << "VF count";
-  ASSERT_EQ(want.ee.size(), got.ee.size()) << "EE count";
-  ASSERT_EQ(want.tt.size(), got.tt.size()) << "TT count";
-  for (std::size_t i = 0; i < want.vf.size(); ++i) {
-    ASSERT_EQ(want.vf[i].vertex, got.vf[i].vertex) << "VF " << i;
-    ASSERT_EQ(want.vf[i].face, got.vf[i].face) << "VF " << i;
-    ASSERT_TRUE(close(want.vf[i].distance, got.vf[i].distance)) << "VF " << i;
-    // The shared kernel, called with the same arguments: the whole record is bit-identical.
-    ASSERT_EQ(want.vf[i].distance, got.vf[i].distance) << "VF " << i;
-    ASSERT_EQ(want.vf[i].barycentric, got.vf[i].barycentric) << "VF " << i;
-    ASSERT_EQ(want.vf[i].normal, got.vf[i].normal) << "VF " << i;
-  }
-  for (std::size_t i = 0; i < want.ee.size(); ++i) {
-    ASSERT_EQ(want.ee[i].a, got.ee[i].a) << "EE " << i;
-    ASSERT_EQ(want.ee[i].b, got.ee[i].b) << "EE " << i;
-    ASSERT_TRUE(close(want.ee[i].distance, got.ee[i].distance)) << "EE " << i;
-    // Same edges in the same order through the same kernel (an edge handed over reversed would
-    // give s or t as 1 - s or 1 - t and a distance equal only to rounding).
-    ASSERT_EQ(want.ee[i].edge0, got.ee[i].edge0) << "EE " << i;
-    ASSERT_EQ(want.ee[i].edge1, got.ee[i].edge1) << "EE " << i;
-    ASSERT_EQ(want.ee[i].distance, got.ee[i].distance) << "EE " << i;
-    ASSERT_EQ(want.ee[i].s, got.ee[i].s) << "EE " << i;
-    ASSERT_EQ(want.ee[i].t, got.ee[i].t) << "EE " << i;
-    ASSERT_EQ(want.ee[i].normal, got.ee[i].normal) << "EE " << i;
-  }
-  for (std::size_t i = 0; i < want.tt.size(); ++i) {
-    ASSERT_EQ(want.tt[i].face0, got.tt[i].face0) << "TT " << i;
-    ASSERT_EQ(want.tt[i].face1, got.tt[i].face1) << "TT " << i;
-  }
+  expect_scaled(want, got, 0, "");
 }
 
 /// Runs every spec in `specs` on a sequence of frames (each with the previous one as motion,
@@ -723,34 +725,6 @@ TEST(ExactDetectors, CoordinatesBeyondFloatPrecisionAndRange) {
   }
 }
 
-/// `got`, found at positions and thickness 2^k times those of `want`: the same contacts, in the
-/// same order, with the same barycentric coordinates, normals and edge parameters, the
-/// distances 2^k times `want`'s (rounded once where they leave the normal range).
-void expect_scaled(const ContactSet& want, const ContactSet& got, int k, const std::string& what) {
-  SCOPED_TRACE(what);
-  ASSERT_EQ(want.vf.size(), got.vf.size()) << "VF count";
-  ASSERT_EQ(want.ee.size(), got.ee.size()) << "EE count";
-  ASSERT_EQ(want.tt.size(), got.tt.size()) << "TT count";
-  for (std::size_t i = 0; i < want.vf.size(); ++i) {
-    ASSERT_EQ(want.vf[i].vertex, got.vf[i].vertex) << "VF " << i;
-    ASSERT_EQ(want.vf[i].face, got.vf[i].face) << "VF " << i;
-    ASSERT_EQ(std::scalbn(want.vf[i].distance, k), got.vf[i].distance) << "VF " << i;
-    ASSERT_EQ(want.vf[i].barycentric, got.vf[i].barycentric) << "VF " << i;
-    ASSERT_EQ(want.vf[i].normal, got.vf[i].normal) << "VF " << i;
-  }
-  for (std::size_t i = 0; i < want.ee.size(); ++i) {
-    ASSERT_EQ(want.ee[i].edge0, got.ee[i].edge0) << "EE " << i;
-    ASSERT_EQ(want.ee[i].edge1, got.ee[i].edge1) << "EE " << i;
-    ASSERT_EQ(std::scalbn(want.ee[i].distance, k), got.ee[i].distance) << "EE " << i;
-    ASSERT_EQ(want.ee[i].s, got.ee[i].s) << "EE " << i;
-    ASSERT_EQ(want.ee[i].t, got.ee[i].t) << "EE " << i;
-    ASSERT_EQ(want.ee[i].normal, got.ee[i].normal) << "EE " << i;
-  }
-  for (std::size_t i = 0; i < want.tt.size(); ++i) {
-    ASSERT_EQ(want.tt[i].face0, got.tt[i].face0) << "TT " << i;
-    ASSERT_EQ(want.tt[i].face1, got.tt[i].face1) << "TT " << i;
-  }
-}
 
 Positions scaled_by(PositionsView x, int k) {
   Positions y(x.begin(), x.end());
