@@ -108,7 +108,7 @@ std::string spec_error(std::string_view text) {
 TEST(SpecText, MethodAndSceneSpecsReportUnknownKeysAlike) {
   EXPECT_EQ(spec_error<MethodSpec>("sap:zz=1"),
             "method sap: unknown key 'zz' (valid keys: axis, max_contacts, overflow)");
-  EXPECT_EQ(spec_error<MethodSpec>("naive:zz=1"), "method naive: unknown key 'zz' (valid keys: none)");
+  EXPECT_EQ(spec_error<MethodSpec>("naive:zz=1"), "method naive: unknown key 'zz' (valid keys: cull)");
   const std::string scene = spec_error<sim::SceneSpec>("hanging-cloth:zz=1");
   EXPECT_EQ(scene.rfind("scene 'hanging-cloth': unknown key 'zz' (valid keys: ", 0), 0u) << scene;
   EXPECT_NE(scene.find("nx"), std::string::npos) << scene;

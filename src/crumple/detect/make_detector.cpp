@@ -16,7 +16,7 @@ namespace crumple {
 std::unique_ptr<Detector> make_detector(const MethodSpec& spec, const DetectorOptions& options) {
   switch (spec.method()) {
     case Method::Naive:
-      return std::make_unique<NaiveDetector>(options);
+      return std::make_unique<NaiveDetector>(options, spec.get_bool("cull", true));
     case Method::Kdop: {
       const KdopParams p = KdopParams::from_spec(spec);
       return std::make_unique<ExactDetector>(options, ExactParams::from_spec(spec), std::make_unique<KdopTree>(p));

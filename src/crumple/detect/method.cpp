@@ -10,7 +10,11 @@ namespace crumple {
 
 namespace {
 
-constexpr std::array<ParamInfo, 0> kNaiveParams{};
+constexpr std::array<ParamInfo, 1> kNaiveParams{{
+    {"cull", "on",
+     "on | off: skip the pairs whose bounding boxes, padded beyond any rounding of the distance, "
+     "are apart (the same contacts); off = the thesis' loop, every pair through the exact test"},
+}};
 
 constexpr std::array<ParamInfo, 10> kStochasticParams{{
     {"variant", "direct",
