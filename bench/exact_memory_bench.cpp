@@ -6,6 +6,8 @@
 // first frame's contacts gone by then); the records are the larger frame's.
 //   build/release/bench/exact_memory_bench --thickness 0.15 FRAME0 FRAME1
 //   build/release/bench/exact_memory_bench --lattice 200 --spacings 3   # a crumpled lattice
+//   build/release/bench/exact_memory_bench --hedgehog 4000 --kinds tt   # every face pair meets
+//   (--hedgehog N --apart: the same triangles moved apart, the O(faces) part)
 // One JSON line per case.
 #include <crumple/detect/detector.hpp>
 #include <crumple/detect/method.hpp>
@@ -94,7 +96,8 @@ int main(int argc, char** argv) {
     std::string method = "kdop", kinds = "vf,ee";
     int threads = 2;
     double thickness = 0, spacings = 3;
-    long lattice = 0;
+    long lattice = 0, hedgehog = 0;
+    bool apart = false;
     std::vector<std::string> frames;
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
@@ -108,6 +111,8 @@ int main(int argc, char** argv) {
       else if (a == "--thickness") thickness = std::stod(value());
       else if (a == "--lattice") lattice = std::stol(value());
       else if (a == "--spacings") spacings = std::stod(value());
+      else if (a == "--hedgehog") hedgehog = std::stol(value());
+      else if (a == "--apart") apart = true;
       else frames.push_back(a);
     }
     if (lattice > 0) {
@@ -119,8 +124,17 @@ int main(int argc, char** argv) {
           threads);
       return 0;
     }
+    if (hedgehog > 0) {
+      const auto [mesh, x0] = testing::hedgehog(static_cast<Index>(hedgehog), apart);
+      Positions x1 = x0;
+      for (Vec3& p : x1) p *= 0.995;
+      run(std::string(apart ? "hedgehog-apart-" : "hedgehog-") + std::to_string(hedgehog), mesh, x0, x1,
+          thickness > 0 ? thickness : 1e-3, method, kinds, threads);
+      return 0;
+    }
     if (frames.size() != 2 || !(thickness > 0)) {
-      std::fprintf(stderr, "usage: exact_memory_bench --thickness H FRAME0 FRAME1 | --lattice N [--spacings K]\n"
+      std::fprintf(stderr, "usage: exact_memory_bench --thickness H FRAME0 FRAME1 | --lattice N [--spacings K] |\n"
+                           "       --hedgehog N [--apart]\n"
                            "       [--method M] [--kinds vf,ee] [--threads T]\n");
       return 2;
     }

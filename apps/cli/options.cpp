@@ -36,6 +36,19 @@ bool boxes_near(const Vec3& amin, const Vec3& amax, const Vec3& bmin, const Vec3
   return (amin.array() <= bmax.array() + gap).all() && (bmin.array() <= amax.array() + gap).all();
 }
 
+/// The exponent k such that 2^k times the largest finite |coordinate| of x lies in [1, 2) (0
+/// when every coordinate is 0).
+int scale_exponent(PositionsView x) {
+  Scalar magnitude = 0;
+  for (const Vec3& p : x) {
+    for (int a = 0; a < 3; ++a) {
+      const Scalar c = std::abs(p[a]);
+      if (std::isfinite(c)) magnitude = std::max(magnitude, c);
+    }
+  }
+  return magnitude > 0 ? -std::ilogb(magnitude) : 0;
+}
+
 }  // namespace
 
 void add_detection_options(CLI::App& app, DetectionArgs& args, const DetectionHelp& help) {
@@ -126,34 +139,44 @@ void check_contact_budget(const Topology& topo, PositionsView x, const DetectorO
   }
   // Contacts per vertex stay bounded by the input while h is a few edge lengths at most.
   if (max_contacts == 0 || !(h > 4 * edge_length_stats(topo, x).mean)) return;
-  // Otherwise count exactly around a sample of vertices and edges and scale up.
+  // Otherwise count exactly around a sample of vertices and edges and scale up. The count
+  // compares squared distances, so it runs on the positions and the thickness times the power
+  // of two 2^k that brings the largest coordinate near 1 (exact, as in the detectors):
+  // coordinates near 1e200 would overflow (every pair within an infinite h^2), near 1e-200
+  // underflow (every pair at distance 0).
+  const int k = scale_exponent(x);
+  Positions y(x.size());
+  for (std::size_t v = 0; v < x.size(); ++v) {
+    for (int a = 0; a < 3; ++a) y[v][a] = std::scalbn(x[v][a], k);
+  }
+  const Scalar hs = std::scalbn(h, k);
   constexpr Index kSamples = 64;
   const auto faces = topo.faces();
   const auto edges = topo.edges();
   std::vector<Vec3> fmin(faces.size()), fmax(faces.size()), emin(edges.size()), emax(edges.size());
   for (std::size_t f = 0; f < faces.size(); ++f) {
-    const Vec3 &a = x[static_cast<std::size_t>(faces[f][0])], &b = x[static_cast<std::size_t>(faces[f][1])],
-               &c = x[static_cast<std::size_t>(faces[f][2])];
+    const Vec3 &a = y[static_cast<std::size_t>(faces[f][0])], &b = y[static_cast<std::size_t>(faces[f][1])],
+               &c = y[static_cast<std::size_t>(faces[f][2])];
     fmin[f] = a.cwiseMin(b).cwiseMin(c);
     fmax[f] = a.cwiseMax(b).cwiseMax(c);
   }
   for (std::size_t e = 0; e < edges.size(); ++e) {
-    const Vec3 &a = x[static_cast<std::size_t>(edges[e][0])], &b = x[static_cast<std::size_t>(edges[e][1])];
+    const Vec3 &a = y[static_cast<std::size_t>(edges[e][0])], &b = y[static_cast<std::size_t>(edges[e][1])];
     emin[e] = a.cwiseMin(b);
     emax[e] = a.cwiseMax(b);
   }
   double estimate = 0;
-  const Scalar h2 = h * h;
+  const Scalar h2 = hs * hs;
   if (options.kinds.vf || options.kinds.tt) {
     const Index nv = topo.num_vertices(), step = std::max<Index>(1, nv / kSamples);
     double found = 0, sampled = 0;
     for (Index v = 0; v < nv; v += step, ++sampled) {
-      const Vec3& p = x[static_cast<std::size_t>(v)];
+      const Vec3& p = y[static_cast<std::size_t>(v)];
       for (std::size_t f = 0; f < faces.size(); ++f) {
-        if (!boxes_near(p, p, fmin[f], fmax[f], h) || topo.face_has_vertex(static_cast<Index>(f), v)) continue;
+        if (!boxes_near(p, p, fmin[f], fmax[f], hs) || topo.face_has_vertex(static_cast<Index>(f), v)) continue;
         const auto& t = faces[f];
-        found += geometry::point_triangle(p, x[static_cast<std::size_t>(t[0])], x[static_cast<std::size_t>(t[1])],
-                                          x[static_cast<std::size_t>(t[2])])
+        found += geometry::point_triangle(p, y[static_cast<std::size_t>(t[0])], y[static_cast<std::size_t>(t[1])],
+                                          y[static_cast<std::size_t>(t[2])])
                      .sqr_distance <= h2;
       }
     }
@@ -167,9 +190,9 @@ void check_contact_budget(const Topology& topo, PositionsView x, const DetectorO
       for (std::size_t g = 0; g < edges.size(); ++g) {
         const Edge& b = edges[g];
         if (static_cast<Index>(g) == e || a[0] == b[0] || a[0] == b[1] || a[1] == b[0] || a[1] == b[1]) continue;
-        if (!boxes_near(emin[static_cast<std::size_t>(e)], emax[static_cast<std::size_t>(e)], emin[g], emax[g], h)) continue;
-        found += geometry::segment_segment(x[static_cast<std::size_t>(a[0])], x[static_cast<std::size_t>(a[1])],
-                                           x[static_cast<std::size_t>(b[0])], x[static_cast<std::size_t>(b[1])])
+        if (!boxes_near(emin[static_cast<std::size_t>(e)], emax[static_cast<std::size_t>(e)], emin[g], emax[g], hs)) continue;
+        found += geometry::segment_segment(y[static_cast<std::size_t>(a[0])], y[static_cast<std::size_t>(a[1])],
+                                           y[static_cast<std::size_t>(b[0])], y[static_cast<std::size_t>(b[1])])
                      .sqr_distance <= h2;
       }
     }

@@ -542,9 +542,13 @@ int run_simulate(const SimulateArgs& args) {
   }
   summary.wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - loop_start).count();
   progress.finish();
-  std::fclose(csv);
+  // The close is checked too (every line was flushed and checked as written); the state is
+  // saved first either way, so that a failed close still leaves a run that resumes.
+  const bool closed = std::fclose(csv) == 0;
+  const int close_errno = errno;
   csv = nullptr;
   save();
+  if (!closed) throw InputError("cannot write " + csv_path.string() + ": " + std::strerror(close_errno));
 
   if (diverged) {
     const Scalar frame_time = settings.dt * settings.substeps;

@@ -12,6 +12,7 @@
 #include <cctype>
 #include <cmath>
 #include <csignal>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -254,6 +255,31 @@ TEST(Safety, HugeThicknessStopsBeforeDetecting) {
   EXPECT_EQ(r.out.find("warning"), std::string::npos) << r.out;
 }
 
+// Defect 6: the contact estimate squared unscaled distances: at coordinates near 1e200 every
+// pair whose boxes met counted (h^2 = inf), near 1e-200 too (everything squared to 0), so the
+// same sheet gave another estimate, and another verdict, at another scale. It is the same.
+TEST(Safety, ContactEstimateIsTheSameAtEveryScale) {
+  const testing::TempDir dir;
+  const TriMesh mesh = shapes::folded_cloth();
+  std::string first;
+  for (const Scalar scale : {1.0, 1e200, 1e-200}) {
+    Positions x = mesh.positions();
+    for (Vec3& p : x) p *= scale;
+    const auto file = dir / "sheet.obj";
+    io::write_obj(file, x, mesh.topology().faces());
+    char thickness[32];
+    std::snprintf(thickness, sizeof thickness, "%.17g", 0.23 * scale);
+    const auto r = run_cli("detect " + file.string() + " -t " + thickness + " --max-contacts 10");
+    EXPECT_EQ(r.status, 1) << scale << "\n" << r.out;
+    const std::size_t at = r.out.find("would give about ");
+    ASSERT_NE(at, std::string::npos) << scale << "\n" << r.out;
+    const std::string estimate = r.out.substr(at, r.out.find(" contacts", at) - at);
+    if (first.empty()) first = estimate;
+    EXPECT_EQ(estimate, first) << "at scale " << scale << "\n" << r.out;
+    EXPECT_EQ(r.out.find("inf"), std::string::npos) << scale << "\n" << r.out;
+  }
+}
+
 // Defect 6: typos in sizes end in a clear bound, not `internal error` or a 309-digit number.
 TEST(Safety, OutOfRangeSizesAreClearErrors) {
   const std::vector<std::pair<std::string, std::string>> cases{
@@ -329,6 +355,42 @@ TEST(Safety, ProgressIsAPlainLineWithAnEtaOffTerminal) {
   r = run_cli("simulate hanging-cloth:nx=4,ny=4 -n 3 --force -o " + dir.path().string());
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_EQ(r.out.find("ETA"), std::string::npos) << r.out;
+  // So do render (a scene's frames, and a video's) and detect over several frames.
+  const std::string progress = "CRUMPLE_PROGRESS_SECONDS=0 " + std::string(CRUMPLE_CLI);
+  r = testing::run_program(progress, "render hanging-cloth:nx=4,ny=4 --frame 3 --size 40x30 --out " +
+                                         (dir / "f.png").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("crumple render: frame 3/4, "), std::string::npos) << r.out;  // frames done
+  EXPECT_NE(r.out.find("ETA"), std::string::npos) << r.out;
+  r = testing::run_program(progress, "detect " + (dir / "frames").string() + " -t 0.01");
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("crumple detect: frame 4/4, "), std::string::npos) << r.out;
+}
+
+// Fuzzing in CI: a missing fuzz binary printed a sed error and was reported as a finding (or
+// `fuzz.sh TARGET` exited 2 with the sed error only). It is one clear line naming what to
+// build, exit 2, and nothing runs, even when the other targets are built.
+TEST(Safety, FuzzScriptWithoutItsBinariesSaysWhatToBuild) {
+  const testing::TempDir dir;
+  const auto bin = dir / "tests" / "fuzz";
+  std::filesystem::create_directories(bin);
+  {
+    std::ofstream fake(bin / "fuzz_obj");
+    fake << "#!/bin/sh\necho RAN >&2\n";
+  }
+  std::filesystem::permissions(bin / "fuzz_obj", std::filesystem::perms::owner_all);
+  const std::string script = "FUZZ_BUILD=" + quoted(dir.path()) + " bash " +
+                             quoted(std::filesystem::path(CRUMPLE_SOURCE_DIR) / "scripts" / "fuzz.sh");
+  for (const std::string& args : {std::string("ci 1"), std::string("ply 1 ") + (dir / "work").string()}) {
+    const auto r = testing::run_program(script, args);
+    EXPECT_EQ(r.status, 2) << args << "\n" << r.out;
+    EXPECT_NE(r.out.find("fuzz.sh: not built: " + (bin / "fuzz_ply").string()), std::string::npos)
+        << args << "\n" << r.out;
+    EXPECT_NE(r.out.find("cmake --preset fuzz"), std::string::npos) << args << "\n" << r.out;
+    EXPECT_EQ(r.out.find("sed:"), std::string::npos) << args << "\n" << r.out;
+    EXPECT_EQ(r.out.find("RAN"), std::string::npos) << "nothing runs: " << args << "\n" << r.out;
+    EXPECT_EQ(r.out.find("fuzz_obj:"), std::string::npos) << args << "\n" << r.out;
+  }
 }
 
 }  // namespace

@@ -1219,6 +1219,25 @@ void check_real_references(bool sanitized) {
 /// scenes of under 100,000 contacts.
 TEST(ExactDetectors, RealMeshesMatchCachedNaiveReferences) { check_real_references(kSanitized); }
 
+// A TT-only query streams the broad phase's candidates to the narrow phase on the broad
+// phase's threads, and gathers triangle contacts from their keys alone (exact/gather_contacts.cpp):
+// element by element naive's, for every method, on one and three threads, on a crumpled
+// sheet moving over frames and on triangles of which every pair meets (more candidates than
+// one stream chunk holds).
+TEST(ExactDetectors, TriangleIntersectionsAloneMatchNaive) {
+  const TriMesh sheet = shapes::lattice(24, 24);
+  std::vector<Positions> frames{testing::crumple_lattice(sheet, 0.3, 3)};
+  for (int f = 1; f < 3; ++f) {
+    frames.push_back(frames.back());
+    for (Vec3& p : frames.back()) p = Vec3(p.x() + 0.01 * p.z(), p.y(), p.z() * 0.97);
+  }
+  const ContactKinds tt = ContactKinds::parse("tt");
+  EXPECT_GT(expect_sequence_exact(sheet, frames, 0.0, all_specs(), tt, {1, 3}), 50u) << "the sheet should cross itself";
+  const auto [spikes, x] = testing::hedgehog(kSanitized ? 120 : 240, false);
+  EXPECT_EQ(expect_sequence_exact(spikes, {x}, 0.0, default_specs(), tt, {1, 3}),
+            static_cast<std::size_t>(spikes.num_faces()) * (spikes.num_faces() - 1) / 2);
+}
+
 /// Published fact (tests/data README, the dataset's paper): cloth-ball 93 has 97,320
 /// non-adjacent intersecting triangle pairs.
 TEST(ExactDetectors, ClothBallIntersectionCount) {

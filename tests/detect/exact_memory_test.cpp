@@ -12,6 +12,10 @@
 #include "support/meshes.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <random>
+#include <string>
+#include <utility>
 
 namespace crumple {
 namespace {
@@ -77,6 +81,35 @@ TEST(ExactMemory, PeakIsTheRecordsOnceAndAFraction) {
         << kinds << ": peak " << thick.extra / thick.records << " x the records (" << thick.records / 1e6
         << " MB), O(faces) " << (thin.extra + kept) / 1e6 << " MB";
   }
+}
+
+// Triangle intersections alone (`--kinds tt`) past the record budget. A triangle contact (8
+// bytes) is as large as its key and as a broad-phase candidate, so every copy counts: all the
+// candidates held through the narrow phase, keys grown by doubling beside kept records, and the
+// gather's places (an address and a second face a contact) beside the keys, then beside the
+// output, took 5.1 x the records here. On `testing::hedgehog` (every pair of faces meets), and
+// the same triangles moved apart for the O(faces) part.
+TEST(ExactMemory, TriangleIntersectionsAlonePastTheBudget) {
+  // As many contacts as a face's share of the O(faces) part (about 1.6 kB here) times 3, at
+  // least: fewer would let the bound pass whatever the gather holds (also under the sanitizers).
+  const Index n = 2400;
+  const auto [spread, x_apart] = testing::hedgehog(n, true);
+  const auto [mesh, x0] = testing::hedgehog(n, false);
+  Positions x1 = x0, y1 = x_apart;
+  for (Vec3& p : x1) p *= 0.995;
+  for (Vec3& p : y1) p *= 0.995;
+  const Measured thin = measure(spread, x_apart, y1, 1e-3, "tt");
+  ASSERT_EQ(thin.records, 0) << "the triangles moved apart do not meet";
+  const double kept = 2.0 * static_cast<double>(exact::kKeepBytesPerFace) * static_cast<double>(mesh.num_faces());
+  const Measured thick = measure(mesh, x0, x1, 1e-3, "tt");
+  ASSERT_EQ(thick.records, static_cast<double>(sizeof(TriangleTriangleContact)) * n * (n - 1) / 2)
+      << "every pair of triangles meets";
+  ASSERT_GT(thick.records, 3 * (thin.extra + kept)) << "the records must dominate for the bound to say anything";
+  RecordProperty("peak_over_records", std::to_string(thick.extra / thick.records));
+  RecordProperty("o_faces_mb", std::to_string(thin.extra / 1e6));
+  EXPECT_LE(thick.extra, 1.5 * thick.records + thin.extra + kept)
+      << "tt: peak " << thick.extra / thick.records << " x the records (" << thick.records / 1e6 << " MB), O(faces) "
+      << (thin.extra + kept) / 1e6 << " MB";
 }
 
 }  // namespace

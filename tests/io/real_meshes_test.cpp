@@ -9,6 +9,7 @@
 // The C++ side sums in the same order, so the doubles must match bit for bit.
 
 #include "io_test_util.hpp"
+#include "support/meshes.hpp"
 
 #include <chrono>
 #include <cstdlib>
@@ -87,11 +88,7 @@ const RealMesh real_meshes[] = {
      {39938, 39920, 29985}, 28684.559425496976, 9568968036},
 };
 
-// The folder configured at build time; the environment variable CRUMPLE_DATA_DIR overrides it.
-fs::path data_dir() {
-  const char* env = std::getenv("CRUMPLE_DATA_DIR");
-  return fs::path(env && *env ? env : CRUMPLE_DATA_DIR);
-}
+using crumple::testing::data_dir;  // the environment's CRUMPLE_DATA_DIR, else the configured folder
 
 // Fails (does not skip) when the shared data is missing: these checks must not pass silently.
 ::testing::AssertionResult data_available() {
@@ -103,6 +100,21 @@ fs::path data_dir() {
               "variable CRUMPLE_DATA_DIR)";
   }
   return ::testing::AssertionSuccess();
+}
+
+// `CRUMPLE_DATA_DIR=/elsewhere ctest` reached this program only (the other test programs read
+// the configured folder alone): every test program's `data_path` follows the environment, and
+// an empty value means the configured folder.
+TEST(RealMeshes, TheEnvironmentMovesEveryTestProgramsDataFolder) {
+  const char* was = std::getenv("CRUMPLE_DATA_DIR");
+  const std::string saved = was != nullptr ? was : "";
+  ::setenv("CRUMPLE_DATA_DIR", "/elsewhere/data", 1);
+  EXPECT_EQ(crumple::testing::data_path("a/t0.ply"), fs::path("/elsewhere/data/a/t0.ply"));
+  ::setenv("CRUMPLE_DATA_DIR", "", 1);
+  EXPECT_EQ(crumple::testing::data_path("a/t0.ply"), fs::path(CRUMPLE_DATA_DIR) / "a/t0.ply");
+  ::unsetenv("CRUMPLE_DATA_DIR");
+  EXPECT_EQ(data_dir(), fs::path(CRUMPLE_DATA_DIR));
+  if (was != nullptr) ::setenv("CRUMPLE_DATA_DIR", saved.c_str(), 1);
 }
 
 TEST(RealMeshes, EveryPlyFileIsListed) {

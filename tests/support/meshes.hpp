@@ -5,6 +5,8 @@
 #include <crumple/mesh/mesh.hpp>
 #include <crumple/mesh/shapes.hpp>
 
+#include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <random>
 #include <string>
@@ -13,9 +15,41 @@
 
 namespace crumple::testing {
 
-/// Path of a file in the shared real-mesh folder.
-inline std::filesystem::path data_path(const std::string& relative) {
-  return std::filesystem::path(CRUMPLE_DATA_DIR) / relative;
+/// The shared real-mesh folder: the environment variable CRUMPLE_DATA_DIR when set and not
+/// empty (so `CRUMPLE_DATA_DIR=... ctest` moves every test program to another copy), else the
+/// folder configured at build time (-DCRUMPLE_DATA_DIR, default ../shared/data).
+inline std::filesystem::path data_dir() {
+  const char* env = std::getenv("CRUMPLE_DATA_DIR");
+  return std::filesystem::path(env != nullptr && *env != '\0' ? env : CRUMPLE_DATA_DIR);
+}
+
+/// Path of a file in the shared real-mesh folder (`data_dir`).
+inline std::filesystem::path data_path(const std::string& relative) { return data_dir() / relative; }
+
+/// `n` separate triangles through one point (their centroid) in seeded random planes, so that
+/// every pair intersects (n (n - 1) / 2 triangle contacts, as many as broad-phase candidates);
+/// or (`apart`) the same triangles spread on a grid 3 units apart, meeting none. Returns the
+/// mesh and its positions.
+inline std::pair<TriMesh, Positions> hedgehog(Index n, bool apart) {
+  std::mt19937 random(11);
+  std::normal_distribution<Scalar> normal;
+  std::uniform_real_distribution<Scalar> angle(0, 6.283185307179586);
+  Positions x;
+  std::vector<Face> faces;
+  const auto side = static_cast<Index>(std::ceil(std::sqrt(static_cast<double>(n))));
+  for (Index t = 0; t < n; ++t) {
+    const Vec3 normal_of_plane = Vec3(normal(random), normal(random), normal(random)).normalized();
+    const Vec3 u = normal_of_plane.unitOrthogonal(), v = normal_of_plane.cross(u);
+    const Scalar phase = angle(random);
+    const Vec3 offset = apart ? Vec3(3.0 * (t % side), 3.0 * (t / side), 0) : Vec3::Zero();
+    for (int k = 0; k < 3; ++k) {
+      const Scalar a = phase + 2.0943951023931953 * k;
+      x.push_back(offset + std::cos(a) * u + std::sin(a) * v);
+    }
+    faces.push_back({3 * t, 3 * t + 1, 3 * t + 2});
+  }
+  TriMesh mesh = TriMesh::create(x, faces);
+  return {std::move(mesh), std::move(x)};
 }
 
 /// Small built-in meshes with different topology: open lattices, a folded lattice, a closed

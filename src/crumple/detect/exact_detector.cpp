@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -148,20 +149,24 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
   FrameInput in{previous, x, pad / 2, threads, !proximity, {}};
   if (!kinds.tt) in.owns = s.face_owns;
   broad_phase_->update(in, stats_);
-  broad_phase_->self_pairs(s.candidates, stats_);
+  // Triangle intersections alone: each candidate may be a contact, and is as large as one, so
+  // the candidates are not all held: the broad phase streams them to the narrow phase
+  // (`narrow_phase`), whose memory then follows the contacts.
+  const bool stream = !proximity;
+  if (!stream) broad_phase_->self_pairs(s.candidates, stats_);
   // The one length among the broad phases' counters, in the caller's units.
   if (const double cell = stats_.get("cell_size"); cell != 0 && scale_exponent() != 0) {
     stats_.set("cell_size", std::scalbn(cell, -scale_exponent()));
   }
-  stats_.set("candidates", static_cast<double>(s.candidates.total()));
+  if (!stream) stats_.set("candidates", static_cast<double>(s.candidates.total()));
   stats_.set("broad_ms", ms_since(t0));
 
-  narrow_phase(x, pad, magnitude, out);
+  narrow_phase(x, pad, magnitude, stream, out);
   s.candidates.clear();
   cap_contacts(out);
 }
 
-void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, ContactSet& out) {
+void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, bool stream, ContactSet& out) {
   State& s = *state_;
   const Topology& topo = topology();
   const int threads = options().threads;
@@ -178,7 +183,21 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   }
   exact::NarrowFrame frame(topo, x, kinds, threads, thickness(), pad, magnitude, s.packed, s.face_corners,
                            s.coarse_x, s.edge_rank, s.spare_sets);
-  exact::narrow_candidates(frame, s.candidates);
+  if (stream) {
+    s.candidates.clear();
+    s.candidates.set_consumer([&frame](std::span<const FacePair> chunk) { exact::narrow_candidate_chunk(frame, chunk); });
+    try {
+      broad_phase_->self_pairs(s.candidates, stats_);
+    } catch (...) {
+      s.candidates.set_consumer({});
+      s.candidates.clear();
+      throw;
+    }
+    s.candidates.set_consumer({});
+    stats_.set("candidates", static_cast<double>(s.candidates.total()));
+  } else {
+    exact::narrow_candidates(frame, s.candidates);
+  }
 
   const auto orphans_start = std::chrono::steady_clock::now();
   const bool refresh = frame.proximity && exact::wake_orphan_blocks(s.orphans, s.sleep, x, pad, threads, stats_);

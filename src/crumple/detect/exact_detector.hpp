@@ -83,7 +83,8 @@ class ExactDetector final : public Detector {
   /// The frame's largest coordinate magnitude (of `previous` too), and the float positions.
   Scalar prepare_frame(PositionsView previous, PositionsView x);
   /// Stages 3 to 5 over the broad phase's candidates; `magnitude` as `prepare_frame` gives it.
-  void narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, ContactSet& out);
+  /// `stream`: the broad phase's `self_pairs` is run here, its candidates tested as they come.
+  void narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, bool stream, ContactSet& out);
   /// Applies `max_contacts` (throws or truncates) and sets the contact stats.
   void cap_contacts(ContactSet& out);
 

@@ -8,6 +8,57 @@
 
 namespace crumple::exact {
 
+namespace {
+
+/// The triangle contacts of `parts` into `out` in canonical order (by first face, then second).
+/// A triangle contact is its key (face0 << 32 | face1, 8 bytes as the record), so its record
+/// is made from the key, kept or not, and the keys are placed without `gather_place`'s
+/// address per contact: counted per first face, their second faces scattered to their places
+/// (4 bytes each, beside the keys), the keys freed, then `out` sized and filled group by group,
+/// each group's second faces sorted. The peak is 12 bytes a contact (1.5 x the records) plus
+/// two counts per face.
+void gather_triangles(std::vector<KeyedContacts>& parts, Index nf, int threads,
+                      std::vector<TriangleTriangleContact>& out) {
+  const auto faces = static_cast<std::size_t>(nf);
+  std::size_t total = 0;
+  for (const KeyedContacts& p : parts) total += p.tt_keys.size() + p.tt_only.size();
+  if (total > out.capacity()) std::vector<TriangleTriangleContact>().swap(out);  // not held beside the keys
+  out.clear();
+  if (total == 0) return;
+  std::vector<std::size_t> start(faces + 1, 0);  // start[f]: the place of face f's first contact
+  for (const KeyedContacts& p : parts) {
+    for (const auto* keys : {&p.tt_keys, &p.tt_only}) {
+      for (const std::uint64_t key : *keys) ++start[(key >> 32) + 1];
+    }
+  }
+  for (std::size_t f = 0; f < faces; ++f) start[f + 1] += start[f];
+  std::vector<std::int32_t> second(total);
+  {
+    std::vector<std::size_t> next(start.begin(), start.end() - 1);
+    for (KeyedContacts& p : parts) {
+      for (auto* keys : {&p.tt_keys, &p.tt_only}) {
+        for (const std::uint64_t key : *keys) {
+          second[next[key >> 32]++] = static_cast<std::int32_t>(key & 0x7FFFFFFFu);
+        }
+        std::vector<std::uint64_t>().swap(*keys);
+      }
+    }
+  }
+  out.resize(total);
+  parallel_for_chunks(faces, threads, 4096, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) {
+      std::int32_t* const first = second.data() + start[f];
+      std::int32_t* const last = second.data() + start[f + 1];
+      std::sort(first, last);
+      for (std::int32_t* g = first; g < last; ++g) {
+        out[static_cast<std::size_t>(g - second.data())] = {static_cast<Index>(f), static_cast<Index>(*g)};
+      }
+    }
+  });
+}
+
+}  // namespace
+
 void gather_contacts(NarrowFrame& frame, const std::vector<Index>& edge_by_rank, GatherBuffers& buffers,
                      ContactSet& out) {
   const Topology& topo = frame.topo;
@@ -17,14 +68,11 @@ void gather_contacts(NarrowFrame& frame, const std::vector<Index>& edge_by_rank,
   std::vector<KeyedContacts>& parts = frame.parts;
   std::vector<detail::KeyedList<VertexFaceContact>> vf_parts;
   std::vector<detail::KeyedList<EdgeEdgeContact>> ee_parts;
-  std::vector<detail::KeyedList<TriangleTriangleContact>> tt_parts;
   for (const KeyedContacts& p : parts) {
     vf_parts.push_back({&p.set.vf, &p.vf_keys});
     vf_parts.push_back({nullptr, &p.vf_only});
     ee_parts.push_back({&p.set.ee, &p.ee_keys});
     ee_parts.push_back({nullptr, &p.ee_only});
-    tt_parts.push_back({&p.set.tt, &p.tt_keys});
-    tt_parts.push_back({nullptr, &p.tt_only});
   }
   // The records not kept, made again by the kernels that found them, four at a time, on the
   // same positions in the same order of arguments (`vertex_face` with the face's corners in
@@ -52,9 +100,6 @@ void gather_contacts(NarrowFrame& frame, const std::vector<Index>& edge_by_rank,
     }
     batch.flush(sqr_thickness, made);
   };
-  const auto make_tt = [&](const std::uint64_t* keys, std::size_t n, std::vector<TriangleTriangleContact>& made) {
-    for (std::size_t i = 0; i < n; ++i) made.push_back({first_of(keys[i]), second_of(keys[i])});
-  };
   // A kind's keys, once its places are found: given back before its records are sized.
   const auto free_keys = [&](auto keys, auto only) {
     for (KeyedContacts& p : parts) {
@@ -68,23 +113,23 @@ void gather_contacts(NarrowFrame& frame, const std::vector<Index>& edge_by_rank,
     return n;
   };
   const Index nf = topo.num_faces();
+  // The triangle contacts first (their keys are freed before the other kinds' places are found).
+  gather_triangles(parts, nf, threads, out.tt);
   if (resolve_threads(threads) > 1 && detail::gather_places_serially(count(vf_parts)) &&
-      detail::gather_places_serially(count(ee_parts)) && detail::gather_places_serially(count(tt_parts))) {
+      detail::gather_places_serially(count(ee_parts))) {
     // Few contacts: each kind's places are found on one thread, so the kinds are placed side by
-    // side (the vertex-face and triangle contacts copied there too) rather than one after the
-    // other, then the edge-edge ones (most of them) are copied by every thread.
+    // side (the vertex-face contacts copied there too) rather than one after the other, then
+    // the edge-edge ones (most of them) are copied by every thread.
     parallel_for_chunks(2, threads, 1, [&](std::size_t begin, std::size_t end) {
       for (std::size_t task = begin; task < end; ++task) {
         if (task == 0) {
           detail::gather_place(ee_parts, topo.num_edges(), threads, buffers.main);
         } else {
           detail::gather_sorted(out.vf, vf_parts, topo.num_vertices(), threads, buffers.other, make_vf);
-          detail::gather_sorted(out.tt, tt_parts, nf, threads, buffers.other, make_tt);
         }
       }
     });
     free_keys(&KeyedContacts::vf_keys, &KeyedContacts::vf_only);
-    free_keys(&KeyedContacts::tt_keys, &KeyedContacts::tt_only);
     free_keys(&KeyedContacts::ee_keys, &KeyedContacts::ee_only);
     detail::gather_copy(out.ee, threads, buffers.main, make_ee);
   } else {
@@ -94,9 +139,6 @@ void gather_contacts(NarrowFrame& frame, const std::vector<Index>& edge_by_rank,
     detail::gather_place(ee_parts, topo.num_edges(), threads, buffers.main);
     free_keys(&KeyedContacts::ee_keys, &KeyedContacts::ee_only);
     detail::gather_copy(out.ee, threads, buffers.main, make_ee);
-    detail::gather_place(tt_parts, nf, threads, buffers.main);
-    free_keys(&KeyedContacts::tt_keys, &KeyedContacts::tt_only);
-    detail::gather_copy(out.tt, threads, buffers.main, make_tt);
   }
   // The parts' storage, kept records' included, for the next frame's chunks (fresh storage
   // costs page faults): at most `keep_budget` bytes of records, which the next frame's budget

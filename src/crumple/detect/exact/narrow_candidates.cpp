@@ -189,29 +189,46 @@ void block_triangle_triangle(const NarrowFrame& frame, const std::array<Candidat
 
 }  // namespace
 
+namespace {
+
+/// Candidates [begin, end) of `chunks` (put end to end; `offsets` their starts) through the
+/// block stages, their contacts handed in as one chunk of work (`NarrowFrame::collect`).
+void narrow_range(NarrowFrame& frame, const std::vector<std::vector<FacePair>>& chunks,
+                  const std::vector<std::size_t>& offsets, std::size_t begin, std::size_t end) {
+  const ContactKinds kinds = frame.kinds;
+  LocalContacts local{frame.spares.take()};
+  std::array<Candidate, kBlock> block;
+  BlockCodes codes;
+  std::size_t c = static_cast<std::size_t>(std::upper_bound(offsets.begin(), offsets.end(), begin) - offsets.begin() - 1);
+  for (std::size_t i = begin; i < end;) {
+    const std::size_t n = list_block(frame, chunks, offsets, i, c, end, block, codes);
+    if (kinds.vf) block_vertex_face(frame, block, codes, local);
+    if (kinds.ee) block_edge_edge(frame, block, codes, local);
+    if (kinds.tt) block_triangle_triangle(frame, block, n, local);
+  }
+  frame.collect(local);
+}
+
+}  // namespace
+
 void narrow_candidates(NarrowFrame& frame, const CandidateBuffer& candidates) {
   const auto& chunks = candidates.chunks();
   std::vector<std::size_t> offsets(chunks.size() + 1, 0);
   for (std::size_t i = 0; i < chunks.size(); ++i) offsets[i + 1] = offsets[i] + chunks[i].size();
   const std::size_t total = offsets.back();
-  const ContactKinds kinds = frame.kinds;
   // Chunks of 2,048 candidates, or fewer so that each thread has at least 16
   // (`balanced_grain`): a small scene's chunks would otherwise leave a thread idle at the end.
   const std::size_t grain = balanced_grain(total, frame.threads, 256, 2048);
   parallel_for_chunks(total, frame.threads, grain, [&](std::size_t begin, std::size_t end) {
-    LocalContacts local{frame.spares.take()};
-    std::array<Candidate, kBlock> block;
-    BlockCodes codes;
-    std::size_t c = static_cast<std::size_t>(
-        std::upper_bound(offsets.begin(), offsets.end(), begin) - offsets.begin() - 1);
-    for (std::size_t i = begin; i < end;) {
-      const std::size_t n = list_block(frame, chunks, offsets, i, c, end, block, codes);
-      if (kinds.vf) block_vertex_face(frame, block, codes, local);
-      if (kinds.ee) block_edge_edge(frame, block, codes, local);
-      if (kinds.tt) block_triangle_triangle(frame, block, n, local);
-    }
-    frame.collect(local);
+    narrow_range(frame, chunks, offsets, begin, end);
   });
+}
+
+void narrow_candidate_chunk(NarrowFrame& frame, std::span<const FacePair> chunk) {
+  if (chunk.empty()) return;
+  const std::vector<std::vector<FacePair>> chunks{std::vector<FacePair>(chunk.begin(), chunk.end())};
+  const std::vector<std::size_t> offsets{0, chunk.size()};
+  narrow_range(frame, chunks, offsets, 0, chunk.size());
 }
 
 }  // namespace crumple::exact

@@ -69,8 +69,10 @@ void NarrowFrame::list_keys(LocalContacts& local) const {
        [&](const VertexFaceContact& c) { return pair_key(c.vertex, c.face); });
   list(local.set.ee, part.set.ee, part.ee_keys, part.ee_only,
        [&](const EdgeEdgeContact& c) { return pair_key(rank(c.edge0), rank(c.edge1)); });
-  list(local.set.tt, part.set.tt, part.tt_keys, part.tt_only,
-       [&](const TriangleTriangleContact& c) { return pair_key(c.face0, c.face1); });
+  // A triangle contact is its key (the gather makes it from the key): keys only, no record
+  // kept beside one as large.
+  for (const TriangleTriangleContact& c : local.set.tt) part.tt_only.push_back(pair_key(c.face0, c.face1));
+  local.set.tt.clear();
 }
 
 void NarrowFrame::collect(LocalContacts& local) {
@@ -79,6 +81,10 @@ void NarrowFrame::collect(LocalContacts& local) {
   local.tt_batch.flush(local.set.tt);
   list_keys(local);
   KeyedContacts& part = local.keyed;
+  // A triangle contact's key is as large as its record: the keys held until the gather are
+  // sized exactly (not up to twice by their growth), so that they and the gather's places stay
+  // within 1.5 x the records (gather_contacts.cpp).
+  part.tt_only.shrink_to_fit();
   const std::lock_guard lock(mutex);
   if (!part.empty()) {
     parts.push_back(std::move(part));

@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <limits>
 #include <mutex>
+#include <span>
 #include <type_traits>
 #include <vector>
 
@@ -278,6 +279,9 @@ struct NarrowFrame {
 /// Stage: the sub-pairs of the broad phase's candidates (faces sharing no vertex), each tested
 /// in the one pair of its owners (ownership.hpp), by kind: VF, EE, TT.
 void narrow_candidates(NarrowFrame& frame, const CandidateBuffer& candidates);
+/// The same stage over one chunk of candidates as a streaming broad phase hands it in
+/// (`CandidateBuffer::set_consumer`), on the calling thread; callable concurrently.
+void narrow_candidate_chunk(NarrowFrame& frame, std::span<const FacePair> chunk);
 
 /// Stage: the orphan sub-pairs (orphans.hpp) of the awake blocks; on a `refresh`, every block,
 /// whose distance bound is then set from what its tests compute anyway. Returns the number of
