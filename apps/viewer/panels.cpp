@@ -99,7 +99,9 @@ void Panels::settings_panel(App& app) {
     changed |= ImGui::Checkbox("collision response", &next.response);
     ImGui::SameLine();
     changed |= ImGui::Checkbox("untangle", &next.untangle);
-    if (app.response_delayed()) ImGui::TextDisabled("response off until frame %lld", static_cast<long long>(app.response_from()));
+    if (app.response_delayed()) {
+      ImGui::TextDisabled("response off until frame %lld", static_cast<long long>(app.response_from()));
+    }
     ImGui::SliderFloat("drag stiffness", &live->drag_stiffness, 1, 1000, "%.0f N/m", ImGuiSliderFlags_Logarithmic);
   }
   ImGui::TextDisabled("%s", app.settings().method.to_string().c_str());
