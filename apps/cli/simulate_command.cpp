@@ -534,8 +534,18 @@ int run_simulate(const SimulateArgs& args) {
         holder.emplace(std::move(next));
         simulation = &*holder;
       }
-      record(simulation->advance_frame());
-      progress.update(static_cast<std::size_t>(k + 1));
+      const sim::FrameStats frame = simulation->advance_frame();
+      record(frame);
+      // The progress line's note: frames per second so far, and the untangling's count.
+      const double seconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - loop_start).count();
+      char note[96];
+      int used = std::snprintf(note, sizeof note, "%.1f fps", seconds > 0 ? static_cast<double>(k + 1) / seconds : 0.0);
+      if (frame.intersecting_pairs >= 0) {
+        std::snprintf(note + used, sizeof note - static_cast<std::size_t>(used), ", %lld intersecting pairs",
+                      static_cast<long long>(frame.intersecting_pairs));
+      }
+      progress.update(static_cast<std::size_t>(k + 1), note);
     }
   } catch (const sim::DivergenceError& e) {
     diverged = e;  // the simulation is back at the last good frame

@@ -7,6 +7,7 @@
 #include <crumple/detect/stochastic.hpp>
 #include <crumple/io/x3d.hpp>
 
+#include <chrono>
 #include <cstdio>
 #include <vector>
 
@@ -23,10 +24,13 @@ App::App(Loaded loaded) : source_(std::move(loaded.source)), settings_(std::move
 
 void App::reset() {
   recall_.clear();
+  tangled_pairs_ = tangled_frame_ = clean_frame_ = -1;
+  sim_seconds_ = sim_frames_ = 0;
   if (playback_) {
     show_frame(0);
   } else {
-    stats_ = live_->reset(settings_);
+    stats_ = live_->reset(effective_settings());
+    track_untangling();
   }
 }
 
@@ -36,7 +40,8 @@ void App::apply_settings(const sim::Settings& settings) {
   if (playback_) {
     show_frame(playback_->index());
   } else {
-    stats_ = live_->apply(settings_);
+    stats_ = live_->apply(effective_settings());
+    track_untangling();
   }
 }
 
@@ -44,9 +49,61 @@ void App::advance() {
   recall_.clear();
   if (playback_) {
     show_frame((playback_->index() + 1) % playback_->size());
-  } else {
-    stats_ = live_->advance();
+    return;
   }
+  const auto start = std::chrono::steady_clock::now();
+  if (response_from_ >= 0 && live_->simulation().frame() == response_from_ &&
+      live_->simulation().settings().response != settings_.response) {
+    stats_ = live_->apply(settings_);  // the delayed response starts here: the tangle measured
+    track_untangling();
+  }
+  stats_ = live_->advance();
+  sim_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  sim_frames_ += 1;
+  track_untangling();
+}
+
+void App::set_response_from(std::int64_t frame) {
+  response_from_ = frame;
+  if (live_) {
+    stats_ = live_->apply(effective_settings());
+    track_untangling();
+  }
+}
+
+bool App::response_delayed() const {
+  return live_ && response_from_ >= 0 && live_->simulation().frame() < response_from_;
+}
+
+sim::Settings App::effective_settings() const {
+  sim::Settings s = settings_;
+  if (response_delayed()) s.response = false;
+  return s;
+}
+
+void App::track_untangling() {
+  const std::int64_t n = stats_.intersecting_pairs;
+  if (n > 0 && tangled_pairs_ < 0) {
+    tangled_pairs_ = n;
+    tangled_frame_ = stats_.frame;
+  }
+  if (n == 0 && tangled_pairs_ > 0 && clean_frame_ < 0) clean_frame_ = stats_.frame;
+  if (n > 0) clean_frame_ = -1;
+}
+
+std::string App::untangle_text() const {
+  if (playback_) return "intersecting pairs: frames only (simulate to untangle)";
+  if (response_delayed()) {
+    return "intersecting pairs: response off until frame " + std::to_string(response_from_);
+  }
+  if (stats_.intersecting_pairs < 0) return "intersecting pairs: not measured (response or untangle off)";
+  std::string text = "intersecting pairs: " + std::to_string(stats_.intersecting_pairs);
+  if (stats_.intersecting_pairs > 0) text += " (" + std::to_string(stats_.contours) + " contours)";
+  if (tangled_pairs_ > 0) {
+    text += ", " + std::to_string(tangled_pairs_) + " at frame " + std::to_string(tangled_frame_);
+    if (clean_frame_ >= 0) text += ", 0 from frame " + std::to_string(clean_frame_);
+  }
+  return text;
 }
 
 void App::show_frame(std::size_t i) {

@@ -28,6 +28,22 @@ class App {
   void apply_settings(const sim::Settings& settings);
   /// One simulated frame, or the next frame of the playback (wrapping around).
   void advance();
+  /// Runs the frames before `frame` with the response off, then with the settings' response
+  /// (a cloth that falls through itself, then untangles); again after each reset. < 0: never.
+  void set_response_from(std::int64_t frame);
+  std::int64_t response_from() const { return response_from_; }
+  /// The response is held off until `response_from()`.
+  bool response_delayed() const;
+  /// Simulated frames per second over the frames advanced since the last reset (their
+  /// `advance` calls' wall time), 0 before the first.
+  double simulation_fps() const { return sim_seconds_ > 0 ? sim_frames_ / sim_seconds_ : 0; }
+  /// The untangling so far: "intersecting pairs N (C contours)", where it started and when it
+  /// reached 0; "not measured" when the response or the untangling is off.
+  std::string untangle_text() const;
+  /// Intersecting triangle pairs of the current frame (-1: not measured).
+  std::int64_t intersecting_pairs() const { return stats_.intersecting_pairs; }
+  /// The frame where the count first reached 0 after being above it (-1: not yet).
+  std::int64_t clean_frame() const { return clean_frame_; }
 
   const sim::Settings& settings() const { return settings_; }
   const sim::FrameStats& stats() const { return stats_; }
@@ -66,6 +82,10 @@ class App {
 
  private:
   void show_frame(std::size_t i);
+  /// The settings the simulation runs with now (the response off while delayed).
+  sim::Settings effective_settings() const;
+  /// Records the untangling's progress from `stats_`.
+  void track_untangling();
   /// The boxes of one level of the kdop detector's hierarchy, as refitted by its last update.
   void kdop_boxes(Batch& batch) const;
   /// The stochastic detector's near (active) pairs after its last update.
@@ -77,6 +97,12 @@ class App {
   std::optional<LiveSimulation> live_;
   std::optional<Playback> playback_;
   std::string recall_, message_;
+  std::int64_t response_from_ = -1;
+  std::int64_t tangled_pairs_ = -1;   ///< the first count above 0 since the reset
+  std::int64_t tangled_frame_ = -1;   ///< its frame
+  std::int64_t clean_frame_ = -1;
+  double sim_seconds_ = 0;
+  double sim_frames_ = 0;
 };
 
 }  // namespace crumple::viewer

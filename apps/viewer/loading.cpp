@@ -37,6 +37,12 @@ bool mentions(const std::filesystem::path& path, const std::string& needle) {
 void apply_overrides(const Options& options, sim::Settings& settings) {
   settings.method = MethodSpec::parse(options.method.value_or(kDefaultMethod));
   if (options.thickness) settings.detector.thickness = *options.thickness;
+  if (options.response) settings.response = *options.response;
+  if (options.untangle) settings.untangle = *options.untangle;
+  if (options.response_from >= 0) {
+    if (options.response == false) throw InputError("--response-from needs the response on, not --response off");
+    settings.response = true;
+  }
 }
 
 }  // namespace
@@ -53,6 +59,7 @@ Loaded load_input(const Options& options) {
     }
     std::sort(files.begin(), files.end());
     if (files.empty()) throw InputError("folder '" + path.string() + "' holds no .obj .ply .off .x3d frame");
+    if (options.response_from >= 0) throw InputError("--response-from needs a simulated scene, not a folder of frames");
     out.frames.emplace(std::move(files));
     out.settings.detector.thickness = default_thickness(out.frames->first().positions());
     apply_overrides(options, out.settings);

@@ -30,6 +30,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <iostream>
+#include <map>
 #include <string>
 
 namespace crumple::viewer {
@@ -92,6 +93,7 @@ int run(const Options& options) {
   if (options.frames < 0) throw InputError("--frames must be >= 0");
   const bool automated = options.exit;
   App app(load_input(options));  // loads before any window opens: bad input fails fast
+  if (options.response_from >= 0) app.set_response_from(options.response_from);
   Panels panels(app.settings().method);
 
   glfwSetErrorCallback(on_glfw_error);
@@ -125,6 +127,10 @@ int run(const Options& options) {
       for (long long k = 0; k < options.frames; ++k) {
         app.advance();
         progress.update(k + 1);
+        if (automated && app.clean_frame() == app.stats().frame) {
+          std::printf("crumple-view: 0 intersecting triangle pairs at frame %lld\n",
+                      static_cast<long long>(app.clean_frame()));
+        }
       }
     } catch (const sim::DivergenceError& e) {
       progress.finish();
@@ -140,8 +146,9 @@ int run(const Options& options) {
     }
     if (automated) {
       app.paused = true;
-      std::printf("crumple-view: %s, method %s, %lld frames\n", app.source().c_str(),
-                  app.settings().method.to_string().c_str(), options.frames);
+      std::printf("crumple-view: %s, method %s, %lld frames, %.1f frames per second\n", app.source().c_str(),
+                  app.settings().method.to_string().c_str(), options.frames, app.simulation_fps());
+      if (app.simulating()) std::printf("crumple-view: %s\n", app.untangle_text().c_str());
     }
     app.draw_options.wireframe = options.wireframe;
     app.draw_options.masses_springs = options.springs;
@@ -235,6 +242,16 @@ int main(int argc, char** argv) {
   cli.add_flag("--recall", options.recall,
                "Print the recall of the detector against naive for the first picture");
   cli.add_flag("--exit", options.exit, "Draw one frame (after --frames), save --screenshot, exit");
+  cli.add_option("--response", options.response, "on|off: self-collision response; default: the scene's")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, bool>{{"on", true}, {"off", false}}));
+  cli.add_option("--untangle", options.untangle,
+                 "on|off: with the response on, untangle a cloth that already intersects itself "
+                 "(default on)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, bool>{{"on", true}, {"off", false}}));
+  cli.add_option("--response-from", options.response_from,
+                 "Run the frames before F with the response off, then on (the hanging cloth falls "
+                 "through itself, then untangles)")
+      ->check(CLI::NonNegativeNumber);
   try {
     cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

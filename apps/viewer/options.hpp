@@ -26,6 +26,9 @@ struct Options {
   bool active_pairs = false;
   int kdop_level = -1;
   bool recall = false;
+  std::optional<bool> response;        ///< default: the scene's
+  std::optional<bool> untangle;        ///< default: on (`sim::Settings::untangle`)
+  long long response_from = -1;        ///< frames before it run with the response off (-1: none)
 };
 
 }  // namespace crumple::viewer

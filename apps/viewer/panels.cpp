@@ -97,6 +97,11 @@ void Panels::settings_panel(App& app) {
       changed = true;
     }
     changed |= ImGui::Checkbox("collision response", &next.response);
+    ImGui::SameLine();
+    changed |= ImGui::Checkbox("untangle", &next.untangle);
+    if (app.response_delayed()) {
+      ImGui::TextDisabled("response off until frame %lld", static_cast<long long>(app.response_from()));
+    }
     ImGui::SliderFloat("drag stiffness", &live->drag_stiffness, 1, 1000, "%.0f N/m", ImGuiSliderFlags_Logarithmic);
   }
   ImGui::TextDisabled("%s", app.settings().method.to_string().c_str());
@@ -138,10 +143,17 @@ void Panels::drawing_panel(App& app) {
 
 void Panels::statistics_panel(App& app, double fps) {
   const sim::FrameStats& s = app.stats();
-  ImGui::Text("%.1f fps   frame %lld", fps, static_cast<long long>(s.frame));
+  ImGui::Text("%.1f fps (redraws)   frame %lld", fps, static_cast<long long>(s.frame));
+  if (app.simulating()) ImGui::Text("simulation: %.1f frames per second", app.simulation_fps());
   ImGui::Text("ms: integrate %.2f  detect %.2f  response %.2f", s.integrate_ms, s.detect_ms, s.response_ms);
   ImGui::Text("contacts: vf %zu  ee %zu  tt %zu", s.vf, s.ee, s.tt);
   ImGui::Text("edges in collision: %.1f%%", 100 * s.collision_share);
+  const std::string untangling = app.untangle_text();
+  if (s.intersecting_pairs > 0) {
+    ImGui::TextColored(ImVec4(1, 0.5f, 0.3f, 1), "%s", untangling.c_str());
+  } else {
+    ImGui::TextUnformatted(untangling.c_str());
+  }
   if (ImGui::Button("Recall vs naive (this frame)")) app.compute_recall();
   if (!app.recall_text().empty()) {
     ImGui::SameLine();

@@ -350,6 +350,9 @@ TEST(Safety, ProgressIsAPlainLineWithAnEtaOffTerminal) {
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("crumple simulate: frame 3/3, "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("ETA"), std::string::npos) << r.out;
+  // Issue 43: the run reports its frames per second as it goes and in its summary.
+  EXPECT_NE(r.out.find(" fps"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("frames per second"), std::string::npos) << r.out;
   EXPECT_EQ(r.out.find('\r'), std::string::npos) << "no terminal redraws in a log";
   // Short runs stay quiet by default.
   r = run_cli("simulate hanging-cloth:nx=4,ny=4 -n 3 --force -o " + dir.path().string());

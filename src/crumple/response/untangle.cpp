@@ -64,6 +64,43 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
       }
     }
   }
+  // 1b. Pinches: a vertex whose star passes through itself (two of its faces sharing only it
+  // intersect; the `tt` pairs leave them out). A curve of a single sheet that ends without
+  // reaching the border ends at such vertices, its two preimages meeting there: the pinch's
+  // crossing joins the pinch to the curve, and the flood fill below goes around the pinch.
+  // Only corners of intersecting faces can end a curve.
+  std::vector<Index> pinch_vertex;  // per pinch pair, after the `tt` pairs
+  {
+    std::vector<char> seen(x.size(), 0);
+    for (const TriangleTriangleContact& c : pairs) {
+      for (Index f : {c.face0, c.face1}) {
+        for (Index v : topology.face(f)) {
+          if (seen[at(v)]) continue;
+          seen[at(v)] = 1;
+          const auto star = topology.vertex_faces()[v];
+          for (std::size_t i = 0; i < star.size(); ++i) {
+            for (std::size_t j = 0; j < star.size(); ++j) {
+              if (i == j) continue;
+              const Face& a = topology.face(star[i]);
+              const Face& b = topology.face(star[j]);
+              const auto in_b = [&](Index u) { return u == b[0] || u == b[1] || u == b[2]; };
+              if (in_b(a[0]) + in_b(a[1]) + in_b(a[2]) != 1) continue;
+              // The side of a opposite v against b (the sides through v meet b's plane at v).
+              for (Index e : topology.face_edges(star[i])) {
+                const Edge& ed = topology.edge(e);
+                if (ed[0] == v || ed[1] == v) continue;
+                if (geometry::segment_triangle_intersect(x[at(ed[0])], x[at(ed[1])], x[at(b[0])], x[at(b[1])],
+                                                         x[at(b[2])])) {
+                  records.push_back({e, star[j], static_cast<Index>(pairs.size() + pinch_vertex.size())});
+                  pinch_vertex.push_back(v);
+                }
+              }
+            }
+          }
+        }
+      }
+    }
+  }
   std::sort(records.begin(), records.end());
   std::vector<Index> record_crossing(records.size());
   for (std::size_t r = 0; r < records.size(); ++r) {
@@ -83,7 +120,7 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
   // 2. Contours: the crossings of one pair are on one curve.
   std::vector<Index> parent(out.crossings.size());
   for (std::size_t i = 0; i < parent.size(); ++i) parent[i] = static_cast<Index>(i);
-  std::vector<Index> pair_first(pairs.size(), -1);
+  std::vector<Index> pair_first(pairs.size() + pinch_vertex.size(), -1);
   for (std::size_t r = 0; r < records.size(); ++r) {
     Index& first = pair_first[at(records[r].pair)];
     if (first < 0) {
@@ -105,8 +142,19 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
     k.crossings.push_back(static_cast<Index>(i));
     k.open = k.open || topology.edge_faces()[c.edge].size() == 1;
   }
-  for (Index first : pair_first) {
-    if (first >= 0) ++out.contours[at(out.crossings[at(first)].contour)].pairs;
+  for (std::size_t p = 0; p < pair_first.size(); ++p) {
+    if (pair_first[p] < 0) continue;
+    Contour& k = out.contours[at(out.crossings[at(pair_first[p])].contour)];
+    if (p < pairs.size()) {
+      ++k.pairs;
+    } else {
+      k.pinches.push_back(pinch_vertex[p - pairs.size()]);
+    }
+  }
+  for (Contour& k : out.contours) {
+    std::sort(k.pinches.begin(), k.pinches.end());
+    k.pinches.erase(std::unique(k.pinches.begin(), k.pinches.end()), k.pinches.end());
+    for (Index v : k.pinches) out.tangle[at(v)] = 1;
   }
 
   // 3. Regions: flood fill with the contour's crossing edges cut, the outside chosen in each
@@ -117,13 +165,14 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
   std::vector<std::size_t> size;
   std::vector<char> pinned;
   std::vector<char> inside_any(at(nv), 0);
+  std::vector<char> blocked(at(nv), 0);  // the current contour's pinches: on the curve
   // Labels the parts of the mesh reachable along edges that are not cut; returns their count.
   const auto fill = [&](std::vector<Index>& label) {
     std::fill(label.begin(), label.end(), -1);
     size.clear();
     pinned.clear();
     for (Index seed = 0; seed < nv; ++seed) {
-      if (label[at(seed)] >= 0 || topology.vertex_edges()[seed].empty()) continue;
+      if (label[at(seed)] >= 0 || blocked[at(seed)] || topology.vertex_edges()[seed].empty()) continue;
       const Index id = static_cast<Index>(size.size());
       size.push_back(0);
       pinned.push_back(0);
@@ -138,7 +187,7 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
           if (cut[at(e)]) continue;
           const Edge& ed = topology.edge(e);
           const Index w = ed[0] == v ? ed[1] : ed[0];
-          if (label[at(w)] < 0) {
+          if (label[at(w)] < 0 && !blocked[at(w)]) {
             label[at(w)] = id;
             stack.push_back(w);
           }
@@ -153,8 +202,10 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
   std::vector<char> piece_pinned(pieces);
   for (Contour& k : out.contours) {
     for (Index i : k.crossings) cut[at(out.crossings[at(i)].edge)] = 1;
+    for (Index v : k.pinches) blocked[at(v)] = 1;
     k.parts = fill(part);
     for (Index i : k.crossings) cut[at(out.crossings[at(i)].edge)] = 0;
+    for (Index v : k.pinches) blocked[at(v)] = 0;
     if (k.parts == pieces) continue;  // the curve cuts nothing off
     piece_of_part.assign(k.parts, -1);
     for (Index v = 0; v < nv; ++v) {
@@ -235,16 +286,20 @@ std::size_t Untangler::analyse(PositionsView x, std::span<const Scalar> inv_mass
     const Face& t = topo.face(c.face);
     const Vec3 n = unit_normal(t, x);
     if (n == Vec3::Zero()) continue;
-    if (!k.inside.empty()) {
-      const bool in0 = std::binary_search(k.inside.begin(), k.inside.end(), ed[0]);
-      const bool in1 = std::binary_search(k.inside.begin(), k.inside.end(), ed[1]);
-      if (in0 == in1) continue;
+    // A pinch is on the curve: the part of an edge between it and the crossing is inside.
+    const auto in = [&](Index v) {
+      return std::binary_search(k.inside.begin(), k.inside.end(), v) ||
+             std::binary_search(k.pinches.begin(), k.pinches.end(), v);
+    };
+    const bool in0 = in(ed[0]), in1 = in(ed[1]);
+    if (in0 != in1) {
       const Index inner = in0 ? ed[0] : ed[1], outer = in0 ? ed[1] : ed[0];
       const Scalar side = n.dot(x[at(outer)] - x[at(inner)]);
       if (side == 0) continue;
       pulls_.push_back(vertex_face_stencil(inner, t, c.barycentric, side > 0 ? n : Vec3(-n)));
       continue;
     }
+    if (!k.inside.empty()) continue;
     // No inside: shorten the curve (contour minimisation).
     const Vec3 p = c.barycentric[0] * x[at(t[0])] + c.barycentric[1] * x[at(t[1])] + c.barycentric[2] * x[at(t[2])];
     const Vec3 along = x[at(ed[1])] - x[at(ed[0])];
@@ -300,7 +355,11 @@ UntangleStats Untangler::apply(std::span<const Scalar> inv_mass, std::span<Vec3>
       for (int k = 0; k < 5; ++k) {
         const Index i = s.vertex[at(k)];
         if (inv_mass[at(i)] == 0) continue;
-        x[at(i)] += (k < 2 ? options_.contour_step : -options_.contour_step) * s.direction;
+        const Vec3 d = k < 2 ? Vec3(s.direction) : Vec3(-s.direction);
+        x[at(i)] += options_.contour_step * d;
+        // The move is kept: a velocity against it would undo it at the next step.
+        const Scalar back = v[at(i)].dot(d);
+        if (back < 0) v[at(i)] -= back * d;
         moved = true;
       }
       stats.contour_moves += moved ? 1 : 0;

@@ -13,23 +13,29 @@
 ///  2. **Contours**: the crossings chained through the pairs (union–find: the crossings of one
 ///     pair belong to one contour). A contour is *open* when a crossing edge is a boundary edge
 ///     (the intersection curve reaches the cloth's border).
+///  2b. **Pinches**: a curve of one sheet that ends inside the cloth ends at a vertex whose star
+///     passes through itself (two of its faces sharing only that vertex intersect; `tt` pairs
+///     leave such faces out), where the curve's two preimages meet. The crossings of those
+///     faces join the pinch to its contour.
 ///  3. **Regions**: the mesh's vertices flood-filled along edges, the contour's crossing edges
-///     cut. In each connected piece of the mesh the largest part is *outside*; every other part
-///     is *inside*: the smaller side of the curve, which went through. A part holding a pinned vertex (m⁻¹ = 0) cannot go back
-///     through, so when one exists the largest pinned part is the outside instead. This also
-///     handles open contours: a flap of the cloth whose intersection curve runs from its border
-///     to its border is cut off and is the inside; a curve that cuts nothing (from the border
-///     of one sheet to the border of another, a slit) has no inside.
+///     cut and its pinches removed (they are on the curve, which closes through them). In each
+///     connected piece of the mesh the largest part is *outside*; every other part is *inside*:
+///     the smaller side of the curve, which went through. A part holding a pinned vertex
+///     (m⁻¹ = 0) cannot go back through, so when one exists the largest pinned part is the
+///     outside instead. This also handles open contours: a flap of the cloth whose intersection
+///     curve runs from its border to its border is cut off and is the inside; a curve that cuts
+///     nothing (from the border of one sheet to the border of another, a slit) has no inside.
 ///
 /// Pushes (`Untangler::apply`), built at the analysed positions, applied after each step:
-///  - a crossing whose edge has one end inside and one outside: the inside end and the crossed
-///    face (at the crossing's barycentric point) get a position impulse in the stencil form of
-///    `contact_response.hpp` along the face's normal turned towards the outside end — the
+///  - a crossing whose edge has one end inside (or at a pinch of its contour: the part of the
+///    edge between the pinch and the crossing is inside) and one outside: the inside end and
+///    the crossed face (at the crossing's barycentric point) get a position impulse in the
+///    stencil form of `contact_response.hpp` along the face's normal turned towards the outside end — the
 ///    repulsion with its sign flipped for the pair, so the inside end passes back through the
 ///    face to a gap of the thickness h — at most `max_step` per call, and their approaching
 ///    relative velocity along it is removed;
-///  - a crossing of a contour with no inside: its edge's ends move by +σG, the face's corners
-///    by −σG (σ = `contour_step`), G the direction that shortens the intersection curve:
+///  - any other crossing of a contour with no inside: its edge's ends move by +σG, the face's
+///    corners by −σG (σ = `contour_step`), G the direction that shortens the intersection curve:
 ///    Σ over the edge's faces f of R_f − (E·R_f)/(E·N) N (E the edge's direction, N the
 ///    face's normal, R_f the curve's direction into f), normalised — the first-order change of
 ///    the curve's length when the edge moves (the N term dropped when |E·N| is tiny).
@@ -65,6 +71,9 @@ struct Contour {
   std::vector<Index> crossings;  ///< indices into `IntersectionAnalysis::crossings`
   std::size_t pairs = 0;         ///< intersecting face pairs along it
   bool open = false;             ///< a crossing edge is a boundary edge
+  /// Pinch vertices where the curve ends inside the cloth (sorted): two faces of the vertex's
+  /// star, sharing only it, intersect. The flood fill goes around them (they are on the curve).
+  std::vector<Index> pinches;
   /// Parts of the mesh with the crossing edges cut (the connected pieces of the mesh when the
   /// curve cuts nothing off).
   std::size_t parts = 0;

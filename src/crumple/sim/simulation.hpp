@@ -115,7 +115,7 @@ struct Settings {
   /// Largest pull-through position impulse of one crossing per step, as a fraction of h_c (> 0).
   Scalar untangle_step = 0.25;
   /// Contour-minimisation displacement per step (contours bounding no region), fraction of h_c.
-  Scalar contour_step = 0.05;
+  Scalar contour_step = 0.1;
 };
 
 /// Figures of one frame (timings summed over its steps).

@@ -50,3 +50,22 @@ endif()
 if(NOT EXISTS "${DIVERGED}")
   message(FATAL_ERROR "viewer.smoke: a diverging run ended before its screenshot")
 endif()
+# Untangling, as `crumple simulate --response-from`: the 12 x 12 hanging cloth falls through
+# itself for 300 frames with the response off, then untangles; the headless run prints the
+# intersecting pairs' count (as the panel shows it) and the simulated frames per second.
+set(UNTANGLED "${OUT}.untangled.png")
+file(REMOVE "${UNTANGLED}")
+execute_process(
+  COMMAND ${XVFB_RUN} -a -s "-screen 0 1024x768x24" "${VIEWER}" hanging-cloth:nx=12,ny=12 --response-from 300
+          --frames 340 --screenshot "${UNTANGLED}" --exit
+  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err TIMEOUT 240)
+message(STATUS "crumple-view (untangling): ${out}${err}")
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "viewer.smoke: the untangling run exited with '${rc}'")
+endif()
+if(NOT out MATCHES "intersecting pairs: 0, [1-9][0-9]* at frame 300, 0 from frame 3[0-3][0-9]")
+  message(FATAL_ERROR "viewer.smoke: the tangled cloth did not reach 0 intersecting pairs within 40 frames")
+endif()
+if(NOT out MATCHES "[0-9.]+ frames per second")
+  message(FATAL_ERROR "viewer.smoke: no frames per second printed")
+endif()
