@@ -75,7 +75,7 @@ constexpr std::array<SceneParamInfo, 18> kRibbon{{
     {"turns", "6", "turns of the driven end about the ribbon's axis over twist-time"},
     {"approach", "0.7", "fraction of the length the driven end moves towards the other over twist-time"},
     {"twist-time", "6", "duration of the twist (s); the end is held afterwards"},
-    {"settle", "0.01",
+    {"settle", "0.005",
      "the projective step iterates (up to 40 times) until no particle moves more than this fraction of the "
      "thickness in an iteration; 0 = a fixed 5 iterations (the coiling ribbon then heats up and diverges)"},
     {"jitter", "0.01", "seeded random displacement of the initial vertices, fraction of an edge"},
