@@ -288,6 +288,7 @@ int check_frames(int argc, char** argv) {
               intersections.tt.size());
   int bad = 0, run = 0;
   std::size_t most = 0, impacts = 0, frozen = 0;
+  double iterations = 0;
   double ms = 0, ccd_ms = 0, queries = 0, integrate_ms = 0, detect_ms = 0, response_ms = 0, contacts = 0;
   std::string diverged;
   for (int f = 1; f <= frames; ++f) {
@@ -301,6 +302,7 @@ int check_frames(int argc, char** argv) {
     ++run;
     ms += st.integrate_ms + st.detect_ms + st.response_ms + st.ccd_ms;
     ccd_ms += st.ccd_ms;
+    iterations += st.cg_iterations;
     integrate_ms += st.integrate_ms;
     detect_ms += st.detect_ms;
     response_ms += st.response_ms;
@@ -330,11 +332,12 @@ int check_frames(int argc, char** argv) {
   std::printf(
       "summary %s: %d frames run of %d, %d with intersections (most %zu); %.1f ms/frame (integrate %.1f, "
       "detect %.1f, response %.1f, CCD %.1f), %.0f contacts/frame, %.1f live impacts/frame, %.2f queries/frame, "
-      "%zu frozen in all%s%s\n",
+      "%zu frozen in all, %.1f solver iterations/frame%s%s\n",
       spec.c_str(), run, frames, bad, most, ms / std::max(run, 1), integrate_ms / std::max(run, 1),
       detect_ms / std::max(run, 1), response_ms / std::max(run, 1), ccd_ms / std::max(run, 1),
       contacts / std::max(run, 1),
       static_cast<double>(impacts) / std::max(run, 1), queries / std::max(run, 1), frozen,
+      iterations / std::max(run, 1),
       diverged.empty() ? "" : "; DIVERGED: ", diverged.c_str());
   return bad > 0 || !diverged.empty() ? 1 : 0;
 }

@@ -423,6 +423,11 @@ class Projective final : public Integrator {
  public:
   explicit Projective(const IntegratorOptions& options) : options_(options) {
     CRUMPLE_CHECK(options.projective_iterations >= 1, "projective iterations must be >= 1");
+    CRUMPLE_CHECK(options.projective_tolerance >= 0 && std::isfinite(options.projective_tolerance),
+                  "projective tolerance must be finite and >= 0");
+    CRUMPLE_CHECK(options.projective_tolerance == 0 ||
+                      options.projective_max_iterations >= options.projective_iterations,
+                  "projective max iterations must be >= projective iterations");
     CRUMPLE_CHECK(options.threads >= 0, "threads must be >= 0");
     threads_ = std::min(2, resolve_threads(options.threads));
   }
@@ -475,7 +480,10 @@ class Projective final : public Integrator {
     const std::size_t spring_grain = balanced_grain(springs.size(), threads_, 1024, 1 << 16);
     const std::size_t row_grain = balanced_grain(m, threads_, 512, 1 << 15);
     Scalar omega = 1;
-    for (int it = 0; it < options_.projective_iterations; ++it) {
+    const Scalar tolerance = options_.projective_tolerance;
+    const int most = tolerance > 0 ? options_.projective_max_iterations : options_.projective_iterations;
+    int it = 0;
+    for (; it < most; ++it) {
       // Local step: each spring's pull k d_s at the current positions (d_s its rest-length
       // projection); then each free row's right-hand side, gathered over its springs in a fixed
       // order and placed at its permuted row for the solve.
@@ -516,8 +524,18 @@ class Projective final : public Integrator {
           next_[i] = omega * (solved - previous) + previous;
         }
       });
+      // Settled: no free particle moved more than the tolerance in this iteration (older_
+      // holds the previous iterate; a serial scan, so the same bits on any thread count).
+      if (tolerance > 0 && it + 1 >= options_.projective_iterations) {
+        Scalar moved = 0;
+        for (const std::size_t i : free_) moved = std::max(moved, (next_[i] - older_[i]).squaredNorm());
+        if (moved <= tolerance * tolerance) {
+          ++it;
+          break;
+        }
+      }
     }
-    last_iterations_ = options_.projective_iterations;
+    last_iterations_ = it;
     for (std::size_t r = 0; r < free_.size(); ++r) {
       const std::size_t i = free_[r];
       s.v[i] = (next_[i] - s.x[i]) / h;

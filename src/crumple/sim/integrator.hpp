@@ -27,7 +27,8 @@
 ///    only when h, the model (`Model::revision`) or the field's linear terms change; the
 ///    triangular solves run the two halves of the elimination tree on two threads. Starts from
 ///    the inertial prediction x₀ + h v₀ (warm start: the last step's velocity), runs
-///    `projective_iterations` local/global iterations, v₁ = (x₁ − x₀)/h. Unconditionally stable and dissipative; the springs' own
+///    `projective_iterations` local/global iterations (more, up to a cap, until the iterates
+///    settle within `projective_tolerance` when it is set), v₁ = (x₁ − x₀)/h. Unconditionally stable and dissipative; the springs' own
 ///    damping (along the spring) is not modelled, the hinges' is. Pinned particles move by h v₀.
 /// Every integrator is deterministic (same input, same bits, whatever the thread count);
 /// projective dynamics' triangular solves run on up to two threads, the rest on one.
@@ -58,6 +59,13 @@ struct IntegratorOptions {
   int projective_iterations = 10;  ///< local/global iterations per step (projective, >= 1)
   /// Chebyshev acceleration's spectral radius estimate ρ (projective; 0 = none, < 1).
   Scalar projective_rho = 0;
+  /// Projective: > 0 (m) keeps iterating after `projective_iterations` until no free particle
+  /// moved more than this in the last iteration, up to `projective_max_iterations`; 0 = exactly
+  /// `projective_iterations`. An under-converged step gives back as motion much of the elastic
+  /// energy that position corrections (contacts, the fail-safe) store; a converged backward
+  /// Euler step dissipates it (docs/simulation.md, "Energy under contact").
+  Scalar projective_tolerance = 0;
+  int projective_max_iterations = 40;  ///< cap with a tolerance (>= projective_iterations)
   /// Threads of the projective solve's triangular sweeps (0 = all hardware threads, at most 2
   /// used; 1 = serial). The result is the same bits on any number.
   int threads = 0;

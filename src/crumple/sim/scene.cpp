@@ -67,7 +67,7 @@ constexpr std::array<SceneParamInfo, 17> kSphere{{
     {"self-friction", "0.2", "Coulomb friction between touching parts of the cloth"},
 }};
 
-constexpr std::array<SceneParamInfo, 17> kRibbon{{
+constexpr std::array<SceneParamInfo, 18> kRibbon{{
     {"nx", "48", "quads along the ribbon"},
     {"ny", "3", "quads across the ribbon"},
     {"length", "2", "ribbon length along x (m)"},
@@ -75,6 +75,9 @@ constexpr std::array<SceneParamInfo, 17> kRibbon{{
     {"turns", "6", "turns of the driven end about the ribbon's axis over twist-time"},
     {"approach", "0.7", "fraction of the length the driven end moves towards the other over twist-time"},
     {"twist-time", "6", "duration of the twist (s); the end is held afterwards"},
+    {"settle", "0.005",
+     "the projective step iterates (up to 40 times) until no particle moves more than this fraction of the "
+     "thickness in an iteration; 0 = a fixed 5 iterations (the coiling ribbon then heats up and diverges)"},
     {"jitter", "0.01", "seeded random displacement of the initial vertices, fraction of an edge"},
     CRUMPLE_MATERIAL_KEYS("0.1", "400", "0", "2e-4", "0.01", "0", "0.5", "0.3"),
     {"self-friction", "0.2", "Coulomb friction between touching parts of the cloth"},
@@ -329,6 +332,9 @@ Scene twisted_ribbon(const SceneSpec& spec, std::uint64_t seed) {
   };
   s.settings.response = true;
   fast_settings(s, spec);
+  const Scalar settle = spec.get_double("settle");
+  if (!(settle >= 0) || !std::isfinite(settle)) throw InputError("scene key 'settle' must be finite and >= 0");
+  s.settings.integrator_options.projective_tolerance = settle * s.settings.detector.thickness;
   return s;
 }
 
