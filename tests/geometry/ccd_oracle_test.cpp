@@ -24,6 +24,7 @@
 #include <optional>
 #include <random>
 #include <string>
+#include <vector>
 
 namespace crumple::geometry {
 namespace {
@@ -592,6 +593,206 @@ TEST(CcdOracle, BudgetLimitedQueriesStartingApartReportAPositiveTime) {
   EXPECT_EQ(tally.false_negatives, 0);
   EXPECT_EQ(tally.toi_late, 0);
   EXPECT_EQ(tally.tolerance_failures, 0);
+}
+
+// The coplanarity filter's time intervals (ccd_coplanar_times, δ = 0) against the exact cubic:
+// on every gap between the intervals (where `ccd` neither searches nor reports), the exact
+// coplanarity function det[x1 - x0, x2 - x0, x3 - x0](t) has no root, counted exactly with a
+// Sturm sequence in rationals; a cubic that vanishes identically (coplanar motion, degenerate
+// primitives) leaves all of [0, 1]. So the filter never drops a contact, whose time is always a
+// root. Constructed contacts also check that their time lies in an interval and that `ccd` hits
+// no later.
+using Poly = std::vector<co::Q>;  // coefficients, constant first; no trailing zeros
+
+void trim(Poly& p) {
+  while (!p.empty() && p.back() == 0) p.pop_back();
+}
+co::Q eval(const Poly& p, const co::Q& t) {
+  co::Q r = 0;
+  for (auto it = p.rbegin(); it != p.rend(); ++it) r = r * t + *it;
+  return r;
+}
+/// Remainder of a by b (b nonzero).
+Poly rem(Poly a, const Poly& b) {
+  while (a.size() >= b.size() && !a.empty()) {
+    const co::Q f = a.back() / b.back();
+    const std::size_t shift = a.size() - b.size();
+    for (std::size_t i = 0; i < b.size(); ++i) a[shift + i] -= f * b[i];
+    a.pop_back();
+    trim(a);
+  }
+  return a;
+}
+/// a / (t - r), exact when r is a root.
+Poly deflate(const Poly& a, const co::Q& r) {
+  Poly q(a.size() - 1);
+  co::Q carry = 0;
+  for (std::size_t i = a.size() - 1; i >= 1; --i) {
+    carry = a[i] + carry * r;
+    q[i - 1] = carry;
+  }
+  return q;
+}
+/// Sign variations of the Sturm sequence of p at t (zeros skipped).
+int variations(const std::vector<Poly>& seq, const co::Q& t) {
+  int count = 0, last = 0;
+  for (const Poly& q : seq) {
+    const int s = sgn(eval(q, t));
+    if (s == 0) continue;
+    if (last != 0 && s != last) ++count;
+    last = s;
+  }
+  return count;
+}
+/// Number of distinct roots of p (nonzero) in the open interval (l, r), l < r.
+int roots_between(Poly p, const co::Q& l, const co::Q& r) {
+  while (p.size() > 1 && eval(p, l) == 0) p = deflate(p, l);
+  while (p.size() > 1 && eval(p, r) == 0) p = deflate(p, r);
+  if (p.size() <= 1) return 0;
+  std::vector<Poly> seq{p};
+  Poly d(p.size() - 1);
+  for (std::size_t i = 1; i < p.size(); ++i) d[i - 1] = p[i] * static_cast<long>(i);
+  trim(d);
+  while (!d.empty()) {
+    seq.push_back(d);
+    Poly next = rem(seq[seq.size() - 2], d);
+    for (co::Q& x : next) x = -x;
+    d = next;
+  }
+  return variations(seq, l) - variations(seq, r);
+}
+/// The exact coplanarity cubic, interpolated from its values at t = 0, 1/3, 2/3, 1.
+Poly coplanarity_cubic(const Case& c) {
+  const co::Points pts = co::make_points(c.pair == CcdPair::kVertexFace, c.start, c.end);
+  const co::Q ts[4] = {0, co::Q(1, 3), co::Q(2, 3), 1};
+  Poly p(4, co::Q(0));
+  for (int i = 0; i < 4; ++i) {
+    // Lagrange basis polynomial for ts[i], times the value.
+    Poly basis{1};
+    co::Q denom = 1;
+    for (int j = 0; j < 4; ++j) {
+      if (j == i) continue;
+      Poly next(basis.size() + 1, co::Q(0));
+      for (std::size_t k = 0; k < basis.size(); ++k) {
+        next[k + 1] += basis[k];
+        next[k] -= basis[k] * ts[j];
+      }
+      basis = next;
+      denom *= ts[i] - ts[j];
+    }
+    const co::Q y = co::coplanarity(pts, ts[i]) / denom;
+    for (std::size_t k = 0; k < 4; ++k) p[k] += basis[k] * y;
+  }
+  trim(p);
+  return p;
+}
+
+struct IntervalTally {
+  int queries = 0, identically_zero = 0, never = 0, dropped = 0, contacts = 0;
+  double open_width = 0;
+};
+
+void check_intervals(const Case& c, IntervalTally& tally) {
+  ++tally.queries;
+  const CcdTimeIntervals iv = ccd_coplanar_times(c.start, c.end);
+  const Poly p = coplanarity_cubic(c);
+  for (int i = 0; i < iv.count; ++i) {
+    tally.open_width += iv.at[i][1] - iv.at[i][0];
+    ASSERT_LE(iv.at[i][0], iv.at[i][1]) << hex(c);
+    if (i > 0) {
+      ASSERT_LT(iv.at[i - 1][1], iv.at[i][0]) << hex(c);
+    }
+  }
+  if (p.empty()) {
+    ++tally.identically_zero;
+    EXPECT_TRUE(iv.count == 1 && iv.at[0][0] == 0 && iv.at[0][1] == 1) << "coplanar throughout: " << hex(c);
+    return;
+  }
+  tally.never += iv.count == 0;
+  // The gaps: [0, lo_0), (hi_i, lo_i+1), (hi_last, 1]; or all of [0, 1] when there is none.
+  int roots = 0;
+  const co::Q first = iv.count == 0 ? co::Q(1) : co::Q(iv.at[0][0]);
+  if (first > 0) roots += (eval(p, 0) == 0) + roots_between(p, 0, first);
+  for (int i = 0; i + 1 < iv.count; ++i) roots += roots_between(p, co::Q(iv.at[i][1]), co::Q(iv.at[i + 1][0]));
+  const co::Q last = iv.count == 0 ? co::Q(0) : co::Q(iv.at[iv.count - 1][1]);
+  if (iv.count == 0) {
+    roots += (eval(p, 1) == 0);
+  } else if (last < 1) {
+    roots += roots_between(p, last, 1) + (eval(p, 1) == 0);
+  }
+  if (roots != 0) {
+    ++tally.dropped;
+    ADD_FAILURE() << roots << " coplanarity time(s) outside the intervals: " << hex(c);
+  }
+  if (c.constructed_contact && c.witness) {
+    ++tally.contacts;
+    const Scalar t = (*c.witness)[0];
+    bool inside = false;
+    for (int i = 0; i < iv.count; ++i) inside = inside || (iv.at[i][0] <= t && t <= iv.at[i][1]);
+    EXPECT_TRUE(inside) << "contact at " << t << " outside the intervals: " << hex(c);
+    const CcdResult r = ccd(c.pair, c.start, c.end);
+    EXPECT_TRUE(r.hit && r.toi <= t) << "contact at " << t << ": " << hex(c);
+  }
+}
+
+void run_intervals(const char* name, int n, std::uint64_t seed, const std::function<Case(Gen&)>& make) {
+  IntervalTally tally;
+  static const Scalar kScales[] = {1, 0x1p-66, 0x1p66, 0x1p-20, 0x1p30};
+  Gen g(seed, 1);
+  for (int i = 0; i < n; ++i) {
+    Gen gi(g.rng()(), kScales[i % 5]);
+    check_intervals(make(gi), tally);
+  }
+  std::printf("[ copl     ] %-22s n=%4d never coplanar=%d coplanar throughout=%d contacts=%d dropped=%d "
+              "mean open width=%.4f\n",
+              name, tally.queries, tally.never, tally.identically_zero, tally.contacts, tally.dropped,
+              tally.open_width / tally.queries);
+  EXPECT_EQ(tally.dropped, 0);
+}
+
+TEST(CcdCoplanarTimes, NeverDropACoplanarityTime) {
+  run_intervals("vf-contact", 300, 101, vf_contact);
+  run_intervals("ee-contact", 300, 102, ee_contact);
+  run_intervals("touching-shared-point", 300, 103, touching_shared_point);
+  for (const Scalar gap : {1e-7, 1e-10, 1e-12}) {
+    run_intervals("vf-near-miss", 100, 104 + static_cast<std::uint64_t>(-std::log10(gap)), [gap](Gen& g) { return shifted(vf_contact(g), g, gap); });
+    run_intervals("ee-near-miss", 100, 124 + static_cast<std::uint64_t>(-std::log10(gap)), [gap](Gen& g) { return shifted(ee_contact(g), g, gap); });
+  }
+  for (const Scalar h : {0.0, 1e-10, -1e-12}) {
+    run_intervals("vf-grazing", 60, 106, [h](Gen& g) { return vf_grazing(g, h); });
+    run_intervals("ee-parallel", 60, 107, [h](Gen& g) { return ee_parallel(g, h); });
+  }
+  run_intervals("degenerate", 200, 108, degenerate);
+  run_intervals("zero-motion", 200, 109, zero_motion);
+  run_intervals("generic", 300, 110, generic);
+}
+
+// Roots close together, a double root (a tangential contact) and coplanar motion: each
+// coplanarity time is kept. Vertex p(t) = (1/4, t - 1/2, e) against the triangle (0, 0, 0),
+// (1, 0, 0), (0, 1, t - 1/2): det(t) = e - (t - 1/2)², roots 1/2 ± √e.
+TEST(CcdCoplanarTimes, ClusteredDoubleAndIdenticallyZeroRootsAreKept) {
+  IntervalTally tally;
+  for (const Scalar e : {0x1p-8, 0x1p-24, 0x1p-60, 0.0}) {
+    Case c;
+    c.pair = CcdPair::kVertexFace;
+    c.start = {Vec3(0.25, -0.5, e), Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, -0.5)};
+    c.end = {Vec3(0.25, 0.5, e), Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0.5)};
+    if (e == 0) {  // touches the edge f0 f1 at t = 1/2, (u, v) = (1/4, 0)
+      c.constructed_contact = true;
+      c.witness = {0.5, 0.25, 0};
+    }
+    check_intervals(c, tally);
+    EXPECT_GE(ccd_coplanar_times(c.start, c.end).count, 1) << e;
+  }
+  // Edges whose 4 points stay coplanar (b's ends at heights -z and z above a's line).
+  Case c;
+  c.pair = CcdPair::kEdgeEdge;
+  c.start = {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, -1, -0.5), Vec3(0, 1, 0.5)};
+  c.end = {Vec3(-1, 0, 0), Vec3(1, 0, 0), Vec3(0, -1, 0.5), Vec3(0, 1, -0.5)};
+  check_intervals(c, tally);
+  EXPECT_EQ(tally.identically_zero, 1);
+  EXPECT_EQ(tally.contacts, 1);
+  EXPECT_EQ(tally.dropped, 0);
 }
 
 }  // namespace

@@ -154,7 +154,7 @@ class ContinuousQuery {
   /// (candidates whose faces' boxes are apart, all their sub-pairs dropped at once),
   /// `vf_tests` / `ee_tests` (narrow-phase calls), `orphan_vf` / `orphan_ee`,
   /// `isolated_vertices`, `vf_impacts` / `ee_impacts`, `conservative_hits` (impacts decided by
-  /// budget, precision or range only), `narrow_boxes`, `narrow_<outcome>` (tests per
+  /// budget, precision or range only), `narrow_boxes`, `narrow_advance_steps`, `narrow_<outcome>` (tests per
   /// `CcdOutcome`, e.g. `narrow_separated-hull`); `update_ms` (broad-phase refit, sort or
   /// hash), `stream_ms` (wall time of the candidate stream: traversal and the narrow phase of
   /// its candidates, interleaved on the threads), `narrow_cpu_ms` (thread time spent in the

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <queue>
+#include <tuple>
 #include <vector>
 
 namespace crumple::geometry {
@@ -211,6 +212,166 @@ bool line_above(Scalar s0, Scalar s1, Scalar t, Scalar threshold) {
   return value > round_up(threshold + 4 * kU * (std::abs(s0) + std::abs(s1)));
 }
 
+/// det[a; b; c] of three vectors whose entries are each one rounded difference of inputs,
+/// evaluated in the order of Shewchuk's orient3d, with his a-priori bound
+/// |fl(det) - det| ≤ (7 u + 56 u²) · permanent; we use 8 u · permanent.
+struct Det {
+  Scalar value;
+  Scalar error;
+};
+
+Det det3(const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Scalar bxcy = b.x() * c.y(), cxby = c.x() * b.y();
+  const Scalar cxay = c.x() * a.y(), axcy = a.x() * c.y();
+  const Scalar axby = a.x() * b.y(), bxay = b.x() * a.y();
+  const Scalar value = a.z() * (bxcy - cxby) + b.z() * (cxay - axcy) + c.z() * (axby - bxay);
+  const Scalar permanent = (std::abs(bxcy) + std::abs(cxby)) * std::abs(a.z()) +
+                           (std::abs(cxay) + std::abs(axcy)) * std::abs(b.z()) +
+                           (std::abs(axby) + std::abs(bxay)) * std::abs(c.z());
+  return {value, 8 * kU * permanent};
+}
+
+/// Certified sign (+1, -1, or 0 for "unknown") of a sum of determinants: the sum's rounding
+/// adds at most γ_2 Σ|d_i| ≤ 3 u Σ|d_i| to the determinants' own bounds.
+int certified_sign(const Det* d, int n) {
+  Scalar sum = 0, abs_sum = 0, error = 0;
+  for (int i = 0; i < n; ++i) {
+    sum += d[i].value;
+    abs_sum += std::abs(d[i].value);
+    error += d[i].error;
+  }
+  const Scalar bound = (error + 3 * kU * abs_sum) * (1 + 8 * kU) + kUnderflowSlack;
+  if (sum > bound) return 1;
+  if (sum < -bound) return -1;
+  return 0;
+}
+
+
+/// An interval [value - radius, value + radius] certified to hold an exact real.
+struct Ball {
+  Scalar value = 0;
+  Scalar radius = 0;
+};
+
+/// The coplanarity cubic's Bernstein coefficients on [0, 1], as balls.
+struct Cubic {
+  std::array<Ball, 4> b;
+};
+
+/// The ball of a certified_sign sum divided by a positive integer `k` ≤ 3: fl(sum / k) errs by
+/// at most u |sum / k| ≤ 2u |result|; the bound is divided by k rounded up.
+Ball coefficient(const Det* d, int n, Scalar k) {
+  Scalar sum = 0, abs_sum = 0, error = 0;
+  for (int i = 0; i < n; ++i) {
+    sum += d[i].value;
+    abs_sum += std::abs(d[i].value);
+    error += d[i].error;
+  }
+  const Scalar bound = (error + 3 * kU * abs_sum) * (1 + 8 * kU) + kUnderflowSlack;
+  const Scalar value = sum / k;
+  return {value, (bound / k + 2 * kU * std::abs(value)) * (1 + 8 * kU) + kUnderflowSlack};
+}
+
+/// Filter 2 (δ = 0 only): contact needs the 4 points coplanar at some t. The coplanarity
+/// function det[x1 - x0, x2 - x0, x3 - x0](t) is a cubic whose Bernstein coefficients on [0, 1]
+/// are, up to positive factors, the sums of the mixed determinants taking j columns at t = 1
+/// (j = 0..3). Same certified strict sign for all four: never coplanar.
+///
+/// `cubic`, when given, receives the cubic's Bernstein coefficients on [0, 1] as intervals
+/// (those sums divided by 1, 3, 3, 1) for `coplanar_times`; it is filled only when the answer
+/// is false. b0 and b3 are tried first: a sign change between them ends the test early.
+bool never_coplanar(const CcdPoints& start, const CcdPoints& end, Cubic* cubic) {
+  std::array<std::array<Vec3, 3>, 2> col;
+  for (int i = 0; i < 3; ++i) {
+    col[0][i] = start[i + 1] - start[0];
+    col[1][i] = end[i + 1] - end[0];
+  }
+  const auto mixed = [&](int t0, int t1, int t2) { return det3(col[t0][0], col[t1][1], col[t2][2]); };
+  const Det b0[1] = {mixed(0, 0, 0)};
+  const Det b3[1] = {mixed(1, 1, 1)};
+  const int s = certified_sign(b0, 1);
+  bool never = s != 0 && certified_sign(b3, 1) == s;
+  Det b1[3], b2[3];
+  if (never || cubic != nullptr) {
+    b1[0] = mixed(1, 0, 0), b1[1] = mixed(0, 1, 0), b1[2] = mixed(0, 0, 1);
+    b2[0] = mixed(0, 1, 1), b2[1] = mixed(1, 0, 1), b2[2] = mixed(1, 1, 0);
+    never = never && certified_sign(b1, 3) == s && certified_sign(b2, 3) == s;
+  }
+  if (!never && cubic != nullptr) {
+    cubic->b = {coefficient(b0, 1, 1), coefficient(b1, 3, 3), coefficient(b2, 3, 3), coefficient(b3, 1, 1)};
+  }
+  return never;
+}
+
+/// Subintervals of [0, 1] that may hold a coplanarity time, in increasing order; outside them
+/// the 4 points are certified never coplanar (so, at δ = 0, never touching).
+using TimeIntervals = CcdTimeIntervals;
+constexpr int kMaxIntervals = static_cast<int>(std::tuple_size_v<decltype(TimeIntervals::at)>);
+
+/// Depth of the Bernstein subdivision: intervals of width 2^-kCoplanarDepth at the finest.
+constexpr int kCoplanarDepth = 10;
+
+/// De Casteljau subdivision of `cubic` (on [0, 1]) at midpoints, depth first from the left
+/// down to kCoplanarDepth: the leaves not certified nonzero, adjacent ones merged. Past
+/// kMaxIntervals separate intervals the last one is extended to 1 (the rest unexplored).
+/// Endpoints k 2^-d are exact.
+///
+/// Certification with one radius R for every node: each computed coefficient is within R of
+/// the exact Bernstein coefficient of the exact cubic on the node's interval. The exact ones
+/// are averages of averages of the exact coefficients on [0, 1], so at most M = max (|b_j| +
+/// r_j) in magnitude. A split averages 3 times; each average of two values within e of exact
+/// ones errs by at most e + u (M + e) (1 + u) (the halving is exact above underflow), so with
+/// e ≤ 2M after k ≤ 3 kCoplanarDepth averages e ≤ r_max + 3.01 k u M + k 2^-1074. A node
+/// whose 4 coefficients are all > R (or all < −R) is certified nonzero: the exact cubic there
+/// is a convex combination of its exact coefficients, all of one strict sign.
+TimeIntervals coplanar_times(const Cubic& cubic) {
+  Scalar m = 0, r = 0;
+  std::array<Scalar, 4> b0;
+  for (std::size_t j = 0; j < 4; ++j) {
+    b0[j] = cubic.b[j].value;
+    m = std::max(m, std::abs(cubic.b[j].value) + cubic.b[j].radius);
+    r = std::max(r, cubic.b[j].radius);
+  }
+  constexpr Scalar kAverages = 3 * kCoplanarDepth;
+  const Scalar radius = (r + 4 * kAverages * kU * m) * (1 + 16 * kU) + kAverages * kUnderflowSlack;
+  const auto nonzero = [radius](const std::array<Scalar, 4>& c) {
+    return (c[0] > radius && c[1] > radius && c[2] > radius && c[3] > radius) ||
+           (c[0] < -radius && c[1] < -radius && c[2] < -radius && c[3] < -radius);
+  };
+  TimeIntervals out;
+  struct Node {
+    std::array<Scalar, 4> c;
+    Scalar t0, t1;
+    int depth;
+  };
+  std::array<Node, kCoplanarDepth + 2> stack;
+  int top = 0;
+  stack[top++] = {b0, 0, 1, 0};
+  while (top > 0) {
+    const Node n = stack[--top];
+    if (nonzero(n.c)) continue;
+    if (n.depth == kCoplanarDepth) {
+      if (out.count > 0 && out.at[static_cast<std::size_t>(out.count - 1)][1] == n.t0) {
+        out.at[static_cast<std::size_t>(out.count - 1)][1] = n.t1;
+      } else if (out.count == kMaxIntervals) {
+        out.at[static_cast<std::size_t>(out.count - 1)][1] = 1;
+        return out;
+      } else {
+        out.at[static_cast<std::size_t>(out.count++)] = {n.t0, n.t1};
+      }
+      continue;
+    }
+    const auto& p = n.c;
+    const Scalar q01 = (p[0] + p[1]) * 0.5, q12 = (p[1] + p[2]) * 0.5, q23 = (p[2] + p[3]) * 0.5;
+    const Scalar r012 = (q01 + q12) * 0.5, r123 = (q12 + q23) * 0.5;
+    const Scalar mid = (r012 + r123) * 0.5;
+    const Scalar tm = (n.t0 + n.t1) / 2;
+    stack[static_cast<std::size_t>(top++)] = {{mid, r123, q23, p[3]}, tm, n.t1, n.depth + 1};  // popped second
+    stack[static_cast<std::size_t>(top++)] = {{p[0], q01, r012, mid}, n.t0, tm, n.depth + 1};
+  }
+  return out;
+}
+
 /// Result of conservative advancement: no contact before `t` (certified); `kSeparated`: none at
 /// all; `kWitness`: a point of the domain at `t` is within the tolerance's reach.
 struct Advance {
@@ -228,11 +389,17 @@ struct Advance {
 /// [t_k, t_{k+1}]. n is the closest-point direction at t_k, for which the bound is tight; its
 /// own rounding does not matter (any n is valid). Stops after `max_steps` steps, or when a step
 /// gains less than 2^-30 or cannot be certified.
+///
+/// With `times` (δ = 0), no contact lies outside its intervals: the advancement starts at the
+/// first one and, once certified past the end of one, resumes at the start of the next (none:
+/// separated).
 Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Prepared& p, const Hull& hull,
-                Scalar reach2, std::int64_t max_steps, Scalar max_time) {
+                Scalar reach2, std::int64_t max_steps, Scalar max_time, const TimeIntervals* times) {
   Advance r;
   const int half = hull.count / 2;  // the points at t = 0, then the same at t = 1
   Scalar t = 0, progress = 1;
+  int interval = 0;
+  if (times != nullptr) t = times->at[0][0];  // count ≥ 1 (else never coplanar)
   for (std::int64_t step = 0;; ++step) {
     if (t >= max_time) {  // no contact before t ≥ max_time
       r.state = Advance::kSeparated;
@@ -330,63 +497,18 @@ Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, cons
       r.state = Advance::kSeparated;
       break;
     }
+    if (times != nullptr && t >= times->at[interval][1]) {
+      // [.., t] is certified and the rest up to the next interval is never coplanar.
+      while (interval < times->count && t >= times->at[interval][1]) ++interval;
+      if (interval == times->count) {
+        r.state = Advance::kSeparated;
+        break;
+      }
+      t = std::max(t, times->at[interval][0]);
+    }
   }
   r.t = t;
   return r;
-}
-
-/// det[a; b; c] of three vectors whose entries are each one rounded difference of inputs,
-/// evaluated in the order of Shewchuk's orient3d, with his a-priori bound
-/// |fl(det) - det| ≤ (7 u + 56 u²) · permanent; we use 8 u · permanent.
-struct Det {
-  Scalar value;
-  Scalar error;
-};
-
-Det det3(const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Scalar bxcy = b.x() * c.y(), cxby = c.x() * b.y();
-  const Scalar cxay = c.x() * a.y(), axcy = a.x() * c.y();
-  const Scalar axby = a.x() * b.y(), bxay = b.x() * a.y();
-  const Scalar value = a.z() * (bxcy - cxby) + b.z() * (cxay - axcy) + c.z() * (axby - bxay);
-  const Scalar permanent = (std::abs(bxcy) + std::abs(cxby)) * std::abs(a.z()) +
-                           (std::abs(cxay) + std::abs(axcy)) * std::abs(b.z()) +
-                           (std::abs(axby) + std::abs(bxay)) * std::abs(c.z());
-  return {value, 8 * kU * permanent};
-}
-
-/// Certified sign (+1, -1, or 0 for "unknown") of a sum of determinants: the sum's rounding
-/// adds at most γ_2 Σ|d_i| ≤ 3 u Σ|d_i| to the determinants' own bounds.
-int certified_sign(const Det* d, int n) {
-  Scalar sum = 0, abs_sum = 0, error = 0;
-  for (int i = 0; i < n; ++i) {
-    sum += d[i].value;
-    abs_sum += std::abs(d[i].value);
-    error += d[i].error;
-  }
-  const Scalar bound = (error + 3 * kU * abs_sum) * (1 + 8 * kU) + kUnderflowSlack;
-  if (sum > bound) return 1;
-  if (sum < -bound) return -1;
-  return 0;
-}
-
-/// Filter 2 (δ = 0 only): contact needs the 4 points coplanar at some t. The coplanarity
-/// function det[x1 - x0, x2 - x0, x3 - x0](t) is a cubic whose Bernstein coefficients on [0, 1]
-/// are, up to positive factors, the sums of the mixed determinants taking j columns at t = 1
-/// (j = 0..3). Same certified strict sign for all four: never coplanar.
-bool never_coplanar(const CcdPoints& start, const CcdPoints& end) {
-  std::array<std::array<Vec3, 3>, 2> col;
-  for (int i = 0; i < 3; ++i) {
-    col[0][i] = start[i + 1] - start[0];
-    col[1][i] = end[i + 1] - end[0];
-  }
-  const auto mixed = [&](int t0, int t1, int t2) { return det3(col[t0][0], col[t1][1], col[t2][2]); };
-  const Det b0[1] = {mixed(0, 0, 0)};
-  const Det b1[3] = {mixed(1, 0, 0), mixed(0, 1, 0), mixed(0, 0, 1)};
-  const Det b2[3] = {mixed(0, 1, 1), mixed(1, 0, 1), mixed(1, 1, 0)};
-  const Det b3[1] = {mixed(1, 1, 1)};
-  const int s = certified_sign(b0, 1);
-  if (s == 0) return false;
-  return certified_sign(b1, 3) == s && certified_sign(b2, 3) == s && certified_sign(b3, 1) == s;
 }
 
 struct Box {
@@ -550,6 +672,16 @@ Scalar ccd_hull_bound(Scalar magnitude, Scalar delta) {
   return round_up(axis_error(magnitude) + delta);
 }
 
+CcdTimeIntervals ccd_coplanar_times(const CcdPoints& start, const CcdPoints& end) {
+  CcdTimeIntervals all;
+  all.at[0] = {0, 1};
+  all.count = 1;
+  if (!in_range(start, end) || max_abs_coordinates(start, end).maxCoeff() > kMaxSignFilterMagnitude) return all;
+  Cubic cubic;
+  if (never_coplanar(start, end, &cubic)) return {};
+  return coplanar_times(cubic);
+}
+
 Vec3 ccd_rounding_bound(const CcdPoints& start, const CcdPoints& end) {
   const Vec3 m = max_abs_coordinates(start, end);
   Vec3 err;
@@ -609,7 +741,9 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   }
   prepare(p, pair, start, end);
   const Scalar magnitude = m.maxCoeff();
-  if (delta == 0 && magnitude <= kMaxSignFilterMagnitude && never_coplanar(start, end)) {
+  const bool coplanarity = delta == 0 && magnitude <= kMaxSignFilterMagnitude;
+  Cubic cubic;
+  if (coplanarity && never_coplanar(start, end, &cubic)) {
     result.outcome = CcdOutcome::kSeparatedCoplanarity;
     return result;
   }
@@ -617,17 +751,27 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
     result.outcome = CcdOutcome::kSeparatedDirection;
     return result;
   }
+  // δ = 0: the times at which the points may be coplanar, to which the search is confined.
+  TimeIntervals times;
+  if (coplanarity) {
+    times = coplanar_times(cubic);
+    if (times.count == 0) {
+      result.outcome = CcdOutcome::kSeparatedCoplanarity;
+      return result;
+    }
+  }
   const Scalar eps = std::max(options.distance_tolerance * extent, 4 * p.err.maxCoeff());
   const Scalar tol_t = std::clamp(options.time_tolerance, kMinWidth, Scalar(1));
   // Witnesses: computed ‖F‖ ≤ reach, so the exact point is within reach + ‖err‖.
   const Scalar reach = delta * (1 + options.separation_tolerance) + eps + (p.err * p.square).norm() / p.square;
   const Scalar reach2 = (reach * p.square) * (reach * p.square);  // of lengths times p.square
-  Scalar t_begin = 0;
+  Scalar t_begin = coplanarity ? times.at[0][0] : 0;
   std::int64_t steps = 0;
   if (magnitude <= kMaxSignFilterMagnitude && options.max_advance_steps > 0) {
     // The closest-point kernels need squared lengths that do not overflow; they only choose
     // directions and witness candidates, so any finite result is safe.
-    const Advance a = advance(pair, start, end, p, hull, reach2, options.max_advance_steps, options.max_time);
+    const Advance a = advance(pair, start, end, p, hull, reach2, options.max_advance_steps, options.max_time,
+                              coplanarity ? &times : nullptr);
     steps = a.steps;
     result.advance_steps = steps;
     if (a.state == Advance::kSeparated) {

@@ -142,6 +142,20 @@ inline bool ccd_slabs_apart(const CcdSlabs& a, const CcdSlabs& b, Scalar bound) 
   return apart != 0;
 }
 
+/// Sub-intervals of [0, 1], increasing and disjoint, with exact dyadic endpoints.
+struct CcdTimeIntervals {
+  std::array<std::array<Scalar, 2>, 8> at{};  ///< [lo, hi], closed
+  int count = 0;
+};
+
+/// The coplanarity filter of `ccd` at δ = 0 (docs/ccd.md, step 3), for tests: the times that
+/// the filter leaves open, outside of which the 4 points are certified never coplanar (so never
+/// touching). No interval: never coplanar. Found by de Casteljau subdivision of the coplanarity
+/// cubic's Bernstein coefficients in certified ball arithmetic, down to width 2^-10; at most 8
+/// intervals (the last one then reaches 1). For coordinates beyond 2^300 in magnitude (where
+/// `ccd` scales the query first or gives up) it is the whole [0, 1].
+CcdTimeIntervals ccd_coplanar_times(const CcdPoints& start, const CcdPoints& end);
+
 /// err, per axis: a certified bound on the absolute rounding error of every difference value
 /// F(t, u, v) the bisection evaluates for these points (64 u · max|coordinate| + 2^-1000,
 /// u = 2^-53; docs/ccd.md derives the 30 u the evaluation needs).
