@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cmath>
 #include <queue>
-#include <tuple>
 #include <vector>
 
 namespace crumple::geometry {
@@ -303,73 +302,56 @@ bool never_coplanar(const CcdPoints& start, const CcdPoints& end, Cubic* cubic) 
   return never;
 }
 
-/// Subintervals of [0, 1] that may hold a coplanarity time, in increasing order; outside them
-/// the 4 points are certified never coplanar (so, at δ = 0, never touching).
-using TimeIntervals = CcdTimeIntervals;
-constexpr int kMaxIntervals = static_cast<int>(std::tuple_size_v<decltype(TimeIntervals::at)>);
+/// A time before which the cubic with Bernstein coefficients `b` on [0, 1] (the computed
+/// values, each within `r` of the exact one) is certified nonzero: 0 when none is, > 1 when
+/// it has no root in [0, 1] at all. Bezier clipping from the left: the graph (t, f(t)) lies in
+/// the convex hull of the control points (j/3, b_j). Signs flipped so that b_0 > r, take lower
+/// bounds l_j ≤ b_j (l_j > 0 proves b_j > 0; all positive: no root); every hull point (x, y)
+/// then has y ≥ l_0 + s x with s the least slope (l_j − l_0) / (j/3), so y > 0 for
+/// x < min over l_j < l_0 of (j/3) l_0 / (l_0 − l_j), computed rounded down (4 roundings of
+/// positive terms: a factor 1 − 8u covers them; l_0 is kept far above underflow).
+Scalar clip_from_left(std::array<Scalar, 4> b, Scalar r) {
+  if (b[0] < 0) {
+    for (Scalar& x : b) x = -x;
+  }
+  if (!(b[0] > r)) return 0;
+  const auto lower = [r](Scalar x) {
+    const Scalar l = x - r;  // within u |l| of the exact difference
+    return l - (2 * kU * std::abs(l) + kUnderflowSlack);
+  };
+  const Scalar l0 = lower(b[0]);
+  if (!(l0 > 0x1p-900)) return 0;
+  Scalar t = 2;
+  bool positive = true;
+  for (int j = 1; j < 4; ++j) {
+    const Scalar lj = lower(b[static_cast<std::size_t>(j)]);
+    positive = positive && lj > 0;
+    if (lj < l0) t = std::min(t, (j * l0) / (3 * (l0 - lj)) * (1 - 8 * kU));
+  }
+  return positive ? 2 : t;  // all l_j > 0: a convex combination of positives, no root
+}
 
-/// Depth of the Bernstein subdivision: intervals of width 2^-kCoplanarDepth at the finest.
-constexpr int kCoplanarDepth = 10;
-
-/// De Casteljau subdivision of `cubic` (on [0, 1]) at midpoints, depth first from the left
-/// down to kCoplanarDepth: the leaves not certified nonzero, adjacent ones merged. Past
-/// kMaxIntervals separate intervals the last one is extended to 1 (the rest unexplored).
-/// Endpoints k 2^-d are exact.
-///
-/// Certification with one radius R for every node: each computed coefficient is within R of
-/// the exact Bernstein coefficient of the exact cubic on the node's interval. The exact ones
-/// are averages of averages of the exact coefficients on [0, 1], so at most M = max (|b_j| +
-/// r_j) in magnitude. A split averages 3 times; each average of two values within e of exact
-/// ones errs by at most e + u (M + e) (1 + u) (the halving is exact above underflow), so with
-/// e ≤ 2M after k ≤ 3 kCoplanarDepth averages e ≤ r_max + 3.01 k u M + k 2^-1074. A node
-/// whose 4 coefficients are all > R (or all < −R) is certified nonzero: the exact cubic there
-/// is a convex combination of its exact coefficients, all of one strict sign.
-TimeIntervals coplanar_times(const Cubic& cubic) {
-  Scalar m = 0, r = 0;
-  std::array<Scalar, 4> b0;
+/// The interval [lo, hi] of [0, 1] outside which the coplanarity cubic is certified nonzero
+/// (the 4 points never coplanar, so at δ = 0 never touching): Bezier clipping from both ends
+/// with the coefficients' largest radius. False when it has no root in [0, 1].
+bool coplanar_interval(const Cubic& cubic, std::array<Scalar, 2>& out) {
+  std::array<Scalar, 4> b, reversed;
+  Scalar r = 0;
   for (std::size_t j = 0; j < 4; ++j) {
-    b0[j] = cubic.b[j].value;
-    m = std::max(m, std::abs(cubic.b[j].value) + cubic.b[j].radius);
+    b[j] = cubic.b[j].value;
+    reversed[3 - j] = cubic.b[j].value;
     r = std::max(r, cubic.b[j].radius);
   }
-  constexpr Scalar kAverages = 3 * kCoplanarDepth;
-  const Scalar radius = (r + 4 * kAverages * kU * m) * (1 + 16 * kU) + kAverages * kUnderflowSlack;
-  const auto nonzero = [radius](const std::array<Scalar, 4>& c) {
-    return (c[0] > radius && c[1] > radius && c[2] > radius && c[3] > radius) ||
-           (c[0] < -radius && c[1] < -radius && c[2] < -radius && c[3] < -radius);
-  };
-  TimeIntervals out;
-  struct Node {
-    std::array<Scalar, 4> c;
-    Scalar t0, t1;
-    int depth;
-  };
-  std::array<Node, kCoplanarDepth + 2> stack;
-  int top = 0;
-  stack[top++] = {b0, 0, 1, 0};
-  while (top > 0) {
-    const Node n = stack[--top];
-    if (nonzero(n.c)) continue;
-    if (n.depth == kCoplanarDepth) {
-      if (out.count > 0 && out.at[static_cast<std::size_t>(out.count - 1)][1] == n.t0) {
-        out.at[static_cast<std::size_t>(out.count - 1)][1] = n.t1;
-      } else if (out.count == kMaxIntervals) {
-        out.at[static_cast<std::size_t>(out.count - 1)][1] = 1;
-        return out;
-      } else {
-        out.at[static_cast<std::size_t>(out.count++)] = {n.t0, n.t1};
-      }
-      continue;
-    }
-    const auto& p = n.c;
-    const Scalar q01 = (p[0] + p[1]) * 0.5, q12 = (p[1] + p[2]) * 0.5, q23 = (p[2] + p[3]) * 0.5;
-    const Scalar r012 = (q01 + q12) * 0.5, r123 = (q12 + q23) * 0.5;
-    const Scalar mid = (r012 + r123) * 0.5;
-    const Scalar tm = (n.t0 + n.t1) / 2;
-    stack[static_cast<std::size_t>(top++)] = {{mid, r123, q23, p[3]}, tm, n.t1, n.depth + 1};  // popped second
-    stack[static_cast<std::size_t>(top++)] = {{p[0], q01, r012, mid}, n.t0, tm, n.depth + 1};
-  }
-  return out;
+  const Scalar lo = clip_from_left(b, r);
+  if (lo > 1) return false;
+  // In s = 1 − t the coefficients reverse; no root for s below `from_right`, i.e. for
+  // t > 1 − from_right, rounded up by one ulp (1 − s rounds at most half an ulp).
+  const Scalar from_right = clip_from_left(reversed, r);
+  if (from_right > 1) return false;
+  const Scalar hi = std::min(Scalar(1), std::nextafter(1 - from_right, Scalar(2)));
+  if (lo > hi) return false;
+  out = {lo, hi};
+  return true;
 }
 
 /// Result of conservative advancement: no contact before `t` (certified); `kSeparated`: none at
@@ -390,16 +372,13 @@ struct Advance {
 /// own rounding does not matter (any n is valid). Stops after `max_steps` steps, or when a step
 /// gains less than 2^-30 or cannot be certified.
 ///
-/// With `times` (δ = 0), no contact lies outside its intervals: the advancement starts at the
-/// first one and, once certified past the end of one, resumes at the start of the next (none:
-/// separated).
+/// No contact lies outside `times` (at δ = 0, the coplanarity interval; else [0, 1]): the
+/// advancement starts at its start and is separated once certified past its end.
 Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Prepared& p, const Hull& hull,
-                Scalar reach2, std::int64_t max_steps, Scalar max_time, const TimeIntervals* times) {
+                Scalar reach2, std::int64_t max_steps, Scalar max_time, std::array<Scalar, 2> times) {
   Advance r;
   const int half = hull.count / 2;  // the points at t = 0, then the same at t = 1
-  Scalar t = 0, progress = 1;
-  int interval = 0;
-  if (times != nullptr) t = times->at[0][0];  // count ≥ 1 (else never coplanar)
+  Scalar t = times[0], progress = 1;
   for (std::int64_t step = 0;; ++step) {
     if (t >= max_time) {  // no contact before t ≥ max_time
       r.state = Advance::kSeparated;
@@ -497,14 +476,9 @@ Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, cons
       r.state = Advance::kSeparated;
       break;
     }
-    if (times != nullptr && t >= times->at[interval][1]) {
-      // [.., t] is certified and the rest up to the next interval is never coplanar.
-      while (interval < times->count && t >= times->at[interval][1]) ++interval;
-      if (interval == times->count) {
-        r.state = Advance::kSeparated;
-        break;
-      }
-      t = std::max(t, times->at[interval][0]);
+    if (t > times[1]) {  // certified up to t, and never coplanar after
+      r.state = Advance::kSeparated;
+      break;
     }
   }
   r.t = t;
@@ -679,7 +653,9 @@ CcdTimeIntervals ccd_coplanar_times(const CcdPoints& start, const CcdPoints& end
   if (!in_range(start, end) || max_abs_coordinates(start, end).maxCoeff() > kMaxSignFilterMagnitude) return all;
   Cubic cubic;
   if (never_coplanar(start, end, &cubic)) return {};
-  return coplanar_times(cubic);
+  CcdTimeIntervals out;
+  if (coplanar_interval(cubic, out.at[0])) out.count = 1;
+  return out;
 }
 
 Vec3 ccd_rounding_bound(const CcdPoints& start, const CcdPoints& end) {
@@ -752,26 +728,23 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
     return result;
   }
   // δ = 0: the times at which the points may be coplanar, to which the search is confined.
-  TimeIntervals times;
-  if (coplanarity) {
-    times = coplanar_times(cubic);
-    if (times.count == 0) {
-      result.outcome = CcdOutcome::kSeparatedCoplanarity;
-      return result;
-    }
+  std::array<Scalar, 2> first{0, 1};
+  if (coplanarity && !coplanar_interval(cubic, first)) {
+    result.outcome = CcdOutcome::kSeparatedCoplanarity;
+    return result;
   }
   const Scalar eps = std::max(options.distance_tolerance * extent, 4 * p.err.maxCoeff());
   const Scalar tol_t = std::clamp(options.time_tolerance, kMinWidth, Scalar(1));
   // Witnesses: computed ‖F‖ ≤ reach, so the exact point is within reach + ‖err‖.
   const Scalar reach = delta * (1 + options.separation_tolerance) + eps + (p.err * p.square).norm() / p.square;
   const Scalar reach2 = (reach * p.square) * (reach * p.square);  // of lengths times p.square
-  Scalar t_begin = coplanarity ? times.at[0][0] : 0;
+  Scalar t_begin = first[0];
   std::int64_t steps = 0;
   if (magnitude <= kMaxSignFilterMagnitude && options.max_advance_steps > 0) {
     // The closest-point kernels need squared lengths that do not overflow; they only choose
     // directions and witness candidates, so any finite result is safe.
     const Advance a = advance(pair, start, end, p, hull, reach2, options.max_advance_steps, options.max_time,
-                              coplanarity ? &times : nullptr);
+                              first);
     steps = a.steps;
     result.advance_steps = steps;
     if (a.state == Advance::kSeparated) {

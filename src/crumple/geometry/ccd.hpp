@@ -142,7 +142,7 @@ inline bool ccd_slabs_apart(const CcdSlabs& a, const CcdSlabs& b, Scalar bound) 
   return apart != 0;
 }
 
-/// Sub-intervals of [0, 1], increasing and disjoint, with exact dyadic endpoints.
+/// Sub-intervals of [0, 1], increasing and disjoint.
 struct CcdTimeIntervals {
   std::array<std::array<Scalar, 2>, 8> at{};  ///< [lo, hi], closed
   int count = 0;
@@ -150,10 +150,9 @@ struct CcdTimeIntervals {
 
 /// The coplanarity filter of `ccd` at δ = 0 (docs/ccd.md, step 3), for tests: the times that
 /// the filter leaves open, outside of which the 4 points are certified never coplanar (so never
-/// touching). No interval: never coplanar. Found by de Casteljau subdivision of the coplanarity
-/// cubic's Bernstein coefficients in certified ball arithmetic, down to width 2^-10; at most 8
-/// intervals (the last one then reaches 1). For coordinates beyond 2^300 in magnitude (where
-/// `ccd` scales the query first or gives up) it is the whole [0, 1].
+/// touching). No interval: never coplanar. Today at most one interval, from Bezier clipping of
+/// the coplanarity cubic's certified Bernstein coefficients from both ends. For coordinates
+/// beyond 2^300 in magnitude (where `ccd` scales the query first or gives up) it is [0, 1].
 CcdTimeIntervals ccd_coplanar_times(const CcdPoints& start, const CcdPoints& end);
 
 /// err, per axis: a certified bound on the absolute rounding error of every difference value
