@@ -755,8 +755,9 @@ TEST(CcdCoplanarTimes, NeverDropACoplanarityTime) {
   run_intervals("ee-contact", 300, 102, ee_contact);
   run_intervals("touching-shared-point", 300, 103, touching_shared_point);
   for (const Scalar gap : {1e-7, 1e-10, 1e-12}) {
-    run_intervals("vf-near-miss", 100, 104 + static_cast<std::uint64_t>(-std::log10(gap)), [gap](Gen& g) { return shifted(vf_contact(g), g, gap); });
-    run_intervals("ee-near-miss", 100, 124 + static_cast<std::uint64_t>(-std::log10(gap)), [gap](Gen& g) { return shifted(ee_contact(g), g, gap); });
+    const auto seed = static_cast<std::uint64_t>(-std::log10(gap));
+    run_intervals("vf-near-miss", 100, 104 + seed, [gap](Gen& g) { return shifted(vf_contact(g), g, gap); });
+    run_intervals("ee-near-miss", 100, 124 + seed, [gap](Gen& g) { return shifted(ee_contact(g), g, gap); });
   }
   for (const Scalar h : {0.0, 1e-10, -1e-12}) {
     run_intervals("vf-grazing", 60, 106, [h](Gen& g) { return vf_grazing(g, h); });

@@ -372,13 +372,16 @@ struct Advance {
 /// own rounding does not matter (any n is valid). Stops after `max_steps` steps, or when a step
 /// gains less than 2^-30 or cannot be certified.
 ///
-/// No contact lies outside `times` (at δ = 0, the coplanarity interval; else [0, 1]): the
-/// advancement starts at its start and is separated once certified past its end.
+/// No contact lies after `times[1]` (at δ = 0, the end of the coplanarity interval; else 1):
+/// the advancement is separated once certified past it. It still starts at t = 0, not at
+/// `times[0]`: started next to a root, it would report a hit a rounding error before the
+/// contact, where the impact's closest-point direction (its normal) is rounding noise; from 0
+/// its hits, and their times, are those it gave without the interval.
 Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Prepared& p, const Hull& hull,
                 Scalar reach2, std::int64_t max_steps, Scalar max_time, std::array<Scalar, 2> times) {
   Advance r;
   const int half = hull.count / 2;  // the points at t = 0, then the same at t = 1
-  Scalar t = times[0], progress = 1;
+  Scalar t = 0, progress = 1;
   for (std::int64_t step = 0;; ++step) {
     if (t >= max_time) {  // no contact before t ≥ max_time
       r.state = Advance::kSeparated;
@@ -738,7 +741,7 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   // Witnesses: computed ‖F‖ ≤ reach, so the exact point is within reach + ‖err‖.
   const Scalar reach = delta * (1 + options.separation_tolerance) + eps + (p.err * p.square).norm() / p.square;
   const Scalar reach2 = (reach * p.square) * (reach * p.square);  // of lengths times p.square
-  Scalar t_begin = first[0];
+  Scalar t_begin = 0;
   std::int64_t steps = 0;
   if (magnitude <= kMaxSignFilterMagnitude && options.max_advance_steps > 0) {
     // The closest-point kernels need squared lengths that do not overflow; they only choose
