@@ -211,149 +211,6 @@ bool line_above(Scalar s0, Scalar s1, Scalar t, Scalar threshold) {
   return value > round_up(threshold + 4 * kU * (std::abs(s0) + std::abs(s1)));
 }
 
-/// det[a; b; c] of three vectors whose entries are each one rounded difference of inputs,
-/// evaluated in the order of Shewchuk's orient3d, with his a-priori bound
-/// |fl(det) - det| ≤ (7 u + 56 u²) · permanent; we use 8 u · permanent.
-struct Det {
-  Scalar value;
-  Scalar error;
-};
-
-Det det3(const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Scalar bxcy = b.x() * c.y(), cxby = c.x() * b.y();
-  const Scalar cxay = c.x() * a.y(), axcy = a.x() * c.y();
-  const Scalar axby = a.x() * b.y(), bxay = b.x() * a.y();
-  const Scalar value = a.z() * (bxcy - cxby) + b.z() * (cxay - axcy) + c.z() * (axby - bxay);
-  const Scalar permanent = (std::abs(bxcy) + std::abs(cxby)) * std::abs(a.z()) +
-                           (std::abs(cxay) + std::abs(axcy)) * std::abs(b.z()) +
-                           (std::abs(axby) + std::abs(bxay)) * std::abs(c.z());
-  return {value, 8 * kU * permanent};
-}
-
-/// Certified sign (+1, -1, or 0 for "unknown") of a sum of determinants: the sum's rounding
-/// adds at most γ_2 Σ|d_i| ≤ 3 u Σ|d_i| to the determinants' own bounds.
-int certified_sign(const Det* d, int n) {
-  Scalar sum = 0, abs_sum = 0, error = 0;
-  for (int i = 0; i < n; ++i) {
-    sum += d[i].value;
-    abs_sum += std::abs(d[i].value);
-    error += d[i].error;
-  }
-  const Scalar bound = (error + 3 * kU * abs_sum) * (1 + 8 * kU) + kUnderflowSlack;
-  if (sum > bound) return 1;
-  if (sum < -bound) return -1;
-  return 0;
-}
-
-
-/// An interval [value - radius, value + radius] certified to hold an exact real.
-struct Ball {
-  Scalar value = 0;
-  Scalar radius = 0;
-};
-
-/// The coplanarity cubic's Bernstein coefficients on [0, 1], as balls.
-struct Cubic {
-  std::array<Ball, 4> b;
-};
-
-/// The ball of a certified_sign sum divided by a positive integer `k` ≤ 3: fl(sum / k) errs by
-/// at most u |sum / k| ≤ 2u |result|; the bound is divided by k rounded up.
-Ball coefficient(const Det* d, int n, Scalar k) {
-  Scalar sum = 0, abs_sum = 0, error = 0;
-  for (int i = 0; i < n; ++i) {
-    sum += d[i].value;
-    abs_sum += std::abs(d[i].value);
-    error += d[i].error;
-  }
-  const Scalar bound = (error + 3 * kU * abs_sum) * (1 + 8 * kU) + kUnderflowSlack;
-  const Scalar value = sum / k;
-  return {value, (bound / k + 2 * kU * std::abs(value)) * (1 + 8 * kU) + kUnderflowSlack};
-}
-
-/// Filter 2 (δ = 0 only): contact needs the 4 points coplanar at some t. The coplanarity
-/// function det[x1 - x0, x2 - x0, x3 - x0](t) is a cubic whose Bernstein coefficients on [0, 1]
-/// are, up to positive factors, the sums of the mixed determinants taking j columns at t = 1
-/// (j = 0..3). Same certified strict sign for all four: never coplanar.
-///
-/// `cubic`, when given, receives the cubic's Bernstein coefficients on [0, 1] as intervals
-/// (those sums divided by 1, 3, 3, 1) for `coplanar_times`; it is filled only when the answer
-/// is false. b0 and b3 are tried first: a sign change between them ends the test early.
-bool never_coplanar(const CcdPoints& start, const CcdPoints& end, Cubic* cubic) {
-  std::array<std::array<Vec3, 3>, 2> col;
-  for (int i = 0; i < 3; ++i) {
-    col[0][i] = start[i + 1] - start[0];
-    col[1][i] = end[i + 1] - end[0];
-  }
-  const auto mixed = [&](int t0, int t1, int t2) { return det3(col[t0][0], col[t1][1], col[t2][2]); };
-  const Det b0[1] = {mixed(0, 0, 0)};
-  const Det b3[1] = {mixed(1, 1, 1)};
-  const int s = certified_sign(b0, 1);
-  bool never = s != 0 && certified_sign(b3, 1) == s;
-  Det b1[3], b2[3];
-  if (never || cubic != nullptr) {
-    b1[0] = mixed(1, 0, 0), b1[1] = mixed(0, 1, 0), b1[2] = mixed(0, 0, 1);
-    b2[0] = mixed(0, 1, 1), b2[1] = mixed(1, 0, 1), b2[2] = mixed(1, 1, 0);
-    never = never && certified_sign(b1, 3) == s && certified_sign(b2, 3) == s;
-  }
-  if (!never && cubic != nullptr) {
-    cubic->b = {coefficient(b0, 1, 1), coefficient(b1, 3, 3), coefficient(b2, 3, 3), coefficient(b3, 1, 1)};
-  }
-  return never;
-}
-
-/// A time before which the cubic with Bernstein coefficients `b` on [0, 1] (the computed
-/// values, each within `r` of the exact one) is certified nonzero: 0 when none is, > 1 when
-/// it has no root in [0, 1] at all. Bezier clipping from the left: the graph (t, f(t)) lies in
-/// the convex hull of the control points (j/3, b_j). Signs flipped so that b_0 > r, take lower
-/// bounds l_j ≤ b_j (l_j > 0 proves b_j > 0; all positive: no root); every hull point (x, y)
-/// then has y ≥ l_0 + s x with s the least slope (l_j − l_0) / (j/3), so y > 0 for
-/// x < min over l_j < l_0 of (j/3) l_0 / (l_0 − l_j), computed rounded down (4 roundings of
-/// positive terms: a factor 1 − 8u covers them; l_0 is kept far above underflow).
-Scalar clip_from_left(std::array<Scalar, 4> b, Scalar r) {
-  if (b[0] < 0) {
-    for (Scalar& x : b) x = -x;
-  }
-  if (!(b[0] > r)) return 0;
-  const auto lower = [r](Scalar x) {
-    const Scalar l = x - r;  // within u |l| of the exact difference
-    return l - (2 * kU * std::abs(l) + kUnderflowSlack);
-  };
-  const Scalar l0 = lower(b[0]);
-  if (!(l0 > 0x1p-900)) return 0;
-  Scalar t = 2;
-  bool positive = true;
-  for (int j = 1; j < 4; ++j) {
-    const Scalar lj = lower(b[static_cast<std::size_t>(j)]);
-    positive = positive && lj > 0;
-    if (lj < l0) t = std::min(t, (j * l0) / (3 * (l0 - lj)) * (1 - 8 * kU));
-  }
-  return positive ? 2 : t;  // all l_j > 0: a convex combination of positives, no root
-}
-
-/// The interval [lo, hi] of [0, 1] outside which the coplanarity cubic is certified nonzero
-/// (the 4 points never coplanar, so at δ = 0 never touching): Bezier clipping from both ends
-/// with the coefficients' largest radius. False when it has no root in [0, 1].
-bool coplanar_interval(const Cubic& cubic, std::array<Scalar, 2>& out) {
-  std::array<Scalar, 4> b, reversed;
-  Scalar r = 0;
-  for (std::size_t j = 0; j < 4; ++j) {
-    b[j] = cubic.b[j].value;
-    reversed[3 - j] = cubic.b[j].value;
-    r = std::max(r, cubic.b[j].radius);
-  }
-  const Scalar lo = clip_from_left(b, r);
-  if (lo > 1) return false;
-  // In s = 1 − t the coefficients reverse; no root for s below `from_right`, i.e. for
-  // t > 1 − from_right, rounded up by one ulp (1 − s rounds at most half an ulp).
-  const Scalar from_right = clip_from_left(reversed, r);
-  if (from_right > 1) return false;
-  const Scalar hi = std::min(Scalar(1), std::nextafter(1 - from_right, Scalar(2)));
-  if (lo > hi) return false;
-  out = {lo, hi};
-  return true;
-}
-
 /// Result of conservative advancement: no contact before `t` (certified); `kSeparated`: none at
 /// all; `kWitness`: a point of the domain at `t` is within the tolerance's reach.
 struct Advance {
@@ -371,14 +228,8 @@ struct Advance {
 /// [t_k, t_{k+1}]. n is the closest-point direction at t_k, for which the bound is tight; its
 /// own rounding does not matter (any n is valid). Stops after `max_steps` steps, or when a step
 /// gains less than 2^-30 or cannot be certified.
-///
-/// No contact lies after `times[1]` (at δ = 0, the end of the coplanarity interval; else 1):
-/// the advancement is separated once certified past it. It still starts at t = 0, not at
-/// `times[0]`: started next to a root, it would report a hit a rounding error before the
-/// contact, where the impact's closest-point direction (its normal) is rounding noise; from 0
-/// its hits, and their times, are those it gave without the interval.
 Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Prepared& p, const Hull& hull,
-                Scalar reach2, std::int64_t max_steps, Scalar max_time, std::array<Scalar, 2> times) {
+                Scalar reach2, std::int64_t max_steps, Scalar max_time) {
   Advance r;
   const int half = hull.count / 2;  // the points at t = 0, then the same at t = 1
   Scalar t = 0, progress = 1;
@@ -479,13 +330,63 @@ Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, cons
       r.state = Advance::kSeparated;
       break;
     }
-    if (t > times[1]) {  // certified up to t, and never coplanar after
-      r.state = Advance::kSeparated;
-      break;
-    }
   }
   r.t = t;
   return r;
+}
+
+/// det[a; b; c] of three vectors whose entries are each one rounded difference of inputs,
+/// evaluated in the order of Shewchuk's orient3d, with his a-priori bound
+/// |fl(det) - det| ≤ (7 u + 56 u²) · permanent; we use 8 u · permanent.
+struct Det {
+  Scalar value;
+  Scalar error;
+};
+
+Det det3(const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Scalar bxcy = b.x() * c.y(), cxby = c.x() * b.y();
+  const Scalar cxay = c.x() * a.y(), axcy = a.x() * c.y();
+  const Scalar axby = a.x() * b.y(), bxay = b.x() * a.y();
+  const Scalar value = a.z() * (bxcy - cxby) + b.z() * (cxay - axcy) + c.z() * (axby - bxay);
+  const Scalar permanent = (std::abs(bxcy) + std::abs(cxby)) * std::abs(a.z()) +
+                           (std::abs(cxay) + std::abs(axcy)) * std::abs(b.z()) +
+                           (std::abs(axby) + std::abs(bxay)) * std::abs(c.z());
+  return {value, 8 * kU * permanent};
+}
+
+/// Certified sign (+1, -1, or 0 for "unknown") of a sum of determinants: the sum's rounding
+/// adds at most γ_2 Σ|d_i| ≤ 3 u Σ|d_i| to the determinants' own bounds.
+int certified_sign(const Det* d, int n) {
+  Scalar sum = 0, abs_sum = 0, error = 0;
+  for (int i = 0; i < n; ++i) {
+    sum += d[i].value;
+    abs_sum += std::abs(d[i].value);
+    error += d[i].error;
+  }
+  const Scalar bound = (error + 3 * kU * abs_sum) * (1 + 8 * kU) + kUnderflowSlack;
+  if (sum > bound) return 1;
+  if (sum < -bound) return -1;
+  return 0;
+}
+
+/// Filter 2 (δ = 0 only): contact needs the 4 points coplanar at some t. The coplanarity
+/// function det[x1 - x0, x2 - x0, x3 - x0](t) is a cubic whose Bernstein coefficients on [0, 1]
+/// are, up to positive factors, the sums of the mixed determinants taking j columns at t = 1
+/// (j = 0..3). Same certified strict sign for all four: never coplanar.
+bool never_coplanar(const CcdPoints& start, const CcdPoints& end) {
+  std::array<std::array<Vec3, 3>, 2> col;
+  for (int i = 0; i < 3; ++i) {
+    col[0][i] = start[i + 1] - start[0];
+    col[1][i] = end[i + 1] - end[0];
+  }
+  const auto mixed = [&](int t0, int t1, int t2) { return det3(col[t0][0], col[t1][1], col[t2][2]); };
+  const Det b0[1] = {mixed(0, 0, 0)};
+  const Det b1[3] = {mixed(1, 0, 0), mixed(0, 1, 0), mixed(0, 0, 1)};
+  const Det b2[3] = {mixed(0, 1, 1), mixed(1, 0, 1), mixed(1, 1, 0)};
+  const Det b3[1] = {mixed(1, 1, 1)};
+  const int s = certified_sign(b0, 1);
+  if (s == 0) return false;
+  return certified_sign(b1, 3) == s && certified_sign(b2, 3) == s && certified_sign(b3, 1) == s;
 }
 
 struct Box {
@@ -649,18 +550,6 @@ Scalar ccd_hull_bound(Scalar magnitude, Scalar delta) {
   return round_up(axis_error(magnitude) + delta);
 }
 
-CcdTimeIntervals ccd_coplanar_times(const CcdPoints& start, const CcdPoints& end) {
-  CcdTimeIntervals all;
-  all.at[0] = {0, 1};
-  all.count = 1;
-  if (!in_range(start, end) || max_abs_coordinates(start, end).maxCoeff() > kMaxSignFilterMagnitude) return all;
-  Cubic cubic;
-  if (never_coplanar(start, end, &cubic)) return {};
-  CcdTimeIntervals out;
-  if (coplanar_interval(cubic, out.at[0])) out.count = 1;
-  return out;
-}
-
 Vec3 ccd_rounding_bound(const CcdPoints& start, const CcdPoints& end) {
   const Vec3 m = max_abs_coordinates(start, end);
   Vec3 err;
@@ -720,20 +609,12 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   }
   prepare(p, pair, start, end);
   const Scalar magnitude = m.maxCoeff();
-  const bool coplanarity = delta == 0 && magnitude <= kMaxSignFilterMagnitude;
-  Cubic cubic;
-  if (coplanarity && never_coplanar(start, end, &cubic)) {
+  if (delta == 0 && magnitude <= kMaxSignFilterMagnitude && never_coplanar(start, end)) {
     result.outcome = CcdOutcome::kSeparatedCoplanarity;
     return result;
   }
   if (separated_by_a_direction(pair, start, end, hull, p.err, delta, p.square)) {
     result.outcome = CcdOutcome::kSeparatedDirection;
-    return result;
-  }
-  // δ = 0: the times at which the points may be coplanar, to which the search is confined.
-  std::array<Scalar, 2> first{0, 1};
-  if (coplanarity && !coplanar_interval(cubic, first)) {
-    result.outcome = CcdOutcome::kSeparatedCoplanarity;
     return result;
   }
   const Scalar eps = std::max(options.distance_tolerance * extent, 4 * p.err.maxCoeff());
@@ -746,8 +627,7 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   if (magnitude <= kMaxSignFilterMagnitude && options.max_advance_steps > 0) {
     // The closest-point kernels need squared lengths that do not overflow; they only choose
     // directions and witness candidates, so any finite result is safe.
-    const Advance a = advance(pair, start, end, p, hull, reach2, options.max_advance_steps, options.max_time,
-                              first);
+    const Advance a = advance(pair, start, end, p, hull, reach2, options.max_advance_steps, options.max_time);
     steps = a.steps;
     result.advance_steps = steps;
     if (a.state == Advance::kSeparated) {

@@ -142,19 +142,6 @@ inline bool ccd_slabs_apart(const CcdSlabs& a, const CcdSlabs& b, Scalar bound) 
   return apart != 0;
 }
 
-/// Sub-intervals of [0, 1], increasing and disjoint.
-struct CcdTimeIntervals {
-  std::array<std::array<Scalar, 2>, 8> at{};  ///< [lo, hi], closed
-  int count = 0;
-};
-
-/// The coplanarity filter of `ccd` at δ = 0 (docs/ccd.md, step 3), for tests: the times that
-/// the filter leaves open, outside of which the 4 points are certified never coplanar (so never
-/// touching). No interval: never coplanar. Today at most one interval, from Bezier clipping of
-/// the coplanarity cubic's certified Bernstein coefficients from both ends. For coordinates
-/// beyond 2^300 in magnitude (where `ccd` scales the query first or gives up) it is [0, 1].
-CcdTimeIntervals ccd_coplanar_times(const CcdPoints& start, const CcdPoints& end);
-
 /// err, per axis: a certified bound on the absolute rounding error of every difference value
 /// F(t, u, v) the bisection evaluates for these points (64 u · max|coordinate| + 2^-1000,
 /// u = 2^-53; docs/ccd.md derives the 30 u the evaluation needs).
