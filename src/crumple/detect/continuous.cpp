@@ -99,7 +99,8 @@ bool boxes_apart(const FaceFrame& a, const FaceFrame& b, Scalar bound) {
 
 /// Counters of one chunk of work, summed into the query's stats under a lock.
 struct Counts {
-  double vf_box_rejected = 0, ee_box_rejected = 0, vf_tests = 0, ee_tests = 0, boxes = 0, face_pairs_apart = 0;
+  double vf_box_rejected = 0, ee_box_rejected = 0, vf_tests = 0, ee_tests = 0, boxes = 0, face_pairs_apart = 0,
+         advance_steps = 0;
   std::array<double, geometry::kCcdOutcomeCount> outcomes{};  ///< narrow-phase tests per `CcdOutcome`
   void add(const Counts& o) {
     for (std::size_t k = 0; k < outcomes.size(); ++k) outcomes[k] += o.outcomes[k];
@@ -108,6 +109,7 @@ struct Counts {
     vf_tests += o.vf_tests;
     ee_tests += o.ee_tests;
     boxes += o.boxes;
+    advance_steps += o.advance_steps;
     face_pairs_apart += o.face_pairs_apart;
   }
 };
@@ -202,6 +204,7 @@ struct Tester {
   /// Counts a result; true when its impact is wanted.
   bool keep(const geometry::CcdResult& r) {
     counts.boxes += static_cast<double>(r.boxes);
+    counts.advance_steps += static_cast<double>(r.advance_steps);
     ++counts.outcomes[static_cast<std::size_t>(r.outcome)];
     if (!r.hit) return false;
     if (earliest == nullptr) return true;
@@ -938,6 +941,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
   stats_.set("face_pairs_apart", sink.counts.face_pairs_apart);
   stats_.set("ee_tests", sink.counts.ee_tests);
   stats_.set("narrow_boxes", sink.counts.boxes);
+  stats_.set("narrow_advance_steps", sink.counts.advance_steps);
   for (std::size_t k = 0; k < sink.counts.outcomes.size(); ++k) {
     stats_.set("narrow_" + std::string(geometry::to_string(static_cast<geometry::CcdOutcome>(k))),
                sink.counts.outcomes[k]);

@@ -154,12 +154,12 @@ class ContinuousQuery {
   /// (candidates whose faces' boxes are apart, all their sub-pairs dropped at once),
   /// `vf_tests` / `ee_tests` (narrow-phase calls), `orphan_vf` / `orphan_ee`,
   /// `isolated_vertices`, `vf_impacts` / `ee_impacts`, `conservative_hits` (impacts decided by
-  /// budget, precision or range only), `narrow_boxes`, `narrow_<outcome>` (tests per
-  /// `CcdOutcome`, e.g. `narrow_separated-hull`); `update_ms` (broad-phase refit, sort or
-  /// hash), `stream_ms` (wall time of the candidate stream: traversal and the narrow phase of
-  /// its candidates, interleaved on the threads), `narrow_cpu_ms` (thread time spent in the
-  /// narrow phase inside the stream), `orphan_ms`, `sort_ms`, `total_ms`; and the broad
-  /// phase's own counters.
+  /// budget, precision or range only), `narrow_boxes`, `narrow_advance_steps`,
+  /// `narrow_<outcome>` (tests per `CcdOutcome`, e.g. `narrow_separated-hull`); `update_ms`
+  /// (broad-phase refit, sort or hash), `stream_ms` (wall time of the candidate stream:
+  /// traversal and the narrow phase of its candidates, interleaved on the threads),
+  /// `narrow_cpu_ms` (thread time spent in the narrow phase inside the stream), `orphan_ms`,
+  /// `sort_ms`, `total_ms`; and the broad phase's own counters.
   const DetectorStats& stats() const { return stats_; }
 
   /// The collision-free step of the step from `previous` to `current`: exactly
