@@ -616,13 +616,8 @@ std::size_t ContinuousQuery::count_candidates(PositionsView given_previous, Posi
   s.broad->update(in, stats_);
   stats_.set("update_ms", ms_since(t0));
   const auto t1 = std::chrono::steady_clock::now();
-  s.candidates.clear();
-  s.candidates.set_consumer([](std::span<const FacePair>) {});
-  s.broad->self_pairs(s.candidates, stats_);
-  s.candidates.set_consumer({});
+  const std::size_t n = stream_self_pairs(*s.broad, s.candidates, stats_, [](std::span<const FacePair>) {});
   stats_.set("stream_ms", ms_since(t1));
-  const std::size_t n = s.candidates.total();
-  s.candidates.clear();
   stats_.set("candidates", static_cast<double>(n));
   return n;
 }
@@ -804,8 +799,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
     s.broad->update(in, stats_);
     stats_.set("update_ms", ms_since(t0));
     const auto t1 = std::chrono::steady_clock::now();
-    s.candidates.clear();
-    s.candidates.set_consumer([&](std::span<const FacePair> chunk) {
+    const std::size_t n = stream_self_pairs(*s.broad, s.candidates, stats_, [&](std::span<const FacePair> chunk) {
       const auto c0 = std::chrono::steady_clock::now();
       Tester tester{step, {}, {}, earliest};
       // The records of a pair a few pairs ahead are fetched while this one is tested (the face
@@ -822,16 +816,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
       }
       sink.take(tester, ms_since(c0));
     });
-    try {
-      s.broad->self_pairs(s.candidates, stats_);
-    } catch (...) {
-      s.candidates.set_consumer({});
-      s.candidates.clear();
-      throw;
-    }
-    s.candidates.set_consumer({});
-    stats_.set("candidates", static_cast<double>(s.candidates.total()));
-    s.candidates.clear();
+    stats_.set("candidates", static_cast<double>(n));
     stats_.set("stream_ms", ms_since(t1));
     stats_.set("narrow_cpu_ms", sink.narrow_cpu_ms);
   }

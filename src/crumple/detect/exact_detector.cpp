@@ -184,17 +184,10 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   exact::NarrowFrame frame(topo, x, kinds, threads, thickness(), pad, magnitude, s.packed, s.face_corners,
                            s.coarse_x, s.edge_rank, s.spare_sets);
   if (stream) {
-    s.candidates.clear();
-    s.candidates.set_consumer([&frame](std::span<const FacePair> chunk) { exact::narrow_candidate_chunk(frame, chunk); });
-    try {
-      broad_phase_->self_pairs(s.candidates, stats_);
-    } catch (...) {
-      s.candidates.set_consumer({});
-      s.candidates.clear();
-      throw;
-    }
-    s.candidates.set_consumer({});
-    stats_.set("candidates", static_cast<double>(s.candidates.total()));
+    const std::size_t n = stream_self_pairs(*broad_phase_, s.candidates, stats_, [&frame](std::span<const FacePair> chunk) {
+      exact::narrow_candidate_chunk(frame, chunk);
+    });
+    stats_.set("candidates", static_cast<double>(n));
   } else {
     exact::narrow_candidates(frame, s.candidates);
   }

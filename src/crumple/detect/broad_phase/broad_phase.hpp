@@ -248,4 +248,23 @@ class BroadPhase {
   virtual const BoundingHierarchy* hierarchy() const { return nullptr; }
 };
 
+/// `broad.self_pairs(out, stats)` with every chunk streamed to `consumer` and none kept; returns
+/// the candidate count. `out` is left empty and not streaming, also when a call throws.
+inline std::size_t stream_self_pairs(BroadPhase& broad, CandidateBuffer& out, DetectorStats& stats,
+                                     CandidateBuffer::Consumer consumer) {
+  out.clear();
+  out.set_consumer(std::move(consumer));
+  try {
+    broad.self_pairs(out, stats);
+  } catch (...) {
+    out.set_consumer({});
+    out.clear();
+    throw;
+  }
+  out.set_consumer({});
+  const std::size_t n = out.total();
+  out.clear();
+  return n;
+}
+
 }  // namespace crumple
