@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -64,6 +65,13 @@ ExactParams ExactParams::from_spec(const MethodSpec& spec) {
   p.max_contacts = static_cast<std::size_t>(cap);
   static constexpr std::array<std::string_view, 2> kOverflow{"error", "truncate"};
   p.overflow_error = spec.get_choice("overflow", "error", kOverflow) == "error";
+  p.budget_ms = spec.get_double("budget", 0);
+  if (!(p.budget_ms >= 0 && p.budget_ms <= 1e6)) {
+    throw InputError("method " + spec.to_string() + ": budget must be in [0, 1e6] ms (0 = none)");
+  }
+  const long long pairs = spec.get_int("pairs", 0);
+  if (pairs < 0) throw InputError("method " + spec.to_string() + ": pairs must be >= 0");
+  p.pairs = static_cast<std::size_t>(pairs);
   return p;
 }
 
@@ -148,20 +156,30 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
   FrameInput in{previous, x, pad / 2, threads, !proximity, {}};
   if (!kinds.tt) in.owns = s.face_owns;
   broad_phase_->update(in, stats_);
-  broad_phase_->self_pairs(s.candidates, stats_);
   // The one length among the broad phases' counters, in the caller's units.
   if (const double cell = stats_.get("cell_size"); cell != 0 && scale_exponent() != 0) {
     stats_.set("cell_size", std::scalbn(cell, -scale_exponent()));
   }
-  stats_.set("candidates", static_cast<double>(s.candidates.total()));
-  stats_.set("broad_ms", ms_since(t0));
-
-  narrow_phase(x, pad, magnitude, out);
+  if (params_.cut_off()) {
+    // The deadline counts from the start of the frame: refit and gather included.
+    const auto deadline =
+        t0 + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                 std::chrono::duration<double, std::milli>(params_.budget_ms));
+    exact::Cutoff cut(params_.pairs, params_.budget_ms > 0, deadline);
+    stats_.set("broad_ms", ms_since(t0));
+    narrow_phase(x, pad, magnitude, out, &cut);
+  } else {
+    broad_phase_->self_pairs(s.candidates, stats_);
+    stats_.set("candidates", static_cast<double>(s.candidates.total()));
+    stats_.set("broad_ms", ms_since(t0));
+    narrow_phase(x, pad, magnitude, out, nullptr);
+  }
   s.candidates.clear();
   cap_contacts(out);
 }
 
-void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, ContactSet& out) {
+void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, ContactSet& out,
+                                 exact::Cutoff* cut) {
   State& s = *state_;
   const Topology& topo = topology();
   const int threads = options().threads;
@@ -178,19 +196,63 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   }
   exact::NarrowFrame frame(topo, x, kinds, threads, thickness(), pad, magnitude, s.packed, s.face_corners,
                            s.coarse_x, s.edge_rank, s.spare_sets);
-  exact::narrow_candidates(frame, s.candidates);
+  bool stopped = false;  // the budget left candidates untested
+  if (cut == nullptr) {
+    exact::narrow_candidates(frame, s.candidates);
+  } else {
+    // Each traversal task's candidates are tested as it ends (chunk size 1), until the budget
+    // stops both.
+    s.candidates.set_consumer(
+        [&](std::span<const FacePair> chunk) {
+          if (!exact::narrow_candidates(frame, chunk, *cut)) s.candidates.stop();
+        },
+        1);
+    try {
+      broad_phase_->self_pairs(s.candidates, stats_);
+    } catch (...) {
+      s.candidates.set_consumer({});
+      throw;
+    }
+    stopped = s.candidates.stopped() || cut->tested() < s.candidates.total();
+    s.candidates.set_consumer({});
+    stats_.set("candidates", static_cast<double>(s.candidates.total()));
+    stats_.set("pairs_tested", static_cast<double>(cut->tested()));
+  }
 
+  // The orphan stages, each whole or, once a budget is spent, not at all (a skipped stage
+  // leaves its sleep state as it was: the next frame wakes from the last refresh).
+  const auto go_on = [&] { return cut == nullptr || !cut->spent(); };
   const auto orphans_start = std::chrono::steady_clock::now();
-  const bool refresh = frame.proximity && exact::wake_orphan_blocks(s.orphans, s.sleep, x, pad, threads, stats_);
-  stats_.set("orphan_wake_ms", ms_since(orphans_start));
-  const std::size_t tested_blocks = exact::narrow_orphans(frame, s.orphans, refresh);
-  const std::size_t star_pairs = exact::narrow_stars(frame, s.orphans.stars, s.own);
-  exact::narrow_isolated(frame, s.own.isolated);
-  if (refresh) s.sleep.ref.assign(x.begin(), x.end());
+  std::size_t tested_blocks = 0, star_pairs = 0;
+  int skipped = 0;
+  if (go_on()) {
+    const bool refresh = frame.proximity && exact::wake_orphan_blocks(s.orphans, s.sleep, x, pad, threads, stats_);
+    stats_.set("orphan_wake_ms", ms_since(orphans_start));
+    tested_blocks = exact::narrow_orphans(frame, s.orphans, refresh);
+    if (refresh) s.sleep.ref.assign(x.begin(), x.end());
+    stats_.set("orphan_refresh", refresh ? 1 : 0);
+  } else {
+    ++skipped;
+    stats_.set("orphan_wake_ms", 0);
+    stats_.set("orphan_refresh", 0);
+  }
+  if (go_on()) {
+    star_pairs = exact::narrow_stars(frame, s.orphans.stars, s.own);
+  } else {
+    ++skipped;
+  }
+  if (go_on()) {
+    exact::narrow_isolated(frame, s.own.isolated);
+  } else {
+    ++skipped;
+  }
+  if (cut != nullptr) {
+    stats_.set("cut", stopped || skipped > 0 ? 1 : 0);
+    stats_.set("stages_skipped", skipped);
+  }
   stats_.set("orphan_ms", ms_since(orphans_start));
   stats_.set("orphan_blocks", static_cast<double>(s.orphans.vf_blocks.size() + s.orphans.ee_blocks.size()));
   stats_.set("orphan_blocks_tested", static_cast<double>(tested_blocks));
-  stats_.set("orphan_refresh", refresh ? 1 : 0);
   stats_.set("orphan_stars", static_cast<double>(s.orphans.stars.size()));
   stats_.set("orphan_star_pairs", static_cast<double>(star_pairs));
   stats_.set("narrow_ms", ms_since(narrow_start));

@@ -30,7 +30,7 @@ constexpr std::array<ParamInfo, 10> kStochasticParams{{
      "thesis settings: 1 = 10 active pairs with propagation, 2 = 100 without (keys override)"},
 }};
 
-constexpr std::array<ParamInfo, 9> kKdopParams{{
+constexpr std::array<ParamInfo, 11> kKdopParams{{
     {"k", "18", "6 | 14 | 18 | 26: k-DOP directions"},
     {"arity", "4", "2 | 4 | 8: children per node"},
     {"leaf", "48", "maximum faces per leaf (1..64)"},
@@ -50,6 +50,13 @@ constexpr std::array<ParamInfo, 9> kKdopParams{{
     {"overflow", "error",
      "error | truncate: over max_contacts, throw, or keep the first contacts in canonical "
      "order (stats: overflow, contacts_dropped)"},
+    {"budget", "0",
+     "time budget per frame in ms (0 = none): the traversal and narrow phase stop when it is "
+     "spent and the frame returns the contacts found so far (a subset; results then depend on "
+     "the machine's speed)"},
+    {"pairs", "0",
+     "most candidate face pairs narrow-tested per frame (0 = all): a budget counted in work, "
+     "in the traversal's order (stats: cut, pairs_tested)"},
 }};
 constexpr std::array<ParamInfo, 4> kHashParams{{
     {"cell", "0", "cell size as a multiple of the mean edge length (0 = max(mean edge, 2h))"},

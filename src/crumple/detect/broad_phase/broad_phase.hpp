@@ -29,7 +29,9 @@
 ///
 /// Streaming: a `CandidateBuffer` with a consumer hands each chunk to it as the chunk is
 /// added, in the adding thread, instead of keeping it; emitters call `flush_if_full` between
-/// units of work, so the candidates in memory are bounded by the chunks in flight.
+/// units of work, so the candidates in memory are bounded by the chunks in flight. A consumer
+/// may ask the emitters to stop (`stop`, a budget spent): they then return early, and the
+/// candidates are incomplete; `KdopTree` checks between its traversal tasks, the others ignore it.
 
 #include <crumple/core/types.hpp>
 #include <crumple/detect/detector.hpp>
@@ -39,6 +41,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -140,13 +143,22 @@ class CandidateBuffer {
     chunks_.push_back(std::move(chunk));
   }
   /// Streams: every chunk added from now on goes to `consumer` and is not kept (`chunks()`
-  /// stays empty; `total()` still counts). An empty function stops streaming.
-  void set_consumer(Consumer consumer) { consumer_ = std::move(consumer); }
+  /// stays empty; `total()` still counts), emitted in chunks of about `chunk` candidates (1:
+  /// whatever an emitter has between its units of work). An empty function stops streaming.
+  /// Clears a `stop`.
+  void set_consumer(Consumer consumer, std::size_t chunk = kStreamChunk) {
+    consumer_ = std::move(consumer);
+    stream_chunk_ = chunk;
+    stop_.store(false, std::memory_order_relaxed);
+  }
   bool streaming() const { return static_cast<bool>(consumer_); }
-  /// When streaming and `chunk` holds at least `kStreamChunk` candidates, adds it and replaces
+  /// Asks the emitters to add nothing more this frame (thread-safe; a consumer calls it).
+  void stop() { stop_.store(true, std::memory_order_relaxed); }
+  bool stopped() const { return stop_.load(std::memory_order_relaxed); }
+  /// When streaming and `chunk` holds at least the consumer's chunk size, adds it and replaces
   /// it by an empty one; otherwise does nothing (a kept chunk is not split).
   void flush_if_full(std::vector<FacePair>& chunk) {
-    if (consumer_ && chunk.size() >= kStreamChunk) {
+    if (consumer_ && !chunk.empty() && chunk.size() >= stream_chunk_) {
       add(std::move(chunk));
       chunk = take();
     }
@@ -165,6 +177,8 @@ class CandidateBuffer {
   std::vector<std::vector<FacePair>> chunks_;
   Spares<std::vector<FacePair>> spares_;
   Consumer consumer_;
+  std::size_t stream_chunk_ = kStreamChunk;
+  std::atomic<bool> stop_{false};
   std::size_t total_ = 0;
 };
 

@@ -17,10 +17,12 @@
 
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <mutex>
+#include <span>
 #include <type_traits>
 #include <vector>
 
@@ -278,6 +280,54 @@ struct NarrowFrame {
 /// Stage: the sub-pairs of the broad phase's candidates (faces sharing no vertex), each tested
 /// in the one pair of its owners (ownership.hpp), by kind: VF, EE, TT.
 void narrow_candidates(NarrowFrame& frame, const CandidateBuffer& candidates);
+
+/// The budget of a cut-off frame (`ExactParams::budget_ms`, `pairs`): candidates are claimed
+/// before they are tested, a block at a time; once the budget is spent, nothing more is.
+/// Thread-safe. With a pair limit only, the cut depends on the candidates' order alone.
+class Cutoff {
+ public:
+  using Clock = std::chrono::steady_clock;
+  /// At most `pairs` candidates (0: no limit), and none claimed at or after `deadline` when
+  /// `timed`.
+  Cutoff(std::size_t pairs, bool timed, Clock::time_point deadline)
+      : limit_(pairs), timed_(timed), deadline_(deadline) {}
+  /// Claims up to n candidates: returns how many may be tested (0 once the budget is spent).
+  std::size_t claim(std::size_t n) {
+    if (spent_.load(std::memory_order_relaxed) || n == 0) return 0;
+    if (timed_ && Clock::now() >= deadline_) {
+      spent_.store(true, std::memory_order_relaxed);
+      return 0;
+    }
+    std::size_t take = n;
+    if (limit_ != 0) {
+      const std::size_t before = claimed_.fetch_add(n, std::memory_order_relaxed);
+      take = before >= limit_ ? 0 : std::min(n, limit_ - before);
+      if (take < n) spent_.store(true, std::memory_order_relaxed);
+    }
+    tested_.fetch_add(take, std::memory_order_relaxed);
+    return take;
+  }
+  /// True once a claim was refused, or (when timed) the deadline has passed.
+  bool spent() {
+    if (!spent_.load(std::memory_order_relaxed) && timed_ && Clock::now() >= deadline_) {
+      spent_.store(true, std::memory_order_relaxed);
+    }
+    return spent_.load(std::memory_order_relaxed);
+  }
+  /// Candidates granted so far.
+  std::size_t tested() const { return tested_.load(std::memory_order_relaxed); }
+
+ private:
+  std::size_t limit_;
+  bool timed_;
+  Clock::time_point deadline_;
+  std::atomic<std::size_t> claimed_{0}, tested_{0};
+  std::atomic<bool> spent_{false};
+};
+
+/// Stage, cut off: the candidates of one streamed chunk, claimed from `cut` a block at a time
+/// (serially, in the calling thread). Returns false when the budget stopped it.
+bool narrow_candidates(NarrowFrame& frame, std::span<const FacePair> chunk, Cutoff& cut);
 
 /// Stage: the orphan sub-pairs (orphans.hpp) of the awake blocks; on a `refresh`, every block,
 /// whose distance bound is then set from what its tests compute anyway. Returns the number of
