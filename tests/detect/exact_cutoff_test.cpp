@@ -93,7 +93,7 @@ void expect_same(const ContactSet& got, const ContactSet& ref, const std::string
 }
 
 TEST(KdopCutoff, ParsesItsKeys) {
-  for (const char* bad : {"kdop:budget=-1", "kdop:budget=nan", "kdop:pairs=-3", "kdop:budget=2e6"}) {
+  for (const char* bad : {"kdop:budget=-1", "kdop:budget=nan", "kdop:pairs=-3", "kdop:budget=2e6", "kdop:clock=sun"}) {
     EXPECT_THROW(make_detector(MethodSpec::parse(bad), {.thickness = 0.1}), InputError) << bad;
   }
   EXPECT_THROW(MethodSpec::parse("hash:pairs=10"), InputError) << "a kdop key only";
@@ -150,17 +150,23 @@ TEST(KdopCutoff, PairBudgetReturnsAGrowingSubsetWithTheSameBits) {
 
 // A time budget, at its two ends: spent before the first candidate (1 ns, less than the refit
 // takes) nothing is tested and nothing reported; never spent, the full set.
+// On either clock (wall, or the thread's processor time).
 TEST(KdopCutoff, TimeBudgetAtItsEnds) {
   const std::vector<ContactSet>& ref = full();
-  run("kdop:budget=1e-6", [&](std::size_t i, const ContactSet& got, const DetectorStats& st) {
-    EXPECT_TRUE(got.empty()) << "frame " << i;
-    EXPECT_EQ(st.get("pairs_tested"), 0) << "frame " << i;
-    EXPECT_EQ(st.get("cut"), 1) << "frame " << i;
-  });
-  run("kdop:budget=1e6", [&](std::size_t i, const ContactSet& got, const DetectorStats& st) {
-    EXPECT_EQ(st.get("cut"), 0) << "frame " << i;
-    expect_same(got, ref[i], "budget=1e6, frame " + std::to_string(i));
-  });
+  for (const std::string clock : {"wall", "cpu"}) {
+    run("kdop:budget=1e-6,clock=" + clock, [&](std::size_t i, const ContactSet& got, const DetectorStats& st) {
+      EXPECT_TRUE(got.empty()) << clock << ", frame " << i;
+      EXPECT_EQ(st.get("pairs_tested"), 0) << clock << ", frame " << i;
+      EXPECT_EQ(st.get("cut"), 1) << clock << ", frame " << i;
+    });
+    run("kdop:budget=1e6,clock=" + clock, [&](std::size_t i, const ContactSet& got, const DetectorStats& st) {
+      EXPECT_EQ(st.get("cut"), 0) << clock << ", frame " << i;
+      expect_same(got, ref[i], "budget=1e6, clock=" + clock + ", frame " + std::to_string(i));
+    });
+  }
+  // Processor time is one thread's.
+  EXPECT_THROW(make_detector(MethodSpec::parse("kdop:budget=1,clock=cpu"), {.thickness = 0.1, .threads = 2}),
+               InputError);
 }
 
 /// The candidates of a fresh tree on x, sorted.

@@ -72,12 +72,17 @@ ExactParams ExactParams::from_spec(const MethodSpec& spec) {
   const long long pairs = spec.get_int("pairs", 0);
   if (pairs < 0) throw InputError("method " + spec.to_string() + ": pairs must be >= 0");
   p.pairs = static_cast<std::size_t>(pairs);
+  static constexpr std::array<std::string_view, 2> kClock{"wall", "cpu"};
+  p.clock = parse_budget_clock(spec.get_choice("clock", "wall", kClock));
   return p;
 }
 
 ExactDetector::ExactDetector(DetectorOptions options, ExactParams params, std::unique_ptr<BroadPhase> broad_phase)
     : Detector(options), params_(params), broad_phase_(std::move(broad_phase)), state_(std::make_unique<State>()) {
   CRUMPLE_CHECK(broad_phase_ != nullptr, "ExactDetector: null broad phase");
+  if (params_.clock == BudgetClock::cpu && params_.budget_ms > 0 && resolve_threads(options.threads) != 1) {
+    throw InputError("exact detector: clock=cpu counts one thread's processor time: it needs threads = 1");
+  }
   if (const BoundingHierarchy* inner = broad_phase_->hierarchy()) unscaled_ = std::make_unique<Unscaled>(*inner, *this);
 }
 
@@ -149,6 +154,8 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
 
   // Broad phase, with each face inflated by half the padded thickness (file comment).
   const auto t0 = std::chrono::steady_clock::now();
+  // A budget counts from the start of the frame: refit and gather included.
+  const FrameDeadline deadline(params_.budget_ms, params_.clock);
   const Scalar magnitude = prepare_frame(previous, x);
   const bool proximity = kinds.vf || kinds.ee;
   const Scalar h = thickness();
@@ -161,11 +168,7 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
     stats_.set("cell_size", std::scalbn(cell, -scale_exponent()));
   }
   if (params_.cut_off()) {
-    // The deadline counts from the start of the frame: refit and gather included.
-    const auto deadline =
-        t0 + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                 std::chrono::duration<double, std::milli>(params_.budget_ms));
-    exact::Cutoff cut(params_.pairs, params_.budget_ms > 0, deadline);
+    exact::Cutoff cut(params_.pairs, deadline);
     stats_.set("broad_ms", ms_since(t0));
     narrow_phase(x, pad, magnitude, out, &cut);
   } else {

@@ -31,6 +31,7 @@
 /// TT is asked, the thickness plays no part and `pad` is the rounding margin alone.
 
 #include <crumple/core/error.hpp>
+#include <crumple/core/frame_deadline.hpp>
 #include <crumple/detect/broad_phase/broad_phase.hpp>
 #include <crumple/detect/detector.hpp>
 
@@ -66,6 +67,7 @@ struct ExactParams {
   bool overflow_error = true;    ///< over the cap: throw (true) or keep the first contacts
   double budget_ms = 0;          ///< time budget per frame from the start of `update`; 0 = none
   std::size_t pairs = 0;         ///< at most this many candidates narrow-tested per frame; 0 = all
+  BudgetClock clock = BudgetClock::wall;  ///< what `budget_ms` counts (cpu: one thread only)
   bool cut_off() const { return budget_ms > 0 || pairs > 0; }
   static ExactParams from_spec(const MethodSpec& spec);
   bool operator==(const ExactParams&) const = default;

@@ -7,6 +7,7 @@
 /// padded thickness: a box test in float lanes (float_lanes.hpp), then a plane or line
 /// separation test (geometry/separation.hpp).
 
+#include <crumple/core/frame_deadline.hpp>
 #include <crumple/detect/broad_phase/broad_phase.hpp>
 #include <crumple/detect/contact.hpp>
 #include <crumple/detect/exact/float_lanes.hpp>
@@ -283,18 +284,16 @@ void narrow_candidates(NarrowFrame& frame, const CandidateBuffer& candidates);
 
 /// The budget of a cut-off frame (`ExactParams::budget_ms`, `pairs`): candidates are claimed
 /// before they are tested, a block at a time; once the budget is spent, nothing more is.
-/// Thread-safe. With a pair limit only, the cut depends on the candidates' order alone.
+/// Thread-safe (with a wall-clock deadline). With a pair limit only, the cut depends on the
+/// candidates' order alone.
 class Cutoff {
  public:
-  using Clock = std::chrono::steady_clock;
-  /// At most `pairs` candidates (0: no limit), and none claimed at or after `deadline` when
-  /// `timed`.
-  Cutoff(std::size_t pairs, bool timed, Clock::time_point deadline)
-      : limit_(pairs), timed_(timed), deadline_(deadline) {}
+  /// At most `pairs` candidates (0: no limit), and none claimed once `deadline` has passed.
+  Cutoff(std::size_t pairs, const FrameDeadline& deadline) : limit_(pairs), deadline_(deadline) {}
   /// Claims up to n candidates: returns how many may be tested (0 once the budget is spent).
   std::size_t claim(std::size_t n) {
     if (spent_.load(std::memory_order_relaxed) || n == 0) return 0;
-    if (timed_ && Clock::now() >= deadline_) {
+    if (deadline_.passed()) {
       spent_.store(true, std::memory_order_relaxed);
       return 0;
     }
@@ -309,7 +308,7 @@ class Cutoff {
   }
   /// True once a claim was refused, or (when timed) the deadline has passed.
   bool spent() {
-    if (!spent_.load(std::memory_order_relaxed) && timed_ && Clock::now() >= deadline_) {
+    if (!spent_.load(std::memory_order_relaxed) && deadline_.passed()) {
       spent_.store(true, std::memory_order_relaxed);
     }
     return spent_.load(std::memory_order_relaxed);
@@ -319,8 +318,7 @@ class Cutoff {
 
  private:
   std::size_t limit_;
-  bool timed_;
-  Clock::time_point deadline_;
+  const FrameDeadline& deadline_;
   std::atomic<std::size_t> claimed_{0}, tested_{0};
   std::atomic<bool> spent_{false};
 };
