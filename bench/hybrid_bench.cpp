@@ -15,6 +15,8 @@
 //   build/release/bench/hybrid_bench --quick --out /tmp/h             # two small scenes
 //   build/release/bench/hybrid_bench --scenes folding-24,hanging-cloth
 //   build/release/bench/hybrid_bench --clock cpu ... # budgets in processor time (clock=cpu)
+//   build/release/bench/hybrid_bench --only kdop ... # only the budgeted families whose spec
+//                                                   # starts with "kdop", no unbudgeted rows
 //   build/release/bench/hybrid_bench --lean ...     # fewer rows: no thesis-rule, every=4, 64-face
 //                                                   # exact zones; budgets 0.25-8 x kdop
 //
@@ -215,6 +217,7 @@ int main(int argc, char** argv) {
   using namespace crumple;
   bool quick = false, lean = false;
   std::string clock = "wall";  // what the budgets count: wall-clock time, or processor time
+  std::string only;            // --only P: the budgeted families whose spec starts with P, no free rows
   std::string out_dir = ".";
   std::vector<std::string> names = {"folding-24",   "hanging-cloth", "strip",       "cloth-on-sphere-64",
                                     "crumple-64",   "folding-100",   "folding-300"};
@@ -229,6 +232,8 @@ int main(int argc, char** argv) {
         std::cerr << "--clock must be wall or cpu\n";
         return 2;
       }
+    } else if (a == "--only" && i + 1 < argc) {
+      only = argv[++i];
     } else if (a == "--lean") {
       lean = true;
     } else if (a == "--out" && i + 1 < argc) {
@@ -238,7 +243,7 @@ int main(int argc, char** argv) {
       std::stringstream list(argv[++i]);
       for (std::string n; std::getline(list, n, ',');) names.push_back(n);
     } else {
-      std::cerr << "usage: hybrid_bench [--quick] [--lean] [--clock wall|cpu] [--out DIR] [--scenes a,b,...]\n";
+      std::cerr << "usage: hybrid_bench [--quick] [--lean] [--clock wall|cpu] [--only SPEC_PREFIX] [--out DIR] [--scenes a,b,...]\n";
       return 2;
     }
   }
@@ -252,6 +257,7 @@ int main(int argc, char** argv) {
   };
   std::vector<Family> budgeted = {
       {"kdop cut off at the budget (cut-off exact)", "kdop"},
+      {"kdop cut off, tracking the last frame's contacts", "kdop:track=on"},
       {"hybrid (stochastic zones)", "hybrid"},
       {"hybrid, exact zones (cut off)", "hybrid:search=exact", false},
       {"hybrid, exact zones of 16 faces (cut off)", "hybrid:search=exact,leaf=16"},
@@ -268,6 +274,10 @@ int main(int argc, char** argv) {
   if (lean) {
     std::erase_if(budgeted, [](const Family& f) { return !f.lean; });
     std::erase_if(free, [](const Family& f) { return !f.lean; });
+  }
+  if (!only.empty()) {
+    std::erase_if(budgeted, [&](const Family& f) { return !std::string(f.spec).starts_with(only); });
+    free.clear();
   }
   std::ostringstream md, csv;
   csv << "scene,method,spec,budget_fraction,budget_ms,kdop_ms,recall,close_recall,worst_frame,mean_ms,p99_ms,"

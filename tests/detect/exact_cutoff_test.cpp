@@ -3,7 +3,8 @@
 // Counted in work, not time: with `pairs=N` the frame narrow-tests exactly N candidates when it
 // has more (stat `pairs_tested`), returns a subset of the full set with every field the same
 // bits, in canonical order, the same for the same frames, growing with N, and the full set
-// when N covers the candidates. A time budget is checked at its two ends only (spent before the
+// when N covers the candidates; with `track`, no repeats, more found at the same N, and the
+// full set reached on a still frame. A time budget is checked at its two ends only (spent before the
 // first claim: nothing; never spent: everything). A traversal stopped on a refresh frame of the
 // frame-to-frame cache must not leave an incomplete cache behind.
 #include <crumple/core/error.hpp>
@@ -167,6 +168,68 @@ TEST(KdopCutoff, TimeBudgetAtItsEnds) {
   // Processor time is one thread's.
   EXPECT_THROW(make_detector(MethodSpec::parse("kdop:budget=1,clock=cpu"), {.thickness = 0.1, .threads = 2}),
                InputError);
+}
+
+/// No contact twice (the list is strictly increasing in canonical order).
+void expect_no_repeats(const ContactSet& got, const std::string& what) {
+  for (std::size_t i = 1; i < got.vf.size(); ++i) ASSERT_TRUE(CanonicalLess{}(got.vf[i - 1], got.vf[i])) << what;
+  for (std::size_t i = 1; i < got.ee.size(); ++i) ASSERT_TRUE(CanonicalLess{}(got.ee[i - 1], got.ee[i])) << what;
+}
+
+// track=on: the last frame's contacts tested again first, the traversal resumed where it
+// stopped. Still a subset with the same bits and no repeats; at the same candidate count it
+// finds more on the folding sequence (the seeds' kernel calls come on top: the benchmark
+// compares in time).
+TEST(KdopCutoff, TrackingFindsMoreAtTheSamePairBudget) {
+  const std::vector<ContactSet>& ref = full();
+  for (const std::size_t n : {64u, 150u}) {
+    ContactMatch plain, tracked;
+    run("kdop:pairs=" + std::to_string(n), [&](std::size_t i, const ContactSet& got, const DetectorStats&) {
+      plain += match_contacts(got, ref[i]);
+    });
+    run("kdop:track=on,pairs=" + std::to_string(n), [&](std::size_t i, const ContactSet& got, const DetectorStats&) {
+      const std::string what = "track, pairs=" + std::to_string(n) + ", frame " + std::to_string(i);
+      expect_subset(got, ref[i], what);
+      expect_no_repeats(got, what);
+      tracked += match_contacts(got, ref[i]);
+    });
+    EXPECT_GT(tracked.recall(), plain.recall() + 0.05) << "pairs=" << n << ": " << plain.found << " against " << tracked.found << " of " << plain.reference;
+    EXPECT_LT(plain.recall(), 0.9) << "the budget must bite, pairs=" << n;
+  }
+}
+
+// On a still frame repeated, a quarter of the candidates per frame: the plain cut finds the
+// same part every frame; tracking keeps what it found and resumes the traversal, and reaches
+// the full set within a few frames.
+TEST(KdopCutoff, TrackingOnAStillFrameReachesTheFullSet) {
+  shapes::FoldedClothParams params;
+  params.n = 24;
+  const TriMesh m = shapes::folded_cloth(params);
+  const DetectorOptions options{.thickness = params.thickness, .threads = 1};
+  auto exact = make_detector(MethodSpec::parse("kdop"), options);
+  exact->set_topology(m.topology_ptr());
+  ContactSet all;
+  exact->update(m.positions(), all);
+  const auto quarter = static_cast<std::size_t>(exact->stats().get("candidates")) / 4;
+  ASSERT_GT(all.size(), 100u);
+  auto plain = make_detector(MethodSpec::parse("kdop:pairs=" + std::to_string(quarter)), options);
+  auto tracked = make_detector(MethodSpec::parse("kdop:track=on,pairs=" + std::to_string(quarter)), options);
+  plain->set_topology(m.topology_ptr());
+  tracked->set_topology(m.topology_ptr());
+  std::size_t reached = 0;
+  for (std::size_t frame = 0; frame < 12; ++frame) {
+    ContactSet p, t;
+    plain->update(m.positions(), p);
+    tracked->update(m.positions(), t);
+    expect_subset(p, all, "plain, frame " + std::to_string(frame));
+    expect_subset(t, all, "tracked, frame " + std::to_string(frame));
+    expect_no_repeats(t, "tracked, frame " + std::to_string(frame));
+    EXPECT_LT(p.size(), all.size()) << "frame " << frame;
+    EXPECT_GE(t.size(), p.size()) << "frame " << frame;
+    if (t.size() == all.size() && reached == 0) reached = frame + 1;
+  }
+  EXPECT_GT(reached, 1u) << "a quarter of the candidates cannot find everything at once";
+  EXPECT_LE(reached, 8u) << "tracking must reach the full set";
 }
 
 /// The candidates of a fresh tree on x, sorted.

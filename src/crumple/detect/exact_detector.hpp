@@ -61,13 +61,19 @@ class Cutoff;  // exact/narrow_frame.hpp
 /// and the orphan stages not yet begun are skipped (each stage runs whole or not at all). The
 /// frame returns the contacts found so far, in canonical order: a subset of the full set, with
 /// the same bits. With `pairs` alone the cut point is a count of candidates, so the contacts
-/// depend only on the frames (one thread; with more, on the threads' interleaving too).
+/// depend only on the frames (one thread; with more, on the threads' interleaving too). Without
+/// `track`, a larger `pairs` finds a superset on every frame.
 struct ExactParams {
   std::size_t max_contacts = 0;  ///< cap on the contacts of one frame; 0 = no cap
   bool overflow_error = true;    ///< over the cap: throw (true) or keep the first contacts
   double budget_ms = 0;          ///< time budget per frame from the start of `update`; 0 = none
   std::size_t pairs = 0;         ///< at most this many candidates narrow-tested per frame; 0 = all
   BudgetClock clock = BudgetClock::wall;  ///< what `budget_ms` counts (cpu: one thread only)
+  /// Cut-off frames first re-test the last frame's contacts (most persist from frame to frame),
+  /// and the traversal begins where the last one stopped (`kdop`), so that frames cut short
+  /// cover the mesh in turn. The result is still a subset with the same bits, without
+  /// duplicates (a contact found twice is reported once).
+  bool track = false;
   bool cut_off() const { return budget_ms > 0 || pairs > 0; }
   static ExactParams from_spec(const MethodSpec& spec);
   bool operator==(const ExactParams&) const = default;

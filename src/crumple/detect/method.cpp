@@ -33,7 +33,7 @@ constexpr std::array<ParamInfo, 11> kStochasticParams{{
      "thesis settings: 1 = 10 active pairs with propagation, 2 = 100 without (keys override)"},
 }};
 
-constexpr std::array<ParamInfo, 12> kKdopParams{{
+constexpr std::array<ParamInfo, 13> kKdopParams{{
     {"k", "18", "6 | 14 | 18 | 26: k-DOP directions"},
     {"arity", "4", "2 | 4 | 8: children per node"},
     {"leaf", "48", "maximum faces per leaf (1..64)"},
@@ -59,7 +59,10 @@ constexpr std::array<ParamInfo, 12> kKdopParams{{
      "the machine's speed)"},
     {"pairs", "0",
      "most candidate face pairs narrow-tested per frame (0 = all): a budget counted in work, "
-     "in the traversal's order (stats: cut, pairs_tested)"},    {"clock", "wall",
+     "in the traversal's order (stats: cut, pairs_tested)"},
+    {"track", "off",
+     "on | off: with a budget, first test the last frame's contacts again, and begin the "
+     "traversal where the last frame's stopped (frames cut short cover the mesh in turn)"},    {"clock", "wall",
      "wall | cpu: the clock the budget counts on; cpu = this thread's processor time (for "
      "measuring budgets on a shared machine; one thread)"},
 }};

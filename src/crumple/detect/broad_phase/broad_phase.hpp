@@ -145,12 +145,16 @@ class CandidateBuffer {
   /// Streams: every chunk added from now on goes to `consumer` and is not kept (`chunks()`
   /// stays empty; `total()` still counts), emitted in chunks of about `chunk` candidates (1:
   /// whatever an emitter has between its units of work). An empty function stops streaming.
-  /// Clears a `stop`.
-  void set_consumer(Consumer consumer, std::size_t chunk = kStreamChunk) {
+  /// Clears a `stop`. With `resume`, an emitter that was stopped last frame may begin this one
+  /// where it stopped (`KdopTree`: at the first task it left out), so that frames cut short
+  /// cover the whole mesh in turn.
+  void set_consumer(Consumer consumer, std::size_t chunk = kStreamChunk, bool resume = false) {
     consumer_ = std::move(consumer);
     stream_chunk_ = chunk;
+    resume_ = resume;
     stop_.store(false, std::memory_order_relaxed);
   }
+  bool resuming() const { return resume_; }
   bool streaming() const { return static_cast<bool>(consumer_); }
   /// Asks the emitters to add nothing more this frame (thread-safe; a consumer calls it).
   void stop() { stop_.store(true, std::memory_order_relaxed); }
@@ -178,6 +182,7 @@ class CandidateBuffer {
   Spares<std::vector<FacePair>> spares_;
   Consumer consumer_;
   std::size_t stream_chunk_ = kStreamChunk;
+  bool resume_ = false;
   std::atomic<bool> stop_{false};
   std::size_t total_ = 0;
 };

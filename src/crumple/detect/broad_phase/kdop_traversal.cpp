@@ -333,6 +333,9 @@ void DopTree<K>::traverse(int threads, CandidateBuffer& out, DetectorStats& stat
   std::mutex mutex;
   std::size_t reused = 0, live = 0;
   std::atomic<bool> cut{false};  // a consumer stopped the traversal: some tasks were skipped
+  // Resuming, the tasks are taken from the one the last stopped traversal left out, around.
+  const std::size_t first = out.resuming() && resume_ < tasks.size() ? resume_ : 0;
+  std::atomic<std::size_t> left_out{tasks.size()};  // the first task in that order left out
   std::vector<std::vector<Unit>> units;  // record frames: per chunk, into pairs[chunk]
   std::vector<std::vector<FacePair>> pairs;
   parallel_for_chunks(tasks.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
@@ -340,9 +343,12 @@ void DopTree<K>::traverse(int threads, CandidateBuffer& out, DetectorStats& stat
     for (std::size_t i = begin; i < end; ++i) {
       if (out.stopped()) {
         cut.store(true, std::memory_order_relaxed);
+        std::size_t seen = left_out.load();
+        while (i < seen && !left_out.compare_exchange_weak(seen, i)) {
+        }
         break;
       }
-      const auto [a, b] = tasks[i];
+      const auto [a, b] = tasks[(i + first) % tasks.size()];
       if (a == b) {
         coherent ? self<true>(a, w) : self<false>(a, w);
       } else {
@@ -360,6 +366,7 @@ void DopTree<K>::traverse(int threads, CandidateBuffer& out, DetectorStats& stat
       pairs.push_back(std::move(w.pairs));
     }
   });
+  resume_ = cut.load() && left_out.load() < tasks.size() ? (left_out.load() + first) % tasks.size() : 0;
   if (mode_ == Mode::record) {
     for (std::size_t c = 0; c < units.size(); ++c) {
       for (Unit u : units[c]) {
