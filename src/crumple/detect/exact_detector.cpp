@@ -34,6 +34,7 @@ struct ExactDetector::State {
   exact::GatherBuffers gather;
   /// The last frame's contacts (`ExactParams::track`): (vertex, face) and (edge, edge).
   std::vector<std::array<Index, 2>> seed_vf, seed_ee;
+  int orphans_waited = 0;  ///< cut-off frames since the orphan stages last ran whole (`track`)
 };
 
 namespace {
@@ -157,6 +158,7 @@ void ExactDetector::on_topology() {
   s.orphans = exact::list_orphans(topo, own);
   s.seed_vf.clear();
   s.seed_ee.clear();
+  s.orphans_waited = 0;
   s.sleep = {};
   s.face_owns = own.face_owns();
   s.edge_rank = exact::edge_ranks(topo);
@@ -292,9 +294,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
     }
     orphan_ms = ms_since(orphans_start);
   };
-  // Tracking, the orphan stages come first: a traversal cut short every frame would never
-  // reach them.
-  const bool orphans_first = cut != nullptr && params_.track;
+  // Tracking, the orphan stages come first when they have not run for kOrphanPeriod frames: a
+  // traversal cut short every frame would never reach them, and the contacts they find are
+  // tracked from then on. (Every frame would spend most of a small budget on them.)
+  constexpr int kOrphanPeriod = 4;
+  const bool orphans_first = cut != nullptr && params_.track && s.orphans_waited >= kOrphanPeriod;
   if (cut == nullptr) {
     exact::narrow_candidates(frame, s.candidates);
   } else {
@@ -319,6 +323,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
     stats_.set("pairs_tested", static_cast<double>(cut->tested()));
   }
   if (!orphans_first) orphan_stages();
+  s.orphans_waited = skipped == 0 ? 0 : s.orphans_waited + 1;
 
   if (cut != nullptr) {
     stats_.set("cut", stopped || skipped > 0 ? 1 : 0);

@@ -71,7 +71,8 @@ struct ExactParams {
   BudgetClock clock = BudgetClock::wall;  ///< what `budget_ms` counts (cpu: one thread only)
   /// Cut-off frames first re-test the last frame's contacts (most persist from frame to frame),
   /// and the traversal begins where the last one stopped (`kdop`), so that frames cut short
-  /// cover the mesh in turn. The result is still a subset with the same bits, without
+  /// cover the mesh in turn; the orphan stages, when the budget has skipped them for 4 frames,
+  /// run before the traversal. The result is still a subset with the same bits, without
   /// duplicates (a contact found twice is reported once).
   bool track = false;
   bool cut_off() const { return budget_ms > 0 || pairs > 0; }
