@@ -616,7 +616,7 @@ std::size_t ContinuousQuery::count_candidates(PositionsView given_previous, Posi
   s.broad->update(in, stats_);
   stats_.set("update_ms", ms_since(t0));
   const auto t1 = std::chrono::steady_clock::now();
-  const std::size_t n = stream_self_pairs(*s.broad, s.candidates, stats_, [](std::span<const FacePair>) {});
+  const std::size_t n = stream_self_pairs(*s.broad, s.candidates, stats_, [](std::span<const FacePair>) {}).candidates;
   stats_.set("stream_ms", ms_since(t1));
   stats_.set("candidates", static_cast<double>(n));
   return n;
@@ -799,7 +799,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
     s.broad->update(in, stats_);
     stats_.set("update_ms", ms_since(t0));
     const auto t1 = std::chrono::steady_clock::now();
-    const std::size_t n = stream_self_pairs(*s.broad, s.candidates, stats_, [&](std::span<const FacePair> chunk) {
+    const StreamedPairs streamed = stream_self_pairs(*s.broad, s.candidates, stats_, [&](std::span<const FacePair> chunk) {
       const auto c0 = std::chrono::steady_clock::now();
       Tester tester{step, {}, {}, earliest};
       // The records of a pair a few pairs ahead are fetched while this one is tested (the face
@@ -816,7 +816,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
       }
       sink.take(tester, ms_since(c0));
     });
-    stats_.set("candidates", static_cast<double>(n));
+    stats_.set("candidates", static_cast<double>(streamed.candidates));
     stats_.set("stream_ms", ms_since(t1));
     stats_.set("narrow_cpu_ms", sink.narrow_cpu_ms);
   }

@@ -9,6 +9,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <iterator>
 #include <mutex>
 #include <span>
 #include <string>
@@ -31,7 +32,58 @@ struct ExactDetector::State {
   std::vector<std::array<float, 4>> coarse_x;     ///< per vertex, rounded to float (frames asking for VF or EE)
   Spares<exact::KeyedContacts> spare_sets;        ///< per-chunk contacts and their keys, for reuse
   exact::GatherBuffers gather;
+  /// The last frame's contacts (`ExactParams::track`): (vertex, face) and (edge, edge).
+  std::vector<std::array<Index, 2>> seed_vf, seed_ee;
+  int orphans_waited = 0;  ///< cut-off frames since the orphan stages last ran whole (`track`)
 };
+
+namespace {
+
+/// The last frame's contacts tested again (`ExactParams::track`) into `tracked`, in canonical
+/// order, until the budget is spent: by the kernels, arguments and batches with which the
+/// gather makes a contact's record again from its key (the same bits as the narrow phase's).
+void test_seeds(const exact::NarrowFrame& frame, const std::vector<std::array<Index, 2>>& vf,
+                const std::vector<std::array<Index, 2>>& ee, exact::Cutoff& cut, ContactSet& tracked) {
+  const Topology& topo = frame.topo;
+  const PositionsView x = frame.x;
+  const Scalar sqr_thickness = frame.sqr_thickness;
+  constexpr std::size_t kCheck = 64;  // seeds between looks at the budget
+  if (frame.kinds.vf) {
+    narrow::VertexFaceBatch batch;
+    for (std::size_t i = 0; i < vf.size() && (i % kCheck != 0 || !cut.spent()); ++i) {
+      const auto [v, f] = vf[i];
+      const Face& t = topo.face(f);
+      batch.push(v, narrow::at(x, v), f, narrow::at(x, t[0]), narrow::at(x, t[1]), narrow::at(x, t[2]), sqr_thickness,
+                 tracked.vf);
+    }
+    batch.flush(sqr_thickness, tracked.vf);
+  }
+  if (frame.kinds.ee) {
+    narrow::EdgeEdgeBatch batch;
+    for (std::size_t i = 0; i < ee.size() && (i % kCheck != 0 || !cut.spent()); ++i) {
+      const auto [e0, e1] = ee[i];
+      const Edge &a = topo.edge(e0), &b = topo.edge(e1);
+      batch.push(e0, a[0], a[1], narrow::at(x, a[0]), narrow::at(x, a[1]), e1, b[0], b[1], narrow::at(x, b[0]),
+                 narrow::at(x, b[1]), sqr_thickness, tracked.ee);
+    }
+    batch.flush(sqr_thickness, tracked.ee);
+  }
+  std::sort(tracked.vf.begin(), tracked.vf.end(), CanonicalLess{});
+  std::sort(tracked.ee.begin(), tracked.ee.end(), CanonicalLess{});
+}
+
+/// `out` and `more`, both in canonical order without repeats, merged into `out` (a contact in
+/// both is the same record: kept once).
+template <class T>
+void merge_unique(std::vector<T>& out, const std::vector<T>& more) {
+  if (more.empty()) return;
+  std::vector<T> merged;
+  merged.reserve(out.size() + more.size());
+  std::set_union(out.begin(), out.end(), more.begin(), more.end(), std::back_inserter(merged), CanonicalLess{});
+  out = std::move(merged);
+}
+
+}  // namespace
 
 /// The broad phase's hierarchy as `update`'s caller sees it: node boxes scaled by 2^-k from the
 /// scaled coordinates the detector computes in (k = the last frame's `scale_exponent`).
@@ -65,12 +117,25 @@ ExactParams ExactParams::from_spec(const MethodSpec& spec) {
   p.max_contacts = static_cast<std::size_t>(cap);
   static constexpr std::array<std::string_view, 2> kOverflow{"error", "truncate"};
   p.overflow_error = spec.get_choice("overflow", "error", kOverflow) == "error";
+  p.budget_ms = spec.get_double("budget", 0);
+  if (!(p.budget_ms >= 0 && p.budget_ms <= 1e6)) {
+    throw InputError("method " + spec.to_string() + ": budget must be in [0, 1e6] ms (0 = none)");
+  }
+  const long long pairs = spec.get_int("pairs", 0);
+  if (pairs < 0) throw InputError("method " + spec.to_string() + ": pairs must be >= 0");
+  p.pairs = static_cast<std::size_t>(pairs);
+  static constexpr std::array<std::string_view, 2> kClock{"wall", "cpu"};
+  p.clock = parse_budget_clock(spec.get_choice("clock", "wall", kClock));
+  p.track = spec.get_bool("track", false);
   return p;
 }
 
 ExactDetector::ExactDetector(DetectorOptions options, ExactParams params, std::unique_ptr<BroadPhase> broad_phase)
     : Detector(options), params_(params), broad_phase_(std::move(broad_phase)), state_(std::make_unique<State>()) {
   CRUMPLE_CHECK(broad_phase_ != nullptr, "ExactDetector: null broad phase");
+  if (params_.clock == BudgetClock::cpu && params_.budget_ms > 0 && resolve_threads(options.threads) != 1) {
+    throw InputError("exact detector: clock=cpu counts one thread's processor time: it needs threads = 1");
+  }
   if (const BoundingHierarchy* inner = broad_phase_->hierarchy()) unscaled_ = std::make_unique<Unscaled>(*inner, *this);
 }
 
@@ -91,6 +156,9 @@ void ExactDetector::on_topology() {
   s.own = exact::own_features(topo);
   const exact::FeatureOwnership& own = s.own;
   s.orphans = exact::list_orphans(topo, own);
+  s.seed_vf.clear();
+  s.seed_ee.clear();
+  s.orphans_waited = 0;
   s.sleep = {};
   s.face_owns = own.face_owns();
   s.edge_rank = exact::edge_ranks(topo);
@@ -142,6 +210,8 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
 
   // Broad phase, with each face inflated by half the padded thickness (file comment).
   const auto t0 = std::chrono::steady_clock::now();
+  // A budget counts from the start of the frame: refit and gather included.
+  const FrameDeadline deadline(params_.budget_ms, params_.clock);
   const Scalar magnitude = prepare_frame(previous, x);
   const bool proximity = kinds.vf || kinds.ee;
   const Scalar h = thickness();
@@ -149,24 +219,38 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
   FrameInput in{previous, x, pad / 2, threads, !proximity, {}};
   if (!kinds.tt) in.owns = s.face_owns;
   broad_phase_->update(in, stats_);
-  // Triangle intersections alone: each candidate may be a contact, and is as large as one, so
-  // the candidates are not all held: the broad phase streams them to the narrow phase
-  // (`narrow_phase`), whose memory then follows the contacts.
-  const bool stream = !proximity;
-  if (!stream) broad_phase_->self_pairs(s.candidates, stats_);
   // The one length among the broad phases' counters, in the caller's units.
   if (const double cell = stats_.get("cell_size"); cell != 0 && scale_exponent() != 0) {
     stats_.set("cell_size", std::scalbn(cell, -scale_exponent()));
   }
-  if (!stream) stats_.set("candidates", static_cast<double>(s.candidates.total()));
-  stats_.set("broad_ms", ms_since(t0));
-
-  narrow_phase(x, pad, magnitude, stream, out);
+  if (params_.cut_off()) {
+    exact::Cutoff cut(params_.pairs, deadline);
+    stats_.set("broad_ms", ms_since(t0));
+    narrow_phase(x, pad, magnitude, out, &cut);
+  } else {
+    // Triangle intersections alone: each candidate may be a contact, and is as large as one, so
+    // the candidates are not all held: the broad phase streams them to the narrow phase, whose
+    // memory then follows the contacts.
+    const bool stream = !proximity;
+    if (!stream) {
+      broad_phase_->self_pairs(s.candidates, stats_);
+      stats_.set("candidates", static_cast<double>(s.candidates.total()));
+    }
+    stats_.set("broad_ms", ms_since(t0));
+    narrow_phase(x, pad, magnitude, out, nullptr, stream);
+  }
   s.candidates.clear();
   cap_contacts(out);
+  if (params_.track) {
+    s.seed_vf.clear();
+    s.seed_ee.clear();
+    for (const VertexFaceContact& c : out.vf) s.seed_vf.push_back({c.vertex, c.face});
+    for (const EdgeEdgeContact& c : out.ee) s.seed_ee.push_back({c.edge0, c.edge1});
+  }
 }
 
-void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, bool stream, ContactSet& out) {
+void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, ContactSet& out,
+                                 exact::Cutoff* cut, bool stream) {
   State& s = *state_;
   const Topology& topo = topology();
   const int threads = options().threads;
@@ -183,26 +267,75 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   }
   exact::NarrowFrame frame(topo, x, kinds, threads, thickness(), pad, magnitude, s.packed, s.face_corners,
                            s.coarse_x, s.edge_rank, s.spare_sets);
-  if (stream) {
-    const std::size_t n = stream_self_pairs(*broad_phase_, s.candidates, stats_, [&frame](std::span<const FacePair> chunk) {
-      exact::narrow_candidate_chunk(frame, chunk);
-    });
-    stats_.set("candidates", static_cast<double>(n));
-  } else {
+  bool stopped = false;  // the budget left candidates untested
+  ContactSet tracked;    // the last frame's contacts found again (`ExactParams::track`)
+  // The orphan stages, each whole or, once a budget is spent, not at all (a skipped stage
+  // leaves its sleep state as it was: the next frame wakes from the last refresh).
+  const auto go_on = [&] { return cut == nullptr || !cut->spent(); };
+  std::size_t tested_blocks = 0, star_pairs = 0;
+  int skipped = 0;
+  double orphan_ms = 0;
+  const auto orphan_stages = [&] {
+    const auto orphans_start = std::chrono::steady_clock::now();
+    if (go_on()) {
+      const bool refresh = frame.proximity && exact::wake_orphan_blocks(s.orphans, s.sleep, x, pad, threads, stats_);
+      stats_.set("orphan_wake_ms", ms_since(orphans_start));
+      tested_blocks = exact::narrow_orphans(frame, s.orphans, refresh);
+      if (refresh) s.sleep.ref.assign(x.begin(), x.end());
+      stats_.set("orphan_refresh", refresh ? 1 : 0);
+    } else {
+      ++skipped;
+      stats_.set("orphan_wake_ms", 0);
+      stats_.set("orphan_refresh", 0);
+    }
+    if (go_on()) {
+      star_pairs = exact::narrow_stars(frame, s.orphans.stars, s.own);
+    } else {
+      ++skipped;
+    }
+    if (go_on()) {
+      exact::narrow_isolated(frame, s.own.isolated);
+    } else {
+      ++skipped;
+    }
+    orphan_ms = ms_since(orphans_start);
+  };
+  // Tracking, the orphan stages come first when they have not run for kOrphanPeriod frames: a
+  // traversal cut short every frame would never reach them, and the contacts they find are
+  // tracked from then on. (Every frame would spend most of a small budget on them.)
+  constexpr int kOrphanPeriod = 4;
+  const bool orphans_first = cut != nullptr && params_.track && s.orphans_waited >= kOrphanPeriod;
+  if (cut == nullptr && stream) {
+    const StreamedPairs streamed = stream_self_pairs(
+        *broad_phase_, s.candidates, stats_, [&frame](std::span<const FacePair> chunk) { exact::narrow_candidate_chunk(frame, chunk); });
+    stats_.set("candidates", static_cast<double>(streamed.candidates));
+  } else if (cut == nullptr) {
     exact::narrow_candidates(frame, s.candidates);
+  } else {
+    if (params_.track) test_seeds(frame, s.seed_vf, s.seed_ee, *cut, tracked);
+    if (orphans_first) orphan_stages();
+    // Each traversal task's candidates are tested as it ends (chunk size 1), until the budget
+    // stops both.
+    const StreamedPairs streamed = stream_self_pairs(
+        *broad_phase_, s.candidates, stats_,
+        [&](std::span<const FacePair> chunk) {
+          if (!exact::narrow_candidates(frame, chunk, *cut)) s.candidates.stop();
+        },
+        1, params_.track);
+    stopped = streamed.stopped || cut->tested() < streamed.candidates;
+    stats_.set("candidates", static_cast<double>(streamed.candidates));
+    stats_.set("pairs_tested", static_cast<double>(cut->tested()));
   }
+  if (!orphans_first) orphan_stages();
+  s.orphans_waited = skipped == 0 ? 0 : s.orphans_waited + 1;
 
-  const auto orphans_start = std::chrono::steady_clock::now();
-  const bool refresh = frame.proximity && exact::wake_orphan_blocks(s.orphans, s.sleep, x, pad, threads, stats_);
-  stats_.set("orphan_wake_ms", ms_since(orphans_start));
-  const std::size_t tested_blocks = exact::narrow_orphans(frame, s.orphans, refresh);
-  const std::size_t star_pairs = exact::narrow_stars(frame, s.orphans.stars, s.own);
-  exact::narrow_isolated(frame, s.own.isolated);
-  if (refresh) s.sleep.ref.assign(x.begin(), x.end());
-  stats_.set("orphan_ms", ms_since(orphans_start));
+  if (cut != nullptr) {
+    stats_.set("cut", stopped || skipped > 0 ? 1 : 0);
+    stats_.set("stages_skipped", skipped);
+  }
+  stats_.set("orphan_ms", orphan_ms);
   stats_.set("orphan_blocks", static_cast<double>(s.orphans.vf_blocks.size() + s.orphans.ee_blocks.size()));
   stats_.set("orphan_blocks_tested", static_cast<double>(tested_blocks));
-  stats_.set("orphan_refresh", refresh ? 1 : 0);
   stats_.set("orphan_stars", static_cast<double>(s.orphans.stars.size()));
   stats_.set("orphan_star_pairs", static_cast<double>(star_pairs));
   stats_.set("narrow_ms", ms_since(narrow_start));
@@ -210,6 +343,8 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // The frame's set in canonical order (`sorted_output`: the base class does not sort it again).
   const auto gather_start = std::chrono::steady_clock::now();
   exact::gather_contacts(frame, s.edge_by_rank, s.gather, out);
+  merge_unique(out.vf, tracked.vf);
+  merge_unique(out.ee, tracked.ee);
   stats_.set("sort_ms", ms_since(gather_start));
   stats_.set("orphan_vf", static_cast<double>(s.orphans.vf.size()));
   stats_.set("orphan_ee", static_cast<double>(s.orphans.ee.size()));

@@ -31,6 +31,7 @@
 /// TT is asked, the thickness plays no part and `pad` is the rounding margin alone.
 
 #include <crumple/core/error.hpp>
+#include <crumple/core/frame_deadline.hpp>
 #include <crumple/detect/broad_phase/broad_phase.hpp>
 #include <crumple/detect/detector.hpp>
 
@@ -46,10 +47,35 @@ class ContactOverflowError : public Error {
   using Error::Error;
 };
 
-/// Keys common to the exact detectors (`max_contacts`, `overflow`).
+namespace exact {
+class Cutoff;  // exact/narrow_frame.hpp
+}
+
+/// Keys common to the exact detectors (`max_contacts`, `overflow`), and `kdop`'s cut-off
+/// (`budget`, `pairs`).
+///
+/// Cut-off frames (the naive way to keep a time budget with an exact method; docs/hybrid.md):
+/// the broad phase streams its candidates to the narrow phase as it finds them (`kdop`: after
+/// each traversal task, in the tree's order), each block of candidates is claimed from the budget
+/// before it is tested, and once the budget is spent the traversal and the narrow phase stop
+/// and the orphan stages not yet begun are skipped (each stage runs whole or not at all). The
+/// frame returns the contacts found so far, in canonical order: a subset of the full set, with
+/// the same bits. With `pairs` alone the cut point is a count of candidates, so the contacts
+/// depend only on the frames (one thread; with more, on the threads' interleaving too). Without
+/// `track`, a larger `pairs` finds a superset on every frame.
 struct ExactParams {
   std::size_t max_contacts = 0;  ///< cap on the contacts of one frame; 0 = no cap
   bool overflow_error = true;    ///< over the cap: throw (true) or keep the first contacts
+  double budget_ms = 0;          ///< time budget per frame from the start of `update`; 0 = none
+  std::size_t pairs = 0;         ///< at most this many candidates narrow-tested per frame; 0 = all
+  BudgetClock clock = BudgetClock::wall;  ///< what `budget_ms` counts (cpu: one thread only)
+  /// Cut-off frames first re-test the last frame's contacts (most persist from frame to frame),
+  /// and the traversal begins where the last one stopped (`kdop`), so that frames cut short
+  /// cover the mesh in turn; the orphan stages, when the budget has skipped them for 4 frames,
+  /// run before the traversal. The result is still a subset with the same bits, without
+  /// duplicates (a contact found twice is reported once).
+  bool track = false;
+  bool cut_off() const { return budget_ms > 0 || pairs > 0; }
   static ExactParams from_spec(const MethodSpec& spec);
   bool operator==(const ExactParams&) const = default;
 };
@@ -83,8 +109,10 @@ class ExactDetector final : public Detector {
   /// The frame's largest coordinate magnitude (of `previous` too), and the float positions.
   Scalar prepare_frame(PositionsView previous, PositionsView x);
   /// Stages 3 to 5 over the broad phase's candidates; `magnitude` as `prepare_frame` gives it.
-  /// `stream`: the broad phase's `self_pairs` is run here, its candidates tested as they come.
-  void narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, bool stream, ContactSet& out);
+  /// With `cut` or `stream`, the broad phase's candidates are streamed (`self_pairs` is called
+  /// here) and tested as they come; with `cut`, cut off as `ExactParams` says.
+  void narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, ContactSet& out, exact::Cutoff* cut,
+                    bool stream = false);
   /// Applies `max_contacts` (throws or truncates) and sets the contact stats.
   void cap_contacts(ContactSet& out);
 

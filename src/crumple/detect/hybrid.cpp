@@ -43,6 +43,8 @@ HybridParams HybridParams::from_spec(const MethodSpec& spec) {
   p.every = static_cast<int>(every);
   p.budget_ms = spec.get_double("budget", 0);
   if (!(p.budget_ms >= 0 && p.budget_ms <= 1e6)) fail("budget must be in [0, 1e6] ms (0 = none)");
+  static constexpr std::array<std::string_view, 2> kClock{"wall", "cpu"};
+  p.clock = parse_budget_clock(spec.get_choice("clock", "wall", kClock));
   const long long zones = spec.get_int("zones", 0);
   if (zones < 0 || zones > 100'000'000) fail("zones must be in [0, 1e8] (0 = all), got " + std::to_string(zones));
   p.zones = static_cast<int>(zones);
@@ -76,7 +78,8 @@ std::string HybridParams::to_string() const {
          ",budget=" + json_number(budget_ms) + ",zones=" + std::to_string(zones) +
          ",search=" + std::string(crumple::to_string(search)) + ",draw=" + std::to_string(draw) +
          ",propagation=" + (auto_propagation ? std::string("auto") : std::string(crumple::to_string(propagation))) +
-         ",near=" + near_text + ",steps=" + std::to_string(steps) + ",seed=" + std::to_string(seed);
+         ",near=" + near_text + ",steps=" + std::to_string(steps) + ",seed=" + std::to_string(seed) +
+         (clock == BudgetClock::cpu ? ",clock=cpu" : "");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -202,9 +205,7 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
   const Scalar h = thickness();
   const ContactKinds& kinds = options().kinds;
   const bool has_previous = !previous.empty();
-  const bool budget = params_.budget_ms > 0;
-  const auto deadline =
-      start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(params_.budget_ms));
+  const FrameDeadline deadline(params_.budget_ms, params_.clock);
   const auto ms_since = [](Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
   };
@@ -238,12 +239,11 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
   // Same contacts either way (distances are deterministic); only `distance_evals` grows.
   base.cache = false;
   base.steps = params_.steps;
-  base.has_deadline = budget;
   base.deadline = deadline;
   m.ee.start_frame(base);
   m.vf.start_frame(base);
   m.ef.start_frame(base);
-  ZoneSearchFrame search{topo, x, h, kinds.ee, kinds.vf, kinds.tt, budget, deadline, ctx, old_kept, {}};
+  ZoneSearchFrame search{topo, x, h, kinds.ee, kinds.vf, kinds.tt, deadline, ctx, old_kept, {}};
   std::size_t zones_due = 0;
   for (const Zone& z : m.zones) zones_due += hybrid_detail::due(z, every) ? 1 : 0;
   m.examine_zones(search, order, base, params_);

@@ -35,6 +35,7 @@
 /// `search=exact` examines every zone. Deterministic for a seed, parameters and input sequence
 /// when there is no time budget. Single-threaded. Vertices with no face are never tested.
 
+#include <crumple/core/frame_deadline.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/detect/stochastic.hpp>
 
@@ -59,6 +60,7 @@ struct HybridParams {
   int leaf = 64;                                  ///< faces per leaf, in [4, 4096] [leaf]
   int every = 1;                                  ///< a zone is due after this many frames [every]
   double budget_ms = 0;                           ///< time budget per frame, 0 = none [budget]
+  BudgetClock clock = BudgetClock::wall;          ///< what budget_ms counts [clock]
   int zones = 0;                                  ///< zones examined per frame at most, 0 = all [zones]
   ZoneSearch search = ZoneSearch::Stochastic;     ///< [search]
   int draw = 0;                                   ///< draws per zone and pair type, 0 = adaptive [draw]

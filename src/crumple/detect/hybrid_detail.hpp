@@ -190,14 +190,13 @@ struct ZoneSearchFrame {
   PositionsView x;
   Scalar h;
   bool run_ee, run_vf, run_ef;  ///< pair types of the query (vf, ee, tt)
-  bool budget;
-  Clock::time_point deadline;
+  const FrameDeadline& deadline;
   Context& ctx;
   const std::vector<Kept>& old_kept;  ///< last frame's kept pairs, by zone
   std::vector<Kept> carried;          ///< kept pairs of the zones not examined (to the next frame)
   std::size_t examined = 0;
   double drawn = 0, exact_pairs = 0;
-  bool out_of_time() const { return budget && Clock::now() >= deadline; }
+  bool out_of_time() const { return deadline.passed(); }
   /// A zone whose examination the budget cut short counts as not examined: it stays due.
   void unfinish(Zone& z) {
     z.examined = false;

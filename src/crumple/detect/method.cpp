@@ -16,7 +16,7 @@ constexpr std::array<ParamInfo, 1> kNaiveParams{{
      "are apart (the same contacts); off = the thesis' loop, every pair through the exact test"},
 }};
 
-constexpr std::array<ParamInfo, 10> kStochasticParams{{
+constexpr std::array<ParamInfo, 11> kStochasticParams{{
     {"variant", "direct",
      "simple | propagate-by-convergence | direct | vertex (thesis 3.2.2.5; docs/stochastic.md)"},
     {"active", "100", "maximum near pairs kept per pair type (setting=1: 10)"},
@@ -30,11 +30,14 @@ constexpr std::array<ParamInfo, 10> kStochasticParams{{
     {"budget", "0",
      "time budget per frame in ms (0 = none): kept pairs first, then draws and propagation "
      "until it is spent (results then depend on the machine's speed)"},
+    {"clock", "wall",
+     "wall | cpu: the clock the budget counts on; cpu = this thread's processor time (for "
+     "measuring budgets on a shared machine; one thread)"},
     {"setting", "0",
      "thesis settings: 1 = 10 active pairs with propagation, 2 = 100 without (keys override)"},
 }};
 
-constexpr std::array<ParamInfo, 9> kKdopParams{{
+constexpr std::array<ParamInfo, 13> kKdopParams{{
     {"k", "18", "6 | 14 | 18 | 26: k-DOP directions"},
     {"arity", "4", "2 | 4 | 8: children per node"},
     {"leaf", "48", "maximum faces per leaf (1..64)"},
@@ -54,6 +57,18 @@ constexpr std::array<ParamInfo, 9> kKdopParams{{
     {"overflow", "error",
      "error | truncate: over max_contacts, throw, or keep the first contacts in canonical "
      "order (stats: overflow, contacts_dropped)"},
+    {"budget", "0",
+     "time budget per frame in ms (0 = none): the traversal and narrow phase stop when it is "
+     "spent and the frame returns the contacts found so far (a subset; results then depend on "
+     "the machine's speed)"},
+    {"pairs", "0",
+     "most candidate face pairs narrow-tested per frame (0 = all): a budget counted in work, "
+     "in the traversal's order (stats: cut, pairs_tested)"},
+    {"track", "off",
+     "on | off: with a budget, first test the last frame's contacts again, and begin the "
+     "traversal where the last frame's stopped (frames cut short cover the mesh in turn)"},    {"clock", "wall",
+     "wall | cpu: the clock the budget counts on; cpu = this thread's processor time (for "
+     "measuring budgets on a shared machine; one thread)"},
 }};
 constexpr std::array<ParamInfo, 4> kHashParams{{
     {"cell", "0", "cell size as a multiple of the mean edge length (0 = max(mean edge, 2h))"},
@@ -71,12 +86,15 @@ constexpr std::array<ParamInfo, 3> kSapParams{{
      "order (stats: overflow, contacts_dropped)"},
 }};
 
-constexpr std::array<ParamInfo, 10> kHybridParams{{
+constexpr std::array<ParamInfo, 11> kHybridParams{{
     {"leaf", "64", "faces per leaf of the coarse hierarchy (4..4096); zones are overlapping leaf pairs"},
     {"every", "1", "coverage period: a zone not examined for this many frames is examined first"},
     {"budget", "0",
      "time budget per frame in ms (0 = none): zones are examined in order until it is spent, the "
      "rest come first next frame (results then depend on the machine's speed)"},
+    {"clock", "wall",
+     "wall | cpu: the clock the budget counts on; cpu = this thread's processor time (for "
+     "measuring budgets on a shared machine; one thread)"},
     {"zones", "0", "most zones examined per frame (0 = all): a budget counted in zones"},
     {"search", "stochastic",
      "stochastic | exact: inside a zone, random pairs converged (the thesis) or every pair"},

@@ -100,6 +100,8 @@ StochasticParams StochasticParams::from_spec(const MethodSpec& spec) {
   p.seed = static_cast<std::uint64_t>(seed);
   p.budget_ms = spec.get_double("budget", 0);
   if (!(p.budget_ms >= 0 && p.budget_ms <= 1e6)) fail("budget must be in [0, 1e6] ms (0 = none)");
+  static constexpr std::array<std::string_view, 2> kClock{"wall", "cpu"};
+  p.clock = parse_budget_clock(spec.get_choice("clock", "wall", kClock));
   return p;
 }
 
@@ -110,7 +112,8 @@ std::string StochasticParams::to_string() const {
          ",active=" + std::to_string(active) + ",draw=" + std::to_string(draw) +
          ",propagation=" + std::string(crumple::to_string(propagation)) + ",near=" + near_text +
          ",steps=" + std::to_string(steps) + ",ef=" + (ef ? "on" : "off") +
-         ",seed=" + std::to_string(seed) + (budget_ms > 0 ? ",budget=" + json_number(budget_ms) : "");
+         ",seed=" + std::to_string(seed) + (budget_ms > 0 ? ",budget=" + json_number(budget_ms) : "") +
+         (clock == BudgetClock::cpu ? ",clock=cpu" : "");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -413,7 +416,7 @@ void StochasticDetector::load_state(std::string_view text) {
 
 void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, ContactSet& out) {
   out.clear();
-  const auto start = std::chrono::steady_clock::now();
+  const FrameDeadline deadline(params_.budget_ms, params_.clock);  // from the start of the frame
   const Topology& topo = topology();
   const Scalar h = thickness();
   const Scalar near = params_.near * h;  // near_distance() in the scaled coordinates
@@ -436,11 +439,7 @@ void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, Con
   config.active = params_.active;
   config.draw = params_.draw;
   config.steps = params_.steps;
-  if (params_.budget_ms > 0) {
-    config.has_deadline = true;
-    config.deadline = start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                  std::chrono::duration<double, std::milli>(params_.budget_ms));
-  }
+  config.deadline = deadline;
   switch (params_.variant) {
     case StochasticVariant::Simple:
       break;

@@ -29,6 +29,7 @@
 /// `StochasticParams::budget_ms`); single-threaded
 /// (`DetectorOptions::threads` is ignored).
 
+#include <crumple/core/frame_deadline.hpp>
 #include <crumple/detect/detector.hpp>
 
 #include <cstdint>
@@ -94,6 +95,7 @@ struct StochasticParams {
   /// propagation step under way finishes, so a frame may overrun by one walk. With a budget the
   /// results depend on the machine's speed: the detector is deterministic only without one.
   double budget_ms = 0;
+  BudgetClock clock = BudgetClock::wall;  ///< what budget_ms counts [clock]
 
   /// Reads a `stochastic:...` spec. `setting=1` (thesis setting 1: active=10, with the variant's
   /// propagation) and `setting=2` (active=100, propagation=none) set defaults that explicit keys

@@ -152,8 +152,7 @@ struct EngineConfig {
   int steps = 16;
   /// Time budget of the frame (`StochasticParams::budget_ms`): past the deadline, kept pairs
   /// are carried over unconverged, and draws and propagation stop.
-  bool has_deadline = false;
-  std::chrono::steady_clock::time_point deadline{};
+  FrameDeadline deadline;  ///< none by default
 };
 
 /// Uniform integer in [0, n) from a 64-bit generator (Lemire's multiply-shift on 32 bits;
@@ -289,7 +288,7 @@ class PairEngine {
   }
 
   bool out_of_time() const {
-    return config_.has_deadline && std::chrono::steady_clock::now() >= config_.deadline;
+    return config_.deadline.passed();
   }
 
   Scalar distance(const Context& ctx, PrimitivePair p) {

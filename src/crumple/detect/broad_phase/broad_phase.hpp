@@ -29,7 +29,9 @@
 ///
 /// Streaming: a `CandidateBuffer` with a consumer hands each chunk to it as the chunk is
 /// added, in the adding thread, instead of keeping it; emitters call `flush_if_full` between
-/// units of work, so the candidates in memory are bounded by the chunks in flight.
+/// units of work, so the candidates in memory are bounded by the chunks in flight. A consumer
+/// may ask the emitters to stop (`stop`, a budget spent): they then return early, and the
+/// candidates are incomplete; `KdopTree` checks between its traversal tasks, the others ignore it.
 
 #include <crumple/core/types.hpp>
 #include <crumple/detect/detector.hpp>
@@ -39,6 +41,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -140,13 +143,26 @@ class CandidateBuffer {
     chunks_.push_back(std::move(chunk));
   }
   /// Streams: every chunk added from now on goes to `consumer` and is not kept (`chunks()`
-  /// stays empty; `total()` still counts). An empty function stops streaming.
-  void set_consumer(Consumer consumer) { consumer_ = std::move(consumer); }
+  /// stays empty; `total()` still counts), emitted in chunks of about `chunk` candidates (1:
+  /// whatever an emitter has between its units of work). An empty function stops streaming.
+  /// Clears a `stop`. With `resume`, an emitter that was stopped last frame may begin this one
+  /// where it stopped (`KdopTree`: at the first task it left out), so that frames cut short
+  /// cover the whole mesh in turn.
+  void set_consumer(Consumer consumer, std::size_t chunk = kStreamChunk, bool resume = false) {
+    consumer_ = std::move(consumer);
+    stream_chunk_ = chunk;
+    resume_ = resume;
+    stop_.store(false, std::memory_order_relaxed);
+  }
+  bool resuming() const { return resume_; }
   bool streaming() const { return static_cast<bool>(consumer_); }
-  /// When streaming and `chunk` holds at least `kStreamChunk` candidates, adds it and replaces
+  /// Asks the emitters to add nothing more this frame (thread-safe; a consumer calls it).
+  void stop() { stop_.store(true, std::memory_order_relaxed); }
+  bool stopped() const { return stop_.load(std::memory_order_relaxed); }
+  /// When streaming and `chunk` holds at least the consumer's chunk size, adds it and replaces
   /// it by an empty one; otherwise does nothing (a kept chunk is not split).
   void flush_if_full(std::vector<FacePair>& chunk) {
-    if (consumer_ && chunk.size() >= kStreamChunk) {
+    if (consumer_ && !chunk.empty() && chunk.size() >= stream_chunk_) {
       add(std::move(chunk));
       chunk = take();
     }
@@ -165,6 +181,9 @@ class CandidateBuffer {
   std::vector<std::vector<FacePair>> chunks_;
   Spares<std::vector<FacePair>> spares_;
   Consumer consumer_;
+  std::size_t stream_chunk_ = kStreamChunk;
+  bool resume_ = false;
+  std::atomic<bool> stop_{false};
   std::size_t total_ = 0;
 };
 
@@ -248,12 +267,20 @@ class BroadPhase {
   virtual const BoundingHierarchy* hierarchy() const { return nullptr; }
 };
 
-/// `broad.self_pairs(out, stats)` with every chunk streamed to `consumer` and none kept; returns
-/// the candidate count. `out` is left empty and not streaming, also when a call throws.
-inline std::size_t stream_self_pairs(BroadPhase& broad, CandidateBuffer& out, DetectorStats& stats,
-                                     CandidateBuffer::Consumer consumer) {
+/// What `stream_self_pairs` saw: the candidate count, and whether a consumer stopped the stream.
+struct StreamedPairs {
+  std::size_t candidates = 0;
+  bool stopped = false;
+};
+
+/// `broad.self_pairs(out, stats)` with every chunk streamed to `consumer` (`set_consumer`'s
+/// chunk and resume) and none kept. `out` is left empty and not streaming, also when a call
+/// throws.
+inline StreamedPairs stream_self_pairs(BroadPhase& broad, CandidateBuffer& out, DetectorStats& stats,
+                                       CandidateBuffer::Consumer consumer,
+                                       std::size_t chunk = CandidateBuffer::kStreamChunk, bool resume = false) {
   out.clear();
-  out.set_consumer(std::move(consumer));
+  out.set_consumer(std::move(consumer), chunk, resume);
   try {
     broad.self_pairs(out, stats);
   } catch (...) {
@@ -261,10 +288,10 @@ inline std::size_t stream_self_pairs(BroadPhase& broad, CandidateBuffer& out, De
     out.clear();
     throw;
   }
+  const StreamedPairs result{out.total(), out.stopped()};
   out.set_consumer({});
-  const std::size_t n = out.total();
   out.clear();
-  return n;
+  return result;
 }
 
 }  // namespace crumple

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cstdint>
 #include <mutex>
@@ -331,18 +332,30 @@ void DopTree<K>::traverse(int threads, CandidateBuffer& out, DetectorStats& stat
   stats.set("tasks", static_cast<double>(tasks.size()));
   std::mutex mutex;
   std::size_t reused = 0, live = 0;
+  std::atomic<bool> cut{false};  // a consumer stopped the traversal: some tasks were skipped
+  // Resuming, the tasks are taken from the one the last stopped traversal left out, around.
+  const std::size_t first = out.resuming() && resume_ < tasks.size() ? resume_ : 0;
+  std::atomic<std::size_t> left_out{tasks.size()};  // the first task in that order left out
   std::vector<std::vector<Unit>> units;  // record frames: per chunk, into pairs[chunk]
   std::vector<std::vector<FacePair>> pairs;
   parallel_for_chunks(tasks.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
     Walk w{out.take(), {}, {}};
     for (std::size_t i = begin; i < end; ++i) {
-      const auto [a, b] = tasks[i];
+      if (out.stopped()) {
+        cut.store(true, std::memory_order_relaxed);
+        std::size_t seen = left_out.load();
+        while (i < seen && !left_out.compare_exchange_weak(seen, i)) {
+        }
+        break;
+      }
+      const auto [a, b] = tasks[(i + first) % tasks.size()];
       if (a == b) {
         coherent ? self<true>(a, w) : self<false>(a, w);
       } else {
         coherent ? pair<true>(a, b, w) : pair<false>(a, b, w);
       }
-      if (!coherent) out.flush_if_full(w.out);  // streaming only; a recording keeps its chunk
+      // Streaming only. A unit lies in one task, and a recording copies its pairs (w.pairs).
+      out.flush_if_full(w.out);
     }
     out.add(std::move(w.out));
     const std::lock_guard lock(mutex);
@@ -353,6 +366,7 @@ void DopTree<K>::traverse(int threads, CandidateBuffer& out, DetectorStats& stat
       pairs.push_back(std::move(w.pairs));
     }
   });
+  resume_ = cut.load() && left_out.load() < tasks.size() ? (left_out.load() + first) % tasks.size() : 0;
   if (mode_ == Mode::record) {
     for (std::size_t c = 0; c < units.size(); ++c) {
       for (Unit u : units[c]) {
@@ -363,7 +377,8 @@ void DopTree<K>::traverse(int threads, CandidateBuffer& out, DetectorStats& stat
       unit_pairs_.insert(unit_pairs_.end(), pairs[c].begin(), pairs[c].end());
     }
     std::sort(units_.begin(), units_.end(), [](const Unit& x, const Unit& y) { return x.key < y.key; });
-    cache_valid_ = true;
+    // A unit left out by a stop is not recorded, and a reuse frame would emit nothing for it.
+    cache_valid_ = !cut.load();
   }
   if (coherent) {
     stats.set("units_reused", static_cast<double>(reused));

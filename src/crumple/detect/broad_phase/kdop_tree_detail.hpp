@@ -219,6 +219,7 @@ class DopTree final : public KdopTree::Impl {
   }
 
   const KdopParams& params_;
+  std::size_t resume_ = 0;  ///< the first task a stopped traversal left out (`CandidateBuffer::resuming`)
   // Temporal coherence (proximity frames).
   Mode mode_ = Mode::off;
   Scalar refit_radius_ = 0;  ///< this frame's inflation radius

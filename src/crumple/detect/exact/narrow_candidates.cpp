@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <array>
+#include <span>
 #include <type_traits>
 
 namespace crumple::exact {
@@ -71,8 +72,9 @@ constexpr std::array<std::size_t, 3> kNext{1, 2, 0};
 /// `end`), and the owned sub-pairs of each whose boxes meet (`coarse_masks`: all of a pair's
 /// box tests in a few float-lane operations), from the tables without a branch. Returns the
 /// number of candidates listed; advances i and c.
-std::size_t list_block(const NarrowFrame& frame, const std::vector<std::vector<FacePair>>& chunks,
-                       const std::vector<std::size_t>& offsets, std::size_t& i, std::size_t& c, std::size_t end,
+template <class Chunks>
+std::size_t list_block(const NarrowFrame& frame, const Chunks& chunks,
+                       std::span<const std::size_t> offsets, std::size_t& i, std::size_t& c, std::size_t end,
                        std::array<Candidate, kBlock>& block, BlockCodes& codes) {
   const std::vector<PackedFace>& packed = frame.packed;
   const ContactKinds kinds = frame.kinds;
@@ -187,29 +189,40 @@ void block_triangle_triangle(const NarrowFrame& frame, const std::array<Candidat
   }
 }
 
-}  // namespace
-
-namespace {
-
-/// Candidates [begin, end) of `chunks` (put end to end; `offsets` their starts) through the
-/// block stages, their contacts handed in as one chunk of work (`NarrowFrame::collect`).
-void narrow_range(NarrowFrame& frame, const std::vector<std::vector<FacePair>>& chunks,
-                  const std::vector<std::size_t>& offsets, std::size_t begin, std::size_t end) {
-  const ContactKinds kinds = frame.kinds;
-  LocalContacts local{frame.spares.take()};
+/// The sub-pairs of candidates [i, end) of the chunks, listed and tested block by block.
+template <class Chunks>
+void narrow_range(const NarrowFrame& frame, const Chunks& chunks, std::span<const std::size_t> offsets,
+                  std::size_t i, std::size_t end, LocalContacts& local) {
   std::array<Candidate, kBlock> block;
   BlockCodes codes;
-  std::size_t c = static_cast<std::size_t>(std::upper_bound(offsets.begin(), offsets.end(), begin) - offsets.begin() - 1);
-  for (std::size_t i = begin; i < end;) {
+  std::size_t c = static_cast<std::size_t>(std::upper_bound(offsets.begin(), offsets.end(), i) - offsets.begin() - 1);
+  while (i < end) {
     const std::size_t n = list_block(frame, chunks, offsets, i, c, end, block, codes);
-    if (kinds.vf) block_vertex_face(frame, block, codes, local);
-    if (kinds.ee) block_edge_edge(frame, block, codes, local);
-    if (kinds.tt) block_triangle_triangle(frame, block, n, local);
+    if (frame.kinds.vf) block_vertex_face(frame, block, codes, local);
+    if (frame.kinds.ee) block_edge_edge(frame, block, codes, local);
+    if (frame.kinds.tt) block_triangle_triangle(frame, block, n, local);
   }
-  frame.collect(local);
 }
 
 }  // namespace
+
+bool narrow_candidates(NarrowFrame& frame, std::span<const FacePair> chunk, Cutoff& cut) {
+  const std::array<std::span<const FacePair>, 1> chunks{chunk};
+  const std::array<std::size_t, 2> offsets{0, chunk.size()};
+  LocalContacts local{frame.spares.take()};
+  bool complete = true;
+  for (std::size_t i = 0; i < chunk.size();) {
+    const std::size_t n = cut.claim(std::min(kBlock, chunk.size() - i));
+    if (n == 0) {
+      complete = false;
+      break;
+    }
+    narrow_range(frame, chunks, offsets, i, i + n, local);
+    i += n;
+  }
+  frame.collect(local);
+  return complete;
+}
 
 void narrow_candidates(NarrowFrame& frame, const CandidateBuffer& candidates) {
   const auto& chunks = candidates.chunks();
@@ -220,15 +233,19 @@ void narrow_candidates(NarrowFrame& frame, const CandidateBuffer& candidates) {
   // (`balanced_grain`): a small scene's chunks would otherwise leave a thread idle at the end.
   const std::size_t grain = balanced_grain(total, frame.threads, 256, 2048);
   parallel_for_chunks(total, frame.threads, grain, [&](std::size_t begin, std::size_t end) {
-    narrow_range(frame, chunks, offsets, begin, end);
+    LocalContacts local{frame.spares.take()};
+    narrow_range(frame, chunks, offsets, begin, end, local);
+    frame.collect(local);
   });
 }
 
 void narrow_candidate_chunk(NarrowFrame& frame, std::span<const FacePair> chunk) {
   if (chunk.empty()) return;
-  const std::vector<std::vector<FacePair>> chunks{std::vector<FacePair>(chunk.begin(), chunk.end())};
-  const std::vector<std::size_t> offsets{0, chunk.size()};
-  narrow_range(frame, chunks, offsets, 0, chunk.size());
+  const std::array<std::span<const FacePair>, 1> chunks{chunk};
+  const std::array<std::size_t, 2> offsets{0, chunk.size()};
+  LocalContacts local{frame.spares.take()};
+  narrow_range(frame, chunks, offsets, 0, chunk.size(), local);
+  frame.collect(local);
 }
 
 }  // namespace crumple::exact

@@ -7,6 +7,7 @@
 /// padded thickness: a box test in float lanes (float_lanes.hpp), then a plane or line
 /// separation test (geometry/separation.hpp).
 
+#include <crumple/core/frame_deadline.hpp>
 #include <crumple/detect/broad_phase/broad_phase.hpp>
 #include <crumple/detect/contact.hpp>
 #include <crumple/detect/exact/float_lanes.hpp>
@@ -17,6 +18,7 @@
 
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -282,6 +284,51 @@ void narrow_candidates(NarrowFrame& frame, const CandidateBuffer& candidates);
 /// The same stage over one chunk of candidates as a streaming broad phase hands it in
 /// (`CandidateBuffer::set_consumer`), on the calling thread; callable concurrently.
 void narrow_candidate_chunk(NarrowFrame& frame, std::span<const FacePair> chunk);
+
+/// The budget of a cut-off frame (`ExactParams::budget_ms`, `pairs`): candidates are claimed
+/// before they are tested, a block at a time; once the budget is spent, nothing more is.
+/// Thread-safe (with a wall-clock deadline). With a pair limit only, the cut depends on the
+/// candidates' order alone.
+class Cutoff {
+ public:
+  /// At most `pairs` candidates (0: no limit), and none claimed once `deadline` has passed.
+  Cutoff(std::size_t pairs, const FrameDeadline& deadline) : limit_(pairs), deadline_(deadline) {}
+  /// Claims up to n candidates: returns how many may be tested (0 once the budget is spent).
+  std::size_t claim(std::size_t n) {
+    if (spent_.load(std::memory_order_relaxed) || n == 0) return 0;
+    if (deadline_.passed()) {
+      spent_.store(true, std::memory_order_relaxed);
+      return 0;
+    }
+    std::size_t take = n;
+    if (limit_ != 0) {
+      const std::size_t before = claimed_.fetch_add(n, std::memory_order_relaxed);
+      take = before >= limit_ ? 0 : std::min(n, limit_ - before);
+      if (take < n) spent_.store(true, std::memory_order_relaxed);
+    }
+    tested_.fetch_add(take, std::memory_order_relaxed);
+    return take;
+  }
+  /// True once a claim was refused, or (when timed) the deadline has passed.
+  bool spent() {
+    if (!spent_.load(std::memory_order_relaxed) && deadline_.passed()) {
+      spent_.store(true, std::memory_order_relaxed);
+    }
+    return spent_.load(std::memory_order_relaxed);
+  }
+  /// Candidates granted so far.
+  std::size_t tested() const { return tested_.load(std::memory_order_relaxed); }
+
+ private:
+  std::size_t limit_;
+  const FrameDeadline& deadline_;
+  std::atomic<std::size_t> claimed_{0}, tested_{0};
+  std::atomic<bool> spent_{false};
+};
+
+/// Stage, cut off: the candidates of one streamed chunk, claimed from `cut` a block at a time
+/// (serially, in the calling thread). Returns false when the budget stopped it.
+bool narrow_candidates(NarrowFrame& frame, std::span<const FacePair> chunk, Cutoff& cut);
 
 /// Stage: the orphan sub-pairs (orphans.hpp) of the awake blocks; on a `refresh`, every block,
 /// whose distance bound is then set from what its tests compute anyway. Returns the number of
