@@ -236,6 +236,7 @@ void render_scene(const RenderArgs& args, Output& output) {
     if (f >= last) break;
     simulation.advance_frame();
   }
+  progress.update(static_cast<std::size_t>(last + 1));
 }
 
 void render_files(const RenderArgs& args, Output& output) {
@@ -282,6 +283,7 @@ void render_files(const RenderArgs& args, Output& output) {
     output.frame(f, topology, x, contacts);
     previous = std::move(x);
   }
+  progress.update(static_cast<std::size_t>(index + 1));
 }
 
 /// Whether `name` is a picture or the video of a `--video` folder.

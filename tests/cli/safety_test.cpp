@@ -364,6 +364,7 @@ TEST(Safety, ProgressIsAPlainLineWithAnEtaOffTerminal) {
                                          (dir / "f.png").string());
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("crumple render: frame 3/4, "), std::string::npos) << r.out;  // frames done
+  EXPECT_NE(r.out.find("crumple render: frame 4/4, "), std::string::npos) << r.out;  // and the end
   EXPECT_NE(r.out.find("ETA"), std::string::npos) << r.out;
   r = testing::run_program(progress, "detect " + (dir / "frames").string() + " -t 0.01");
   ASSERT_EQ(r.status, 0) << r.out;

@@ -3,6 +3,7 @@
 #include <crumple/detect/narrow_phase.hpp>
 #include <crumple/geometry/triangle_intersection.hpp>
 
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <limits>
@@ -42,6 +43,31 @@ Box padded_box(const Vec3& a, const Vec3& b, const Vec3& c, Scalar pad) {
   return {a.cwiseMin(b).cwiseMin(c).array() - pad, a.cwiseMax(b).cwiseMax(c).array() + pad};
 }
 
+/// Calls `per_pair(i, j, local)` (i < j) for every pair of boxes that are not apart, rows in
+/// parallel: the all-pairs loop's pairs, met in another order. Sorted by their lower x bound, a
+/// later box that starts past a row's upper x bound is apart from it, and so is every box after.
+/// Returns how many calls returned true.
+template <class T, class PerPair>
+std::uint64_t overlapping_pairs(const std::vector<Box>& boxes, int threads, std::vector<T>& out,
+                                const PerPair& per_pair) {
+  std::vector<Index> order(boxes.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<Index>(i);
+  const auto lower = [&](Index i) { return boxes[static_cast<std::size_t>(i)].lo.x(); };
+  std::sort(order.begin(), order.end(), [&](Index a, Index b) { return lower(a) < lower(b) || (lower(a) == lower(b) && a < b); });
+  std::atomic<std::uint64_t> counted{0};
+  collect(order.size(), threads, out, [&](Index row, auto& local) {
+    const Index i = order[static_cast<std::size_t>(row)];
+    const Box& box = boxes[static_cast<std::size_t>(i)];
+    std::uint64_t n = 0;
+    for (std::size_t k = static_cast<std::size_t>(row) + 1; k < order.size() && lower(order[k]) <= box.hi.x(); ++k) {
+      const Index j = order[k];
+      if (!box.apart(boxes[static_cast<std::size_t>(j)]) && per_pair(std::min(i, j), std::max(i, j), local)) ++n;
+    }
+    counted += n;
+  });
+  return counted.load();
+}
+
 }  // namespace
 
 void NaiveDetector::detect(PositionsView /*previous*/, PositionsView x, ContactSet& out) {
@@ -61,23 +87,34 @@ void NaiveDetector::detect(PositionsView /*previous*/, PositionsView x, ContactS
   for (const Vec3& p : x) magnitude = std::max(magnitude, p.cwiseAbs().maxCoeff());
   const Scalar pad = cull_ ? thickness() * (1 + 1e-6) + 1e-9 * magnitude : std::numeric_limits<Scalar>::infinity();
   const auto p_at = [&](Index v) -> const Vec3& { return narrow::at(x, v); };
-  std::atomic<std::uint64_t> exact_tests{0};
-
+  const auto face_box = [&](Index f, Scalar grow) {
+    const Face& t = topo.face(f);
+    return padded_box(p_at(t[0]), p_at(t[1]), p_at(t[2]), grow);
+  };
   if (options().kinds.vf) {
-    std::vector<Box> faces(static_cast<std::size_t>(nf));
-    for (Index f = 0; f < nf; ++f) {
-      const Face& t = topo.face(f);
-      faces[static_cast<std::size_t>(f)] = padded_box(p_at(t[0]), p_at(t[1]), p_at(t[2]), pad / 2);
-    }
-    exact_tests = 0;
-    collect(static_cast<std::size_t>(nv), threads, out.vf, [&](Index v, auto& local) {
-      const Box vertex = padded_box(p_at(v), p_at(v), p_at(v), pad / 2);
+    // Rows are faces. The vertices are sorted by x: their boxes share one width and rounding is
+    // monotone, so both bounds are sorted and the vertices whose x range meets a face's form one
+    // run, found by bisection. A vertex with a non-finite coordinate has an unbounded box.
+    std::vector<Index> sorted, unbounded;
+    for (Index v = 0; v < nv; ++v) (p_at(v).allFinite() ? sorted : unbounded).push_back(v);
+    std::sort(sorted.begin(), sorted.end(),
+              [&](Index a, Index b) { return p_at(a).x() < p_at(b).x() || (p_at(a).x() == p_at(b).x() && a < b); });
+    const auto vertex_box = [&](Index v) { return padded_box(p_at(v), p_at(v), p_at(v), pad / 2); };
+    std::atomic<std::uint64_t> exact_tests{0};
+    collect(static_cast<std::size_t>(nf), threads, out.vf, [&](Index f, auto& local) {
+      const Box face = face_box(f, pad / 2);
+      const auto first = std::partition_point(sorted.begin(), sorted.end(),
+                                              [&](Index v) { return vertex_box(v).hi.x() < face.lo.x(); });
+      const auto last =
+          std::partition_point(first, sorted.end(), [&](Index v) { return vertex_box(v).lo.x() <= face.hi.x(); });
       std::uint64_t tests = 0;
-      for (Index f = 0; f < nf; ++f) {
-        if (vertex.apart(faces[static_cast<std::size_t>(f)]) || topo.face_has_vertex(f, v)) continue;
+      const auto test = [&](Index v) {
+        if (vertex_box(v).apart(face) || topo.face_has_vertex(f, v)) return;
         ++tests;
         if (auto c = narrow::vertex_face(x, topo, v, f, h2)) local.push_back(*c);
-      }
+      };
+      std::for_each(first, last, test);
+      std::for_each(unbounded.begin(), unbounded.end(), test);
       exact_tests += tests;
     });
     stats_.set("vf_tests", static_cast<double>(nv) * nf - 3.0 * nf);
@@ -89,49 +126,31 @@ void NaiveDetector::detect(PositionsView /*previous*/, PositionsView x, ContactS
       const Edge& ab = topo.edge(e);
       edges[static_cast<std::size_t>(e)] = padded_box(p_at(ab[0]), p_at(ab[1]), p_at(ab[1]), pad / 2);
     }
-    exact_tests = 0;
-    collect(static_cast<std::size_t>(ne), threads, out.ee, [&](Index e0, auto& local) {
-      const Box& box0 = edges[static_cast<std::size_t>(e0)];
-      std::uint64_t tests = 0;
-      for (Index e1 = e0 + 1; e1 < ne; ++e1) {
-        if (box0.apart(edges[static_cast<std::size_t>(e1)]) || topo.edges_adjacent(e0, e1)) continue;
-        ++tests;
-        if (auto c = narrow::edge_edge(x, topo, e0, e1, h2)) local.push_back(*c);
-      }
-      exact_tests += tests;
+    const std::uint64_t tests = overlapping_pairs(edges, threads, out.ee, [&](Index e0, Index e1, auto& local) {
+      if (topo.edges_adjacent(e0, e1)) return false;
+      if (auto c = narrow::edge_edge(x, topo, e0, e1, h2)) local.push_back(*c);
+      return true;
     });
     stats_.set("ee_pairs", static_cast<double>(ne) * (ne - 1) / 2);
-    stats_.set("ee_exact_tests", static_cast<double>(exact_tests.load()));
+    stats_.set("ee_exact_tests", static_cast<double>(tests));
   }
   if (options().kinds.tt) {
     // Closed triangles lie in their closed bounding boxes, so disjoint boxes (compared exactly,
     // on the input coordinates) prove a pair disjoint: the result is the all-pairs exact test's.
     // It spares the exact test, slowest on coplanar pairs (a flat sheet), for distant pairs.
     std::vector<Box> boxes(static_cast<std::size_t>(nf));
-    for (Index f = 0; f < nf; ++f) {
-      const Face& t = topo.face(f);
-      boxes[static_cast<std::size_t>(f)] = padded_box(p_at(t[0]), p_at(t[1]), p_at(t[2]), cull_ ? 0 : pad);
-    }
-    exact_tests = 0;
-    collect(static_cast<std::size_t>(nf), threads, out.tt, [&](Index f0, auto& local) {
+    for (Index f = 0; f < nf; ++f) boxes[static_cast<std::size_t>(f)] = face_box(f, cull_ ? 0 : pad);
+    const std::uint64_t tests = overlapping_pairs(boxes, threads, out.tt, [&](Index f0, Index f1, auto& local) {
+      if (topo.faces_adjacent(f0, f1)) return false;
       const Face& a = topo.face(f0);
-      const Box& box0 = boxes[static_cast<std::size_t>(f0)];
-      std::uint64_t tests = 0;
-      for (Index f1 = f0 + 1; f1 < nf; ++f1) {
-        const Box& box1 = boxes[static_cast<std::size_t>(f1)];
-        if (box0.apart(box1)) continue;
-        if (topo.faces_adjacent(f0, f1)) continue;
-        ++tests;
-        const Face& b = topo.face(f1);
-        if (geometry::triangles_intersect(narrow::at(x, a[0]), narrow::at(x, a[1]), narrow::at(x, a[2]),
-                                          narrow::at(x, b[0]), narrow::at(x, b[1]), narrow::at(x, b[2]))) {
-          local.push_back({f0, f1});
-        }
+      const Face& b = topo.face(f1);
+      if (geometry::triangles_intersect(p_at(a[0]), p_at(a[1]), p_at(a[2]), p_at(b[0]), p_at(b[1]), p_at(b[2]))) {
+        local.push_back({f0, f1});
       }
-      exact_tests += tests;
+      return true;
     });
     stats_.set("tt_pairs", static_cast<double>(nf) * (nf - 1) / 2);
-    stats_.set("tt_exact_tests", static_cast<double>(exact_tests.load()));
+    stats_.set("tt_exact_tests", static_cast<double>(tests));
   }
 }
 

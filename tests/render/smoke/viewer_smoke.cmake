@@ -7,7 +7,6 @@ if(NOT XVFB_RUN)
   message(FATAL_ERROR "viewer.smoke: xvfb-run not found; install it (apt-get install xvfb xauth, "
                       "or `bash scripts/dev.sh test`)")
 endif()
-file(REMOVE "${OUT}")
 # Under LeakSanitizer the Mesa driver's allocations, made in a library unloaded (dlclose) before
 # the leak check, show as leaks with unresolvable stacks that no suppression can match: leak
 # checking is off for the viewer process only (AddressSanitizer and UBSan stay on; the library
@@ -17,11 +16,20 @@ if(DEFINED ENV{ASAN_OPTIONS} AND NOT "$ENV{ASAN_OPTIONS}" STREQUAL "")
 else()
   set(ENV{ASAN_OPTIONS} "detect_leaks=0")
 endif()
-execute_process(
-  COMMAND ${XVFB_RUN} -a -s "-screen 0 1024x768x24" "${VIEWER}" hanging-cloth --frames 160
-          --screenshot "${OUT}" --exit
-  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err TIMEOUT 240)
-message(STATUS "crumple-view: ${out}${err}")
+# Runs the viewer headless with ARGN after removing SHOT, which it is to write; sets rc, out
+# and err in the caller and prints the output under LABEL.
+function(run_viewer label shot)
+  file(REMOVE "${shot}")
+  execute_process(
+    COMMAND ${XVFB_RUN} -a -s "-screen 0 1024x768x24" "${VIEWER}" ${ARGN} --screenshot "${shot}" --exit
+    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err TIMEOUT 240)
+  message(STATUS "crumple-view${label}: ${out}${err}")
+  set(rc "${rc}" PARENT_SCOPE)
+  set(out "${out}" PARENT_SCOPE)
+  set(err "${err}" PARENT_SCOPE)
+endfunction()
+
+run_viewer("" "${OUT}" hanging-cloth --frames 160)
 if(NOT rc EQUAL 0)
   message(FATAL_ERROR "viewer.smoke: crumple-view exited with '${rc}'")
 endif()
@@ -38,12 +46,7 @@ endif()
 # A diverging simulation (sim::DivergenceError) pauses the viewer with the message instead of
 # ending it: the picture of the last good state is still taken; a scripted run exits 1.
 set(DIVERGED "${OUT}.diverged.png")
-file(REMOVE "${DIVERGED}")
-execute_process(
-  COMMAND ${XVFB_RUN} -a -s "-screen 0 1024x768x24" "${VIEWER}" hanging-cloth -p gravity=1e12 --frames 5
-          --screenshot "${DIVERGED}" --exit
-  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err TIMEOUT 240)
-message(STATUS "crumple-view (diverging): ${out}${err}")
+run_viewer(" (diverging)" "${DIVERGED}" hanging-cloth -p gravity=1e12 --frames 5)
 if(NOT rc EQUAL 1 OR NOT err MATCHES "diverged at frame 1")
   message(FATAL_ERROR "viewer.smoke: a diverging run exited with '${rc}' without the divergence message")
 endif()
@@ -54,12 +57,7 @@ endif()
 # itself for 300 frames with the response off, then untangles; the headless run prints the
 # intersecting pairs' count (as the panel shows it) and the simulated frames per second.
 set(UNTANGLED "${OUT}.untangled.png")
-file(REMOVE "${UNTANGLED}")
-execute_process(
-  COMMAND ${XVFB_RUN} -a -s "-screen 0 1024x768x24" "${VIEWER}" hanging-cloth:nx=12,ny=12 --response-from 300
-          --frames 340 --screenshot "${UNTANGLED}" --exit
-  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err TIMEOUT 240)
-message(STATUS "crumple-view (untangling): ${out}${err}")
+run_viewer(" (untangling)" "${UNTANGLED}" hanging-cloth:nx=12,ny=12 --response-from 300 --frames 340)
 if(NOT rc EQUAL 0)
   message(FATAL_ERROR "viewer.smoke: the untangling run exited with '${rc}'")
 endif()
