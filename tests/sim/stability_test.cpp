@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <string>
 
 namespace crumple::sim {
@@ -31,6 +32,34 @@ TEST(Stability, StableStepFollowsEachSchemesBound) {
   const Model pair = Model::create({1, 1}, {{0, 1, 100, 0, 1}}, {});
   EXPECT_NEAR(stable_time_step(pair, ForceField{}, line, IntegratorKind::SymplecticEuler), 2 / std::sqrt(200.0), 1e-12);
   EXPECT_TRUE(std::isinf(stable_time_step(Model::create({1}, {}, {}), ForceField{}, std::vector<Vec3>{Vec3::Zero()}, IntegratorKind::Rk4)));
+}
+
+// Three unit masses in a line between two pins, springs k with Kelvin-Voigt dashpots c = τ k:
+// C and K share their modes κ_j = (k/m)(2 − 2 cos(jπ/4)), each a root pair of λ² + τκλ + κ.
+// The fastest is overdamped (real, λ ≈ −τκ): explicit Euler is bounded by 2/|λ| there, not by
+// the springs' own damping ratios (2.5 and 3.5, which put the old bound 1.76× too high).
+TEST(Stability, OverdampedChainIsBoundedByItsFastestMode) {
+  const Scalar k = 100, tau = 0.5;
+  std::vector<Spring> springs;
+  for (Index i = 0; i < 4; ++i) springs.push_back({i, i + 1, k, 0, 1});
+  const std::vector<Scalar> masses{0, 1, 1, 1, 0};
+  std::vector<Vec3> x;
+  for (int i = 0; i < 5; ++i) x.emplace_back(i, 0, 0);
+  for (Spring& sp : springs) {  // ζ = c / (2 √(k μ)), μ the reduced mass (a pin's partner alone)
+    const Scalar mu = masses[static_cast<std::size_t>(sp.a)] * masses[static_cast<std::size_t>(sp.b)] > 0 ? 0.5 : 1.0;
+    sp.damping_ratio = tau * k / (2 * std::sqrt(k * mu));
+  }
+  const Model chain = Model::create(masses, springs, {});
+  Scalar euler = std::numeric_limits<Scalar>::infinity(), symplectic = euler;
+  for (int j = 1; j <= 3; ++j) {
+    const Scalar kappa = k * (2 - 2 * std::cos(j * std::numbers::pi / 4)), c = tau * kappa;
+    euler = std::min(euler, c * c >= 4 * kappa ? 4 / (c + std::sqrt(c * c - 4 * kappa)) : c / kappa);
+    // h²κ + 2hc ≤ 4 and hc ≤ 2 (symplectic Euler's step matrix).
+    symplectic = std::min({symplectic, (-c + std::sqrt(c * c + 4 * kappa)) / kappa, 2 / c});
+  }
+  EXPECT_NEAR(stable_time_step(chain, ForceField{}, x, IntegratorKind::ExplicitEuler), euler, 1e-3 * euler);
+  EXPECT_NEAR(stable_time_step(chain, ForceField{}, x, IntegratorKind::SymplecticEuler), symplectic,
+              1e-3 * symplectic);
 }
 
 // The estimate separates the steps that diverge from those that do not on a real scene.
