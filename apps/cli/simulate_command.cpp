@@ -342,19 +342,25 @@ RunOutput prepare_run_output(const SimulateArgs& args, bool resumed, std::int64_
 /// A time step beyond the integrator's stable range, fitted by `sim::fit_time_step` (the scene's
 /// own step split into stable substeps, a step the user chose kept), and the choice said.
 /// Returns the stable step estimate.
-Scalar choose_time_step(sim::Settings& settings, const sim::Model& model, bool user_step) {
-  const sim::TimeStepFit fit = sim::fit_time_step(settings, model, user_step);
+Scalar choose_time_step(sim::Settings& settings, const sim::Scene& scene, bool user_step) {
+  const sim::TimeStepFit fit = sim::fit_time_step(settings, scene.model, scene.field, scene.state.x, user_step);
   const std::string name(sim::to_string(settings.integrator));
   if (fit.action == sim::StepFit::Split) {
     std::fprintf(stderr,
                  "crumple simulate: the scene's time step %.3g s is beyond %s's stable range "
-                 "(about %.3g s for the stiffest spring): using %d substeps of %.3g s per frame "
+                 "(about %.3g s for the model's fastest modes): using %d substeps of %.3g s per frame "
                  "instead of %d (same frame length); --dt and --substeps override\n",
                  fit.given_dt, name.c_str(), fit.stable_dt, fit.substeps, fit.dt, fit.given_substeps);
+  } else if (fit.action == sim::StepFit::Kept && !(fit.stable_dt > 0)) {
+    std::fprintf(stderr,
+                 "crumple: warning: %s is beyond its stable range at every time step on this model "
+                 "(a spring or hinge without damping gains energy at any step): the run will likely "
+                 "diverge. Use -i symplectic-euler, -i rk4 or -i implicit-euler\n",
+                 name.c_str());
   } else if (fit.action == sim::StepFit::Kept) {
     std::fprintf(stderr,
                  "crumple: warning: the time step %.3g s is beyond %s's stable range (about "
-                 "%.3g s for the stiffest spring): the run will likely diverge. Use --dt %.3g "
+                 "%.3g s for the model's fastest modes): the run will likely diverge. Use --dt %.3g "
                  "--substeps %d (same frame length) or -i implicit-euler\n",
                  fit.given_dt, name.c_str(), fit.stable_dt, fit.dt, fit.substeps);
   }
@@ -417,7 +423,7 @@ int run_simulate(const SimulateArgs& args) {
   const auto [out, append] = prepare_run_output(args, side.has_value(), start.frame);
   const std::filesystem::path csv_path = out / "stats.csv";
   const std::filesystem::path frames_dir = out / "frames";
-  const Scalar stable_dt = choose_time_step(settings, scene.model, args.dt || args.substeps || side);
+  const Scalar stable_dt = choose_time_step(settings, scene, args.dt || args.substeps || side);
   const std::string integrator_name(sim::to_string(settings.integrator));
 
   const std::string spec_text = scene.spec;
@@ -564,15 +570,22 @@ int run_simulate(const SimulateArgs& args) {
     const Scalar frame_time = settings.dt * settings.substeps;
     const auto [dt, substeps] = sim::stable_split(frame_time, std::min(settings.dt / 4, stable_dt));
     const std::string state = (out / "state.x3d").string();
+    // No step is stable (explicit Euler on an undamped element): another integrator instead.
+    char smaller[128];
+    if (stable_dt > 0) {
+      std::snprintf(smaller, sizeof smaller, "--dt %.3g --substeps %d", dt, substeps);
+    } else {
+      std::snprintf(smaller, sizeof smaller, "-i symplectic-euler");
+    }
     std::fprintf(stderr,
                  "crumple: error: %s.\n"
                  "  Frames up to %lld are written; the last good state (frame %lld) is saved in %s.\n"
                  "  Resume it with a smaller time step or a stable integrator, e.g.\n"
-                 "    crumple simulate %s --dt %.3g --substeps %d\n"
+                 "    crumple simulate %s %s\n"
                  "    crumple simulate %s -i implicit-euler\n",
                  diverged->what(), static_cast<long long>(simulation->frame()),
-                 static_cast<long long>(simulation->frame()), state.c_str(), state.c_str(), dt,
-                 substeps, state.c_str());
+                 static_cast<long long>(simulation->frame()), state.c_str(), state.c_str(), smaller,
+                 state.c_str());
     return 1;
   }
   int status = 0;
@@ -602,7 +615,9 @@ Run add_simulate_command(CLI::App& app) {
                  "Scene key=value (repeatable), e.g. -p nx=20; for files: pins, stiffness, ...");
   app.add_option("-n,--frames", args->frames, "Frames to simulate")->capture_default_str();
   app.add_option("--dt", args->dt, "Time step (s); default: the scene's");
-  app.add_option("--substeps", args->substeps, "Steps per frame; default: the scene's");
+  app.add_option("--substeps", args->substeps,
+                 "Steps per frame; default: the scene's, split further (up to 100x, said on stderr) where an "
+                 "explicit integrator needs a smaller step to stay stable");
   app.add_option("-i,--integrator", args->integrator,
                  "explicit-euler, symplectic-euler, rk4, implicit-euler or projective; default: the scene's");
   add_detection_options(app, args->detection,

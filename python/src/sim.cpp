@@ -203,7 +203,7 @@ class PySimulation {
     edge_length_ = scene.edge_length;
     sim::Settings settings = scene.settings;
     args.apply(settings);
-    fit_ = sim::fit_time_step(settings, scene.model, args.user_step());
+    fit_ = sim::fit_time_step(settings, scene.model, scene.field, scene.state.x, args.user_step());
     topology_ = scene.model.topology_ptr();
     // response_from: the run starts with the response off and switches to `settings` there.
     if (args.response_from && *args.response_from > 0) response_from_ = *args.response_from;
@@ -223,7 +223,7 @@ class PySimulation {
     char text[512];
     std::snprintf(text, sizeof text,
                   "crumple.Simulation: the time step %.3g s is beyond %s's stable range (about %.3g s for "
-                  "the stiffest spring): the run will likely diverge. Use dt=%.3g, substeps=%d (same "
+                  "the model's fastest modes): the run will likely diverge. Use dt=%.3g, substeps=%d (same "
                   "frame length) or integrator='implicit-euler'",
                   fit_.given_dt, std::string(sim::to_string(settings_.integrator)).c_str(), fit_.stable_dt,
                   fit_.dt, fit_.substeps);

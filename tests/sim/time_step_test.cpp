@@ -22,9 +22,9 @@ TEST(TimeStep, SceneStepSplitUserStepKeptImplicitStable) {
   Settings settings = scene.settings;
   settings.integrator = IntegratorKind::SymplecticEuler;
   const Settings given = settings;
-  TimeStepFit fit = fit_time_step(settings, scene.model, false);
+  TimeStepFit fit = fit_time_step(settings, scene.model, scene.field, scene.state.x, false);
   ASSERT_EQ(fit.action, StepFit::Split);
-  EXPECT_EQ(fit.stable_dt, stable_time_step(scene.model, IntegratorKind::SymplecticEuler));
+  EXPECT_EQ(fit.stable_dt, stable_time_step(scene.model, scene.field, scene.state.x, IntegratorKind::SymplecticEuler));
   EXPECT_GT(given.dt, fit.stable_dt);
   EXPECT_LT(settings.dt, fit.stable_dt);
   EXPECT_GT(settings.substeps, given.substeps);
@@ -35,7 +35,7 @@ TEST(TimeStep, SceneStepSplitUserStepKeptImplicitStable) {
   EXPECT_EQ(fit.given_substeps, given.substeps);
 
   settings = given;  // chosen by the user: kept, the split only suggested
-  fit = fit_time_step(settings, scene.model, true);
+  fit = fit_time_step(settings, scene.model, scene.field, scene.state.x, true);
   EXPECT_EQ(fit.action, StepFit::Kept);
   EXPECT_EQ(settings.dt, given.dt);
   EXPECT_EQ(settings.substeps, given.substeps);
@@ -44,12 +44,12 @@ TEST(TimeStep, SceneStepSplitUserStepKeptImplicitStable) {
   settings = given;  // a split costing more than 100 times the steps: kept
   settings.dt = 1000 * fit.stable_dt;
   settings.substeps = 1;
-  EXPECT_EQ(fit_time_step(settings, scene.model, false).action, StepFit::Kept);
+  EXPECT_EQ(fit_time_step(settings, scene.model, scene.field, scene.state.x, false).action, StepFit::Kept);
   EXPECT_EQ(settings.substeps, 1);
 
   settings = given;
   settings.integrator = IntegratorKind::ImplicitEuler;
-  fit = fit_time_step(settings, scene.model, false);
+  fit = fit_time_step(settings, scene.model, scene.field, scene.state.x, false);
   EXPECT_EQ(fit.action, StepFit::Stable);
   EXPECT_TRUE(std::isinf(fit.stable_dt));
   EXPECT_EQ(settings.dt, given.dt);

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <complex>
 #include <cstdint>
 #include <limits>
 #include <string>
@@ -900,53 +901,229 @@ std::unique_ptr<Integrator> make_integrator(IntegratorKind kind, const Integrato
   throw InputError("unknown integrator");
 }
 
-Scalar stable_time_step(const Model& model, IntegratorKind kind) {
-  constexpr Scalar kInfinity = std::numeric_limits<Scalar>::infinity();
-  if (kind == IntegratorKind::ImplicitEuler || kind == IntegratorKind::Projective) return kInfinity;
+namespace {
+
+/// Bounds on the linearized equations M x'' + C x' + K x = 0 of a model at shape x without
+/// tension (every spring as if at its rest length), over the free particles. An eigenvalue λ
+/// with eigenvector u (u*Mu = 1) is a root of λ² + c λ + k = 0 with c = u*Cu and k = u*Ku, and
+/// these Rayleigh quotients satisfy
+///   0 ≤ k ≤ k_max,  c ≤ air + c_max,  air + τ_min k ≤ c ≤ air + τ_max k,
+/// k_max and c_max the largest eigenvalues of M^-1/2 K M^-1/2 and of the elastic part of
+/// M^-1/2 C M^-1/2, τ = c_e / k_e the ratio of each element's damping to its stiffness (every
+/// element's C_e is τ_e K_e without tension: a spring's dashpot acts along it, a hinge's on its
+/// bend).
+struct RestSpectrum {
+  Scalar k_max = 0, c_max = 0, air = 0;
+  Scalar tau_min = std::numeric_limits<Scalar>::infinity();
+  Scalar tau_max = 0;
+};
+
+/// The largest eigenvalue of the PSD operator y = apply(u) (u, y over all particles, pinned
+/// entries zero): the Rayleigh quotient after `kIterations` power iterations from a fixed start,
+/// at most `bound` (Gershgorin's). The quotient approaches the eigenvalue from below, within
+/// a few per cent on cloth lattices, where the top of the spectrum is a tight cluster.
+template <class Apply>
+Scalar largest_eigenvalue(const Model& model, Scalar bound, const Apply& apply) {
+  constexpr int kIterations = 100;
+  const auto n = static_cast<std::size_t>(model.num_particles());
+  std::vector<Vec3> u(n, Vec3::Zero()), y(n);
+  std::uint64_t h = 0x9e3779b97f4a7c15ULL;  // splitmix64: the same start on every platform
+  const auto next = [&h] {
+    std::uint64_t z = (h += 0x9e3779b97f4a7c15ULL);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return static_cast<Scalar>((z ^ (z >> 31)) >> 11) * 0x1.0p-53 - 0.5;
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3 r(next(), next(), next());
+    if (!model.pinned(static_cast<Index>(i))) u[i] = r;
+  }
+  Scalar quotient = 0;
+  for (int it = 0; it < kIterations; ++it) {
+    Scalar norm2 = 0;
+    for (const Vec3& e : u) norm2 += e.squaredNorm();
+    if (!(norm2 > 0)) return 0;
+    const Scalar scale = 1 / std::sqrt(norm2);
+    for (Vec3& e : u) e *= scale;
+    std::fill(y.begin(), y.end(), Vec3::Zero());
+    apply(u, y);
+    quotient = 0;
+    for (std::size_t i = 0; i < n; ++i) quotient += u[i].dot(y[i]);
+    std::swap(u, y);
+  }
+  return std::min(quotient, bound);
+}
+
+RestSpectrum rest_spectrum(const Model& model, const ForceField& field, std::span<const Vec3> x) {
+  RestSpectrum r;
   const auto mass = model.mass();
-  std::vector<Scalar> row(mass.size(), 0);  // Gershgorin row sums of M^-1/2 K M^-1/2
-  Scalar zeta = kInfinity, zeta_max = 0;
-  for (const Spring& s : model.springs()) {
-    if (!(s.stiffness > 0)) continue;
+  const auto damping = model.damping();
+  std::vector<Scalar> row_k(mass.size(), 0), row_c(mass.size(), 0);
+  const auto ratio = [&](Scalar c, Scalar k) {
+    if (!(k > 0)) {
+      if (c > 0) r.tau_max = std::numeric_limits<Scalar>::infinity();  // a pure dashpot
+      return;
+    }
+    r.tau_min = std::min(r.tau_min, c / k);
+    r.tau_max = std::max(r.tau_max, c / k);
+  };
+  // Adds coefficient × (the pair's entry of a PSD element, |w_i w_j| scaled) to both rows.
+  const auto springs = model.springs();
+  for (std::size_t e = 0; e < springs.size(); ++e) {
+    const Spring& s = springs[e];
     const auto a = static_cast<std::size_t>(s.a), b = static_cast<std::size_t>(s.b);
     const bool free_a = !model.pinned(s.a), free_b = !model.pinned(s.b);
     if (!free_a && !free_b) continue;
-    const Scalar coupling = free_a && free_b ? s.stiffness / std::sqrt(mass[a] * mass[b]) : 0;
-    if (free_a) row[a] += s.stiffness / mass[a] + coupling;
-    if (free_b) row[b] += s.stiffness / mass[b] + coupling;
-    zeta = std::min(zeta, s.damping_ratio);
-    zeta_max = std::max(zeta_max, s.damping_ratio);
+    const Scalar k = std::max<Scalar>(s.stiffness, 0), c = std::max<Scalar>(damping[e], 0);
+    ratio(c, k);
+    // The 3×3 block of a spring has norm k (c): Gershgorin over blocks.
+    const Scalar coupling = free_a && free_b ? 1 / std::sqrt(mass[a] * mass[b]) : 0;
+    if (free_a) {
+      row_k[a] += k * (1 / mass[a] + coupling);
+      row_c[a] += c * (1 / mass[a] + coupling);
+    }
+    if (free_b) {
+      row_k[b] += k * (1 / mass[b] + coupling);
+      row_c[b] += c * (1 / mass[b] + coupling);
+    }
   }
   for (const Hinge& hg : model.hinges()) {
+    bool any_free = false;
     for (std::size_t i = 0; i < 4; ++i) {
       const auto a = static_cast<std::size_t>(hg.vertex[i]);
       if (model.pinned(hg.vertex[i])) continue;
+      any_free = true;
       for (std::size_t j = 0; j < 4; ++j) {
         const auto b = static_cast<std::size_t>(hg.vertex[j]);
         if (model.pinned(hg.vertex[j])) continue;
-        row[a] += hg.stiffness * std::abs(hg.weight[i] * hg.weight[j]) / std::sqrt(mass[a] * mass[b]);
+        const Scalar w = std::abs(hg.weight[i] * hg.weight[j]) / std::sqrt(mass[a] * mass[b]);
+        row_k[a] += std::max<Scalar>(hg.stiffness, 0) * w;
+        row_c[a] += std::max<Scalar>(hg.damping, 0) * w;
       }
     }
+    if (any_free) ratio(std::max<Scalar>(hg.damping, 0), std::max<Scalar>(hg.stiffness, 0));
   }
-  const Scalar omega = std::sqrt(row.empty() ? 0 : *std::max_element(row.begin(), row.end()));
-  if (!(omega > 0)) return kInfinity;
-  switch (kind) {
-    case IntegratorKind::ExplicitEuler:
-      return (zeta < 1 ? 2 * zeta : 2 / (zeta + std::sqrt(zeta * zeta - 1))) / omega;
-    case IntegratorKind::SymplecticEuler: {
-      // The bound falls as ζ grows: the most damped spring decides.
-      const Scalar u = 2 * (std::sqrt(zeta_max * zeta_max + 1) - zeta_max);
-      return (zeta_max > 0 ? std::min(u, 1 / zeta_max) : u) / omega;
-    }
-    case IntegratorKind::Rk4: {
-      // |λ| of the fastest mode: ω, or ω (ζ + √(ζ² − 1)) when overdamped.
-      const Scalar growth = zeta_max > 1 ? zeta_max + std::sqrt(zeta_max * zeta_max - 1) : 1;
-      return 2.78 / (growth * omega);
-    }
-    case IntegratorKind::ImplicitEuler:
-    case IntegratorKind::Projective: break;
+  if (field.drag && field.drag->vertex >= 0 && field.drag->vertex < model.num_particles() &&
+      !model.pinned(field.drag->vertex)) {
+    const auto i = static_cast<std::size_t>(field.drag->vertex);
+    const Scalar k = std::max<Scalar>(field.drag->stiffness, 0), c = std::max<Scalar>(field.drag->damping, 0);
+    ratio(c, k);
+    row_k[i] += k / mass[i];
+    row_c[i] += c / mass[i];
   }
-  return kInfinity;
+  for (std::size_t i = 0; i < mass.size(); ++i) {
+    if (model.pinned(static_cast<Index>(i))) continue;
+    r.k_max = std::max(r.k_max, row_k[i]);
+    r.c_max = std::max(r.c_max, row_c[i]);
+  }
+  // M^-1/2 (Σ coefficient_e K_e) M^-1/2 u at shape x without tension: a spring's block is
+  // d̂d̂ᵀ (its dashpot's too), a hinge's w wᵀ ⊗ I, the drag's I.
+  const auto inv_sqrt = [&](std::size_t i) { return model.pinned(static_cast<Index>(i)) ? 0 : 1 / std::sqrt(mass[i]); };
+  const auto operator_of = [&](bool damped) {
+    return [&, damped](const std::vector<Vec3>& u, std::vector<Vec3>& y) {
+      for (std::size_t e = 0; e < springs.size(); ++e) {
+        const Spring& sp = springs[e];
+        const auto a = static_cast<std::size_t>(sp.a), b = static_cast<std::size_t>(sp.b);
+        const Vec3 d = x[a] - x[b];
+        const Scalar l = d.norm();
+        const Scalar coefficient = std::max<Scalar>(damped ? damping[e] : sp.stiffness, 0);
+        if (!(l > 0) || coefficient == 0) continue;
+        const Vec3 dir = d / l;
+        const Scalar stretch = coefficient * dir.dot(inv_sqrt(a) * u[a] - inv_sqrt(b) * u[b]);
+        y[a] += inv_sqrt(a) * stretch * dir;
+        y[b] -= inv_sqrt(b) * stretch * dir;
+      }
+      for (const Hinge& hg : model.hinges()) {
+        const Scalar coefficient = std::max<Scalar>(damped ? hg.damping : hg.stiffness, 0);
+        Vec3 bend = Vec3::Zero();
+        for (std::size_t i = 0; i < 4; ++i) {
+          const auto v = static_cast<std::size_t>(hg.vertex[i]);
+          bend += hg.weight[i] * inv_sqrt(v) * u[v];
+        }
+        for (std::size_t i = 0; i < 4; ++i) {
+          const auto v = static_cast<std::size_t>(hg.vertex[i]);
+          y[v] += coefficient * hg.weight[i] * inv_sqrt(v) * bend;
+        }
+      }
+      if (field.drag && field.drag->vertex >= 0 && field.drag->vertex < model.num_particles()) {
+        const auto i = static_cast<std::size_t>(field.drag->vertex);
+        y[i] += std::max<Scalar>(damped ? field.drag->damping : field.drag->stiffness, 0) * inv_sqrt(i) * inv_sqrt(i) * u[i];
+      }
+    };
+  };
+  r.k_max = largest_eigenvalue(model, r.k_max, operator_of(false));
+  r.c_max = largest_eigenvalue(model, r.c_max, operator_of(true));
+  r.air = std::max<Scalar>(field.air_damping, 0);
+  if (!(r.tau_min < std::numeric_limits<Scalar>::infinity())) r.tau_min = 0;  // no elastic element
+  return r;
+}
+
+/// Whether one step of `kind` with step h keeps every solution of x'' + c x' + k x = 0 bounded.
+/// Explicit Euler and RK4 amplify the mode e^{λt} by R(hλ) = 1 + w (w = z, and
+/// z + z²/2 + z³/6 + z⁴/24, z = hλ): stable when |R|² − 1 = 2 Re w + |w|² ≤ 0, evaluated in this
+/// form so that a neutral or nearly neutral mode is not lost to cancellation against 1.
+/// Symplectic Euler (v += h a, then x += h v) has the 2×2 amplification matrix with trace
+/// t = 2 − hc − h²k and determinant d = 1 − hc: stable when |d| ≤ 1 and |t| ≤ 1 + d (Jury),
+/// i.e. hc ≤ 2 and h²k + 2hc ≤ 4 (c, k ≥ 0).
+bool mode_is_stable(IntegratorKind kind, Scalar h, Scalar c, Scalar k) {
+  using Complex = std::complex<Scalar>;
+  if (kind == IntegratorKind::SymplecticEuler) return h * c <= 2 && h * h * k + 2 * h * c <= 4;
+  // Roots of λ² + c λ + k, the small one without cancellation.
+  const Complex root = std::sqrt(Complex(c * c - 4 * k, 0));
+  const Complex big = -0.5 * (c + root);
+  const std::array<Complex, 2> lambdas{big, std::abs(big) > 0 ? Complex(k) / big : Complex(0)};
+  for (const Complex lambda : lambdas) {
+    const Complex z = h * lambda;
+    const Complex w = kind == IntegratorKind::ExplicitEuler ? z : z * (1.0 + z * (0.5 + z * (1.0 / 6 + z / 24.0)));
+    // Rounding in the sum is a multiple of |w|²'s ulp: a neutral mode passes.
+    if (2 * w.real() + std::norm(w) > 1e-10 * std::norm(w)) return false;
+  }
+  return true;
+}
+
+/// Whether h is stable for every (c, k) the bounds allow, checked on a grid: k at 0, 160 even
+/// steps up to k_max and 24 halvings below them; c at 17 even steps over its range for each k.
+bool stable_for(IntegratorKind kind, const RestSpectrum& r, Scalar h) {
+  const auto check_k = [&](Scalar k) {
+    const Scalar low = r.air + r.tau_min * k;
+    const Scalar high = std::min(r.air + r.c_max, r.air + r.tau_max * k);
+    if (low > high) return true;  // no mode has this k
+    for (int i = 0; i <= 16; ++i) {
+      if (!mode_is_stable(kind, h, low + (high - low) * i / 16, k)) return false;
+    }
+    return true;
+  };
+  for (int i = 0; i <= 160; ++i) {
+    if (!check_k(r.k_max * i / 160)) return false;
+  }
+  Scalar k = r.k_max / 160;
+  for (int i = 0; i < 24; ++i) {
+    if (!check_k(k *= 0.5)) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+Scalar stable_time_step(const Model& model, const ForceField& field, std::span<const Vec3> x,
+                        IntegratorKind kind) {
+  constexpr Scalar kInfinity = std::numeric_limits<Scalar>::infinity();
+  if (kind == IntegratorKind::ImplicitEuler || kind == IntegratorKind::Projective) return kInfinity;
+  CRUMPLE_CHECK(x.size() == static_cast<std::size_t>(model.num_particles()), "x must have #V positions");
+  const RestSpectrum r = rest_spectrum(model, field, x);
+  if (!(r.k_max > 0) && !(r.c_max > 0)) return kInfinity;  // no elastic force: only air damping
+  // |λ| ≤ c + √k: below 1/(c_max + air + √k_max) every |hλ| ≤ 1. Bracket, then bisect.
+  Scalar lo = 0, hi = 1 / (r.c_max + r.air + std::sqrt(r.k_max));
+  while (stable_for(kind, r, hi)) {
+    lo = hi;
+    hi *= 2;
+    if (!(hi < 1e30)) return kInfinity;
+  }
+  for (int i = 0; i < 60 && hi - lo > 1e-12 * hi; ++i) {
+    const Scalar mid = 0.5 * (lo + hi);
+    (stable_for(kind, r, mid) ? lo : hi) = mid;
+  }
+  return lo;
 }
 
 }  // namespace crumple::sim

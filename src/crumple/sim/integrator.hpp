@@ -89,18 +89,23 @@ class Integrator {
   std::int64_t factorizations_ = 0;
 };
 
-/// The largest step h that `kind` is expected to keep stable on `model`'s springs (s): the linear
-/// stability bound of each scheme on x'' = −ω²x − 2ζωx', with ω² bounded above by Gershgorin's
-/// theorem on M⁻¹K (row of particle i: Σ over its springs of k/mᵢ + k/√(mᵢmⱼ), pinned
-/// neighbours adding k/mᵢ only, and over its hinges s |wᵢ wⱼ| / √(mᵢmⱼ)), ζ the smallest and
-/// ζ⁺ the largest damping ratio of a spring:
-///   explicit Euler  hω < 2ζ (ζ < 1; 2/(ζ + √(ζ²−1)) above), gains energy without damping;
-///   symplectic Euler  hω < min(2(√(ζ⁺²+1) − ζ⁺), 1/ζ⁺);
-///   RK4  hω < 2.78 (divided by ζ⁺ + √(ζ⁺²−1) when ζ⁺ > 1);  implicit Euler and projective
-///   dynamics: infinity (unconditionally stable).
-/// Infinity for a model without springs or free particles. An estimate, not a guarantee: the
-/// nonlinear springs, contacts and obstacles can still make a run diverge below it.
-Scalar stable_time_step(const Model& model, IntegratorKind kind);
+/// The largest step h (s) at which `kind` keeps the linearized motion of `model` at shape `x`
+/// (#V positions) from growing, tension left out: every eigenvalue λ of M x'' + C x' + K x = 0
+/// (springs, hinges, their damping, the field's air damping and drag) is a root of
+/// λ² + cλ + k = 0 for a pair (c, k) within 0 ≤ k ≤ k_max, c − air ≤ c_max and
+/// τ_min k ≤ c − air ≤ τ_max k (τ: each element's damping-to-stiffness ratio; k_max, c_max: the
+/// largest eigenvalues of M^-1/2 K M^-1/2 and M^-1/2 C M^-1/2 by power iteration, at most their
+/// Gershgorin bounds), and h is the largest step whose amplification stays in the unit disc for
+/// every such pair (checked on a grid): |R(hλ)| ≤ 1 for explicit Euler (R = 1 + z) and RK4, the
+/// 2×2 step matrix for symplectic Euler. The stiff, overdamped modes of a Kelvin–Voigt material
+/// (λ ≈ −τk, real) bound explicit Euler at h ≤ 2/|λ| and RK4 at 2.79/|λ|; an undamped spring
+/// makes explicit Euler unstable at every step (0). Implicit Euler and projective dynamics:
+/// infinity (unconditionally stable); infinity also without elastic forces.
+/// Not covered, so an estimate rather than a guarantee: a shape whose springs line up more than
+/// at `x` (k_max grows up to its Gershgorin bound), contacts and obstacles, and the tension of
+/// stretched springs, an undamped transverse stiffness k (1 − L/l) on which explicit Euler gains
+/// energy by about 1 + (hω)²/2 per step unless the air damping absorbs it.
+Scalar stable_time_step(const Model& model, const ForceField& field, std::span<const Vec3> x, IntegratorKind kind);
 
 std::unique_ptr<Integrator> make_integrator(IntegratorKind kind, const IntegratorOptions& options = {});
 

@@ -11,9 +11,10 @@ std::pair<Scalar, int> stable_split(Scalar frame_time, Scalar stable_dt) {
   return {frame_time / substeps, substeps};
 }
 
-TimeStepFit fit_time_step(Settings& settings, const Model& model, bool user_step) {
+TimeStepFit fit_time_step(Settings& settings, const Model& model, const ForceField& field,
+                          std::span<const Vec3> x, bool user_step) {
   TimeStepFit fit;
-  fit.stable_dt = stable_time_step(model, settings.integrator);
+  fit.stable_dt = stable_time_step(model, field, x, settings.integrator);
   fit.given_dt = fit.dt = settings.dt;
   fit.given_substeps = fit.substeps = settings.substeps;
   if (!(settings.dt > fit.stable_dt)) return fit;

@@ -6,6 +6,7 @@
 #include <crumple/sim/integrator.hpp>
 #include <crumple/sim/simulation.hpp>
 
+#include <span>
 #include <utility>
 
 namespace crumple::sim {
@@ -23,7 +24,7 @@ enum class StepFit {
 
 struct TimeStepFit {
   StepFit action = StepFit::Stable;
-  Scalar stable_dt = 0;  ///< `stable_time_step(model, integrator)`
+  Scalar stable_dt = 0;  ///< `stable_time_step(model, field, x, integrator)`
   Scalar given_dt = 0;   ///< the step before the fit
   int given_substeps = 1;
   /// A stable split of the same frame length: what `Split` applied, what `Kept` suggests;
@@ -37,6 +38,7 @@ struct TimeStepFit {
 /// it is the scene's own step (`user_step` false: neither dt nor substeps chosen by the user)
 /// and the split costs at most 100 times the steps; otherwise it is kept as given. The caller
 /// says which (the library never prints).
-TimeStepFit fit_time_step(Settings& settings, const Model& model, bool user_step);
+TimeStepFit fit_time_step(Settings& settings, const Model& model, const ForceField& field,
+                          std::span<const Vec3> x, bool user_step);
 
 }  // namespace crumple::sim
