@@ -6,6 +6,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <utility>
+#include <vector>
 
 namespace crumple::sim {
 namespace {
@@ -151,15 +153,20 @@ Cloth pinned_cloth(Index n) {
 /// One local/global iteration from the inertial prediction y = x₀ + h v₀ is one exact global
 /// solve: the gradient of the step's energy with the springs' directions d_s taken at y,
 ///   M/h² (x − y) − M g + Σ_s ±k ((x_a − x_b) − d_s) + Σ_hinges wᵢ ((s + c/h) Σⱼ wⱼxⱼ − (c/h) Σⱼ wⱼx₀ⱼ),
-/// vanishes at every free particle (pinned ones at y), to 1e-9 of M/h² |x − y|'s scale. On a
-/// 40 × 40 cloth, whose elimination tree the solve splits between two threads, on 1 and 2.
+/// vanishes at every free particle (pinned ones at y), to 1e-5 of M/h² |x − y|'s scale (the
+/// sweeps run over the factor rounded to single precision: measured 3e-6). The same 100 m away
+/// from the origin: the solve is for x − y, so its rounding follows the step's displacement,
+/// not the coordinates (a single-precision solve for x itself misses by 1e-2 of the scale at
+/// the origin, by 2 at 100 m).
+/// On a 40 × 40 cloth, whose elimination tree the solve splits between two threads, on 1 and 2.
 TEST(Projective, OneIterationSolvesTheGlobalStepExactly) {
-  const Cloth c = pinned_cloth(40);
   ForceField field;
   field.air_damping = 0;
   const Scalar h = 1.0 / 240;
-  for (const int threads : {1, 2}) {
-    SCOPED_TRACE("threads " + std::to_string(threads));
+  for (const auto& [offset, threads] : std::vector<std::pair<Scalar, int>>{{0, 1}, {0, 2}, {100, 1}, {100, 2}}) {
+    SCOPED_TRACE("threads " + std::to_string(threads) + ", offset " + std::to_string(offset) + " m");
+    Cloth c = pinned_cloth(40);
+    for (Vec3& p : c.state.x) p += Vec3(offset, -2 * offset, 0.5 * offset);
     IntegratorOptions options;
     options.projective_iterations = 1;
     options.threads = threads;
@@ -192,13 +199,16 @@ TEST(Projective, OneIterationSolvesTheGlobalStepExactly) {
       for (std::size_t k = 0; k < 4; ++k) r[static_cast<std::size_t>(hg.vertex[k])] += hg.weight[k] * g;
     }
     ASSERT_GT(scale, 0);
+    Scalar worst = 0;
     for (std::size_t i = 0; i < n; ++i) {
       if (c.model.pinned(static_cast<Index>(i))) {
         EXPECT_EQ(s.x[i], y[i]) << "pinned particle " << i;
       } else {
-        EXPECT_LT(r[i].norm(), 1e-9 * scale) << "particle " << i;
+        EXPECT_LT(r[i].norm(), 1e-5 * scale) << "particle " << i;
+        worst = std::max(worst, r[i].norm() / scale);
       }
     }
+    std::printf("offset %g m, %d threads: largest residual %.2g of the scale\n", offset, threads, worst);
   }
 }
 

@@ -10,6 +10,7 @@
 #include <array>
 #include <cmath>
 #include <complex>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <string>
@@ -480,14 +481,24 @@ class Projective final : public Integrator {
     older_.resize(n);
     const std::size_t spring_grain = balanced_grain(springs.size(), threads_, 1024, 1 << 16);
     const std::size_t row_grain = balanced_grain(m, threads_, 512, 1 << 15);
+    // The global steps solve for x̂ − y, y the inertial prediction: the right-hand side's
+    // constant part becomes base − A y (in double), so the factor's single-precision rounding
+    // scales with the step's displacement from y, not with the coordinates.
+    origin_.resize(m);
+    parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t r = begin; r < end; ++r) {
+        origin_[r] = next_[free_[r]];
+        base_[r] = a_rows_.reduce(r, base_[r], next_);
+      }
+    });
     Scalar omega = 1;
     const Scalar tolerance = options_.projective_tolerance;
     const int most = tolerance > 0 ? options_.projective_max_iterations : options_.projective_iterations;
     int it = 0;
     for (; it < most; ++it) {
       // Local step: each spring's pull k d_s at the current positions (d_s its rest-length
-      // projection); then each free row's right-hand side, gathered over its springs in a fixed
-      // order and placed at its permuted row for the solve.
+      // projection); then each free row's right-hand side (less A y), gathered over its springs
+      // in a fixed order and placed at its permuted row for the solve.
       parallel_for_chunks(springs.size(), threads_, spring_grain, [&](std::size_t begin, std::size_t end) {
         for (std::size_t k = begin; k < end; ++k) {
           const Spring& sp = springs[k];
@@ -519,7 +530,7 @@ class Projective final : public Integrator {
       parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
         for (std::size_t r = begin; r < end; ++r) {
           const std::size_t i = free_[r];
-          const Vec3 solved = tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(r)])];
+          const Vec3 solved = origin_[r] + tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(r)])];
           const Vec3 previous = it == 0 ? next_[i] : older_[i];
           older_[i] = next_[i];
           next_[i] = omega * (solved - previous) + previous;
@@ -631,6 +642,16 @@ class Projective final : public Integrator {
     const auto m = static_cast<Eigen::Index>(free_.size());
     Sparse a(m, m);
     a.setFromTriplets(t.begin(), t.end());
+    {
+      const Eigen::SparseMatrix<Scalar, Eigen::RowMajor> rows = a;
+      a_rows_.clear();
+      for (Eigen::Index r = 0; r < m; ++r) {
+        for (Eigen::SparseMatrix<Scalar, Eigen::RowMajor>::InnerIterator e(rows, r); e; ++e) {
+          a_rows_.add(static_cast<int>(free_[static_cast<std::size_t>(e.index())]), e.value());
+        }
+        a_rows_.close();
+      }
+    }
     factored_ = false;
     solver_.compute(a);
     CRUMPLE_CHECK(solver_.info() == Eigen::Success, "projective dynamics: the system matrix is not positive definite");
@@ -753,7 +774,7 @@ class Projective final : public Integrator {
     }
     // A forest row's entries all lie in its forest; a top row's go to the top sweep (top
     // columns) and to cross_[f] (forest f's columns).
-    const auto add_row = [&](Sweep& sweep, std::size_t i, int only_label) {
+    const auto add_row = [&](Sweep<float>& sweep, std::size_t i, int only_label) {
       sweep.node.push_back(static_cast<int>(i));
       for (int k = row_start[i]; k < row_start[i + 1]; ++k) {
         const auto c = static_cast<std::size_t>(k);
@@ -761,7 +782,7 @@ class Projective final : public Integrator {
       }
       sweep.close();
     };
-    const auto add_column = [&](Sweep& sweep, std::size_t j) {
+    const auto add_column = [&](Sweep<float>& sweep, std::size_t j) {
       sweep.node.push_back(static_cast<int>(j));
       for (int k = outer[j]; k < outer[j + 1]; ++k) sweep.add(inner[k], value[k]);
       sweep.close();
@@ -780,14 +801,16 @@ class Projective final : public Integrator {
     for (const int i : top_) add_row(top_forward_, static_cast<std::size_t>(i), 2);
     for (auto it = top_.rbegin(); it != top_.rend(); ++it) add_column(top_backward_, static_cast<std::size_t>(*it));
     const auto d = solver_.vectorD();
-    diagonal_.assign(d.data(), d.data() + d.size());
+    inverse_diagonal_.resize(static_cast<std::size_t>(d.size()));
+    for (std::size_t j = 0; j < inverse_diagonal_.size(); ++j) inverse_diagonal_[j] = 1 / d[static_cast<Eigen::Index>(j)];
   }
 
-  /// Rows or columns of L in the order a sweep visits them, stored in that order: a sweep
-  /// reads its entries front to back.
+  /// Rows or columns of L (or rows of A) in the order a sweep visits them, stored in that
+  /// order: a sweep reads its entries front to back.
+  template <class Value>
   struct Sweep {
     std::vector<int> node, start{0}, index;
-    std::vector<Scalar> value;
+    std::vector<Value> value;
     void clear() {
       node.clear();
       start.assign(1, 0);
@@ -796,22 +819,46 @@ class Projective final : public Integrator {
     }
     void add(int i, Scalar v) {
       index.push_back(i);
-      value.push_back(v);
+      value.push_back(static_cast<Value>(v));
     }
     void close() { start.push_back(static_cast<int>(index.size())); }
-    /// x[node] − Σ value · x[index] over line `t`, subtracted in stored order.
-    Vec3 reduce(std::size_t t, Vec3 y, const std::vector<Vec3>& x) const {
-      for (int k = start[t]; k < start[t + 1]; ++k) {
-        y -= value[static_cast<std::size_t>(k)] * x[static_cast<std::size_t>(index[static_cast<std::size_t>(k)])];
+    /// y − Σ value · x[index] over line `t`: four partial sums over the entries k ≡ 0, 1, 2, 3
+    /// (mod 4) from the line's start, each in stored order, then y − ((s₀ + s₁) + (s₂ + s₃)).
+    /// A fixed order (the same bits on every call and thread count); four chains instead of one
+    /// let the additions overlap.
+    Vec3 reduce(std::size_t t, const Vec3& y, const std::vector<Vec3>& x) const {
+      const int* i = index.data();
+      const Value* v = value.data();
+      static_assert(sizeof(Vec3) == 3 * sizeof(Scalar), "Vec3 is three packed Scalars");
+      const Scalar* p = x.data()->data();
+      int k = start[t];
+      const int end = start[t + 1];
+      // Partial sum r of coordinate c in s[3 r + c]: plain scalars, kept in registers.
+      Scalar s[12] = {};
+      const auto add = [&](int r, int e) {
+        const Scalar w = v[e];
+        const Scalar* q = p + 3 * static_cast<std::ptrdiff_t>(i[e]);
+        s[3 * r] += w * q[0];
+        s[3 * r + 1] += w * q[1];
+        s[3 * r + 2] += w * q[2];
+      };
+      for (; k + 4 <= end; k += 4) {
+        add(0, k);
+        add(1, k + 1);
+        add(2, k + 2);
+        add(3, k + 3);
       }
-      return y;
+      if (k < end) add(0, k);
+      if (k + 1 < end) add(1, k + 1);
+      if (k + 2 < end) add(2, k + 2);
+      return y - Vec3((s[0] + s[3]) + (s[6] + s[9]), (s[1] + s[4]) + (s[7] + s[10]), (s[2] + s[5]) + (s[8] + s[11]));
     }
   };
 
   /// L y = b over forest `f` (unit diagonal, in place in tmp_), then the top rows' sums over
   /// its columns into partial_[f].
   void forward_forest(std::size_t f) {
-    const Sweep& rows = forward_[f];
+    const Sweep<float>& rows = forward_[f];
     for (std::size_t t = 0; t < rows.node.size(); ++t) {
       const auto i = static_cast<std::size_t>(rows.node[t]);
       tmp_[i] = rows.reduce(t, tmp_[i], tmp_);
@@ -827,17 +874,19 @@ class Projective final : public Integrator {
     }
   }
 
-  /// Lᵀ z = D⁻¹ y over the columns of `columns`, in place in tmp_.
-  void backward(const Sweep& columns) {
+  /// Lᵀ z = D⁻¹ y over the columns of `columns`, in place in tmp_ (D⁻¹ y as a product with the
+  /// stored reciprocals).
+  void backward(const Sweep<float>& columns) {
     for (std::size_t t = 0; t < columns.node.size(); ++t) {
       const auto j = static_cast<std::size_t>(columns.node[t]);
-      tmp_[j] = columns.reduce(t, tmp_[j] / diagonal_[j], tmp_);
+      tmp_[j] = columns.reduce(t, inverse_diagonal_[j] * tmp_[j], tmp_);
     }
   }
 
-  /// tmp_ = (L D Lᵀ)⁻¹ tmp_: with tmp_ = P b on entry, P A⁻¹ b on return (A = Pᵀ L D Lᵀ P), the
-  /// three coordinates at once (one pass over L per triangle solve instead of one per column),
-  /// the two forests on two threads.
+  /// tmp_ = (L D Lᵀ)⁻¹ tmp_: with tmp_ = P b on entry, P A⁻¹ b on return (A = Pᵀ L D Lᵀ P; L's
+  /// entries rounded to single precision, so to a relative 1e-7 or so: the caller solves for
+  /// corrections), the three coordinates at once (one pass over L per triangle solve instead
+  /// of one per column), the two forests on two threads.
   void solve() {
     parallel_for_chunks(2, threads_, 1, [this](std::size_t begin, std::size_t end) {
       for (std::size_t f = begin; f < end; ++f) forward_forest(f);
@@ -858,11 +907,14 @@ class Projective final : public Integrator {
   Eigen::SimplicialLDLT<Sparse, Eigen::Lower, NestedDissection> solver_;
   std::array<std::vector<int>, 2> forest_;  // nodes of each thread's forest, increasing
   std::vector<int> top_;                    // the other nodes, increasing
-  std::array<Sweep, 2> forward_, cross_, backward_;  // per forest: its rows; top rows; its columns
-  Sweep top_forward_, top_backward_;                 // the top's rows and columns
+  // L rounded to single precision (the sweeps sum in double).
+  std::array<Sweep<float>, 2> forward_, cross_, backward_;  // per forest: its rows; top rows; its columns
+  Sweep<float> top_forward_, top_backward_;                 // the top's rows and columns
   std::array<std::vector<Vec3>, 2> partial_;         // per top row: Σ over forest f's columns
-  std::vector<Scalar> diagonal_;                     // D
+  std::vector<Scalar> inverse_diagonal_;             // D⁻¹
   std::vector<int> incident_start_, incident_;  // per free row: its springs, ~k where it is end b
+  Sweep<Scalar> a_rows_;        // A by free rows, each entry at its column's particle
+  std::vector<Vec3> origin_;    // per free row: the inertial prediction y the solves start from
   std::vector<Vec3> next_, older_, tmp_, base_, pull_;
 };
 
