@@ -65,7 +65,7 @@ constexpr const char* kDefaultOut = "crumple-out";
 constexpr const char* kStatsHeader =
     "frame,time,integrate_ms,detect_ms,response_ms,vf,ee,tt,collision_share,min_distance,"
     "obstacle_penetration,cg_iterations,corrections,energy,max_speed,min_x,min_y,min_z,max_x,"
-    "max_y,max_z,ccd_ms,ccd_impacts,ccd_frozen,intersecting_pairs,contours,untangle_pulls";
+    "max_y,max_z,ccd_ms,ccd_impacts,ccd_frozen,intersecting_pairs,contours,untangle_pulls,pinches";
 
 std::string scenes_help() {
   std::string out = "Built-in scene SPEC, NAME[:key=value,...], or a file (.x3d .obj .ply .off). Scenes:";
@@ -188,10 +188,11 @@ struct Summary {
     hit80 |= s.collision_share >= 0.8;
     if (s.min_distance < 0.5 * thickness) ++close_frames;
     max_penetration = std::max<double>(max_penetration, s.obstacle_penetration);
-    if (s.intersecting_pairs >= 0) {
-      if (first_pairs < 0) first_pairs = s.intersecting_pairs;
-      if (s.intersecting_pairs == 0 && last_pairs > 0 && clean_frame < 0) clean_frame = s.frame;
-      last_pairs = s.intersecting_pairs;
+    if (s.intersecting_pairs >= 0) {  // pinch pairs count too: 0 is intersection-free
+      const std::int64_t pairs = s.intersecting_pairs + std::max<std::int64_t>(s.pinches, 0);
+      if (first_pairs < 0) first_pairs = pairs;
+      if (pairs == 0 && last_pairs > 0 && clean_frame < 0) clean_frame = s.frame;
+      last_pairs = pairs;
     }
   }
 };
@@ -491,10 +492,11 @@ int run_simulate(const SimulateArgs& args) {
         csv_number(s.bounds.max.x()) + "," + csv_number(s.bounds.max.y()) + "," +
         csv_number(s.bounds.max.z()) + "," + csv_number(s.ccd_ms) + "," + std::to_string(s.ccd_impacts) + "," +
         std::to_string(s.ccd_frozen) + "," + std::to_string(s.intersecting_pairs) + "," +
-        std::to_string(s.contours) + "," + std::to_string(s.untangle_pulls) + "\n";
+        std::to_string(s.contours) + "," + std::to_string(s.untangle_pulls) + "," + std::to_string(s.pinches) + "\n";
     write_csv(line);
-    if (!args.quiet && s.intersecting_pairs == 0 && summary.last_pairs > 0 && summary.clean_frame < 0) {
-      std::printf("\rcrumple simulate: 0 intersecting triangle pairs at frame %lld (%lld before)\n",
+    if (!args.quiet && s.intersecting_pairs == 0 && s.pinches == 0 && summary.last_pairs > 0 &&
+        summary.clean_frame < 0) {
+      std::printf("\rcrumple simulate: 0 intersecting triangle pairs at frame %lld, pinches included (%lld before)\n",
                   static_cast<long long>(s.frame), summary.last_pairs);
       std::fflush(stdout);
     }
@@ -548,8 +550,8 @@ int run_simulate(const SimulateArgs& args) {
       char note[96];
       int used = std::snprintf(note, sizeof note, "%.1f fps", seconds > 0 ? static_cast<double>(k + 1) / seconds : 0.0);
       if (frame.intersecting_pairs >= 0) {
-        std::snprintf(note + used, sizeof note - static_cast<std::size_t>(used), ", %lld intersecting pairs",
-                      static_cast<long long>(frame.intersecting_pairs));
+        std::snprintf(note + used, sizeof note - static_cast<std::size_t>(used), ", %lld intersecting pairs, %lld pinches",
+                      static_cast<long long>(frame.intersecting_pairs), static_cast<long long>(frame.pinches));
       }
       progress.update(static_cast<std::size_t>(k + 1), note);
     }

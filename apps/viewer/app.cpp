@@ -7,6 +7,7 @@
 #include <crumple/detect/stochastic.hpp>
 #include <crumple/io/x3d.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <vector>
@@ -82,7 +83,8 @@ sim::Settings App::effective_settings() const {
 }
 
 void App::track_untangling() {
-  const std::int64_t n = stats_.intersecting_pairs;
+  // Pinch pairs (sharing one vertex) count too: 0 is intersection-free.
+  const std::int64_t n = stats_.intersecting_pairs + std::max<std::int64_t>(stats_.pinches, 0);
   if (n > 0 && tangled_pairs_ < 0) {
     tangled_pairs_ = n;
     tangled_frame_ = stats_.frame;
@@ -98,7 +100,8 @@ std::string App::untangle_text() const {
   }
   if (stats_.intersecting_pairs < 0) return "intersecting pairs: not measured (response or untangle off)";
   std::string text = "intersecting pairs: " + std::to_string(stats_.intersecting_pairs);
-  if (stats_.intersecting_pairs > 0) text += " (" + std::to_string(stats_.contours) + " contours)";
+  if (stats_.pinches > 0) text += " + " + std::to_string(stats_.pinches) + " pinches";
+  if (stats_.intersecting_pairs + stats_.pinches > 0) text += " (" + std::to_string(stats_.contours) + " contours)";
   if (tangled_pairs_ > 0) {
     text += ", " + std::to_string(tangled_pairs_) + " at frame " + std::to_string(tangled_frame_);
     if (clean_frame_ >= 0) text += ", 0 from frame " + std::to_string(clean_frame_);

@@ -147,6 +147,7 @@ py::dict stats_dict(const sim::FrameStats& s) {
   d["energy"] = s.energy;
   d["max_speed"] = s.max_speed;
   d["intersecting_pairs"] = s.intersecting_pairs;
+  d["pinches"] = s.pinches;
   d["contours"] = s.contours;
   d["untangle_pulls"] = s.untangle_pulls;
   d["untangle_ms"] = s.untangle_ms;
@@ -408,7 +409,8 @@ On divergence raises crumple.DivergenceError; the frames before it stay done.
           "ccd_ms, ccd_impacts, ccd_queries, ccd_zone_vertices, ccd_frozen (the fail-safe), vf, ee, tt (contacts), collision_share (edges in contact, 0..1), min_distance, "
           "obstacle_penetration (m), cg_iterations, corrections, energy (J), max_speed (m/s), "
           "intersecting_pairs (intersecting triangle pairs at the frame's end, -1 when not measured: "
-          "response or untangle off), contours (intersection contours), untangle_pulls (the "
+          "response or untangle off), pinches (intersecting pairs sharing one vertex, likewise), "
+          "contours (intersection contours), untangle_pulls (the "
           "untangler's pushes over the frame's steps), untangle_ms.")
       .def_property_readonly(
           "positions",

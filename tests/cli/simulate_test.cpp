@@ -186,8 +186,9 @@ std::string field(const std::string& line, std::size_t column) {
 }
 
 // --response-from: the 8x8 hanging cloth falls through itself for 200 frames, then untangles;
-// the column intersecting_pairs counts the pairs (-1 while not measured) down to 0, and the
-// run says when they reach 0. With --untangle off nothing is measured or printed.
+// the column intersecting_pairs counts the pairs (-1 while not measured) down to 0, the column
+// pinches the pairs sharing a vertex (likewise), and the run says when both reach 0. With
+// --untangle off nothing is measured or printed.
 TEST(Simulate, ResponseFromUntanglesAndCountsIntersectingPairs) {
   const testing::TempDir dir;
   auto r = run_cli("simulate hanging-cloth:nx=8,ny=8 --response-from 200 --frames 240 --every 100 -o " +
@@ -197,14 +198,18 @@ TEST(Simulate, ResponseFromUntanglesAndCountsIntersectingPairs) {
   EXPECT_NE(r.out.find("0 intersecting triangle pairs at frame"), std::string::npos) << r.out;
   auto lines = read_lines(dir / "on" / "stats.csv");
   ASSERT_EQ(lines.size(), 242u);
-  const std::string header = ",intersecting_pairs,contours,untangle_pulls";
+  const std::string header = ",intersecting_pairs,contours,untangle_pulls,pinches";
   ASSERT_EQ(lines[0].substr(lines[0].size() - header.size()), header) << lines[0];
-  const std::size_t column = count_fields(lines[0]) - 3;
+  const std::size_t column = count_fields(lines[0]) - 4;
+  const std::size_t pinches = column + 3;
   EXPECT_EQ(field(lines[200], column), "-1") << "frame 199: no response, not measured";
   EXPECT_EQ(field(lines[201], column), "-1") << "frame 200: the last without response";
+  EXPECT_EQ(field(lines[201], pinches), "-1") << "frame 200: not measured";
+  EXPECT_GE(std::stoi(field(lines[202], pinches)), 0) << "frame 201: measured";
   EXPECT_GT(std::stoi(field(lines[202], column)), 0) << "frame 201: still tangled";
   EXPECT_GT(std::stoi(field(lines[202], column + 2)), 0) << "pushes";
   EXPECT_EQ(field(lines[241], column), "0") << "frame 240: untangled";
+  EXPECT_EQ(field(lines[241], pinches), "0") << "frame 240: no pinch either";
   std::ifstream in(dir / "on" / "state.json");
   const std::string json((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_NE(json.find("\"untangle\":true"), std::string::npos) << json;
@@ -215,7 +220,10 @@ TEST(Simulate, ResponseFromUntanglesAndCountsIntersectingPairs) {
   EXPECT_EQ(r.out.find("0 intersecting triangle pairs at frame"), std::string::npos) << r.out;
   lines = read_lines(dir / "off" / "stats.csv");
   ASSERT_EQ(lines.size(), 212u);
-  for (std::size_t k = 1; k < lines.size(); ++k) EXPECT_EQ(field(lines[k], column), "-1") << lines[k];
+  for (std::size_t k = 1; k < lines.size(); ++k) {
+    EXPECT_EQ(field(lines[k], column), "-1") << lines[k];
+    EXPECT_EQ(field(lines[k], pinches), "-1") << lines[k];
+  }
 
   // A run that ends before the switch saves its state with the response off.
   r = run_cli("simulate hanging-cloth:nx=4,ny=4 --response-from 10 --frames 5 -q -o " + (dir / "early").string());

@@ -258,8 +258,8 @@ def test_a_given_step_beyond_the_stable_range_is_kept_with_a_warning():
 def test_untangle_figures_same_as_cli_stats(tmp_path, cli):
     """response_from and untangle as the CLI's --response-from and --untangle: the 8x8 hanging
     cloth falls through itself until frame 200, then untangles; the per-frame figures
-    intersecting_pairs, contours and untangle_pulls are the CLI's stats.csv columns."""
-    scene, start, frames = "hanging-cloth:nx=8,ny=8", 200, 215
+    intersecting_pairs, pinches, contours and untangle_pulls are the CLI's stats.csv columns."""
+    scene, start, frames = "hanging-cloth:nx=8,ny=8", 200, 225
     run_cli(cli, "simulate", scene, "--response-from", start, "--untangle", "on", "--frames", frames,
             "--every", 1000, "--threads", 2, "-q", "-o", tmp_path / "on")
     expected = read_stats_csv(tmp_path / "on/stats.csv")
@@ -268,18 +268,19 @@ def test_untangle_figures_same_as_cli_stats(tmp_path, cli):
     stats = s.run(frames)
     assert s.settings["response"] is True and s.settings["response_from"] is None
     assert s.settings["untangle"] is True
-    for key in ("intersecting_pairs", "contours", "untangle_pulls", "vf", "ee", "ccd_frozen"):
+    for key in ("intersecting_pairs", "pinches", "contours", "untangle_pulls", "vf", "ee", "ccd_frozen"):
         assert stats[key].dtype == np.int64, key
         np.testing.assert_array_equal(stats[key], np.array(expected[key][1:], dtype=np.int64), key)
     np.testing.assert_allclose(stats["energy"], np.array(expected["energy"][1:], dtype=float), rtol=1e-8)
     pairs = stats["intersecting_pairs"]
     assert (pairs[:start] == -1).all()            # no response: not measured
     assert pairs[start] > 0 and stats["untangle_pulls"][start] > 0  # tangled, then pushed
-    assert pairs[-1] == 0                         # untangled
+    assert pairs[-1] == 0 and stats["pinches"][-1] == 0  # untangled, pinches included
     assert stats["untangle_ms"].dtype == np.float64
     # Untangling off: nothing measured.
     off = crumple.Simulation(scene, response_from=start, untangle=False, threads=2).run(start + 3)
     assert (off["intersecting_pairs"] == -1).all() and (off["untangle_pulls"] == 0).all()
+    assert (off["pinches"] == -1).all()
 
 
 @pytest.mark.parametrize("kwargs,match", [

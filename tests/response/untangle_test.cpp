@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <functional>
+#include <limits>
 
 #include "support/intersections.hpp"
 
@@ -181,11 +182,12 @@ int untangle_statically(const Sheets& s, Positions x, const UntangleOptions& opt
   std::vector<Scalar> inv_mass(x.size(), 1);
   std::vector<Vec3> v(x.size(), Vec3::Zero());
   for (int r = 0; r < rounds; ++r) {
-    if (untangler.analyse(x, inv_mass) == 0) return r;
+    untangler.analyse(x, inv_mass);
+    if (!untangler.tangled()) return r;
     const UntangleStats stats = untangler.apply(inv_mass, x, v);
     if (pushes) *pushes += stats.pulls + stats.contour_moves;
   }
-  return untangler.count(x) == 0 ? rounds : -1;
+  return untangler.count(x) == 0 && untangler.pinch_pairs() == 0 ? rounds : -1;
 }
 
 TEST(Untangle, PullsTheBumpBackThrough) {
@@ -223,6 +225,55 @@ TEST(Untangle, ContourMinimisationOpensTheSlit) {
   EXPECT_EQ(untangle_statically(s, s.x, options, 20), -1);
 }
 
+/// A 2 × 2 lattice whose centre vertex 4's star passes through itself: the side (5, 8) of face
+/// {4, 5, 8} pierces face {0, 1, 4}, which shares only vertex 4 with it (a pinch; no two faces
+/// sharing no vertex intersect, so the `tt` count sees nothing).
+Sheets pinched_star() {
+  Sheets s;
+  s.add(2, 2, [](Index i, Index j) { return Vec3(i, 0, j); });
+  s.x[5] = Vec3(1.2, 0.5, 1);
+  s.x[8] = Vec3(0.4, -0.5, 0);
+  return s;
+}
+
+TEST(Untangle, FindsAPinchTheTtCountMisses) {
+  const Sheets s = pinched_star();
+  const auto topology = s.topology();
+  const auto pairs = testing::intersecting_triangles(topology, s.x);
+  EXPECT_EQ(pairs.size(), 0u);
+  const testing::ExactIntersections exact = testing::exact_intersections(*topology, s.x);
+  EXPECT_EQ(exact.disjoint, 0u);
+  EXPECT_GE(exact.pinches, 1u);
+  EXPECT_EQ(count_pinch_pairs(*topology, s.x), exact.pinches);
+  for (const PinchCrossing& c : find_pinch_crossings(*topology, s.x)) EXPECT_EQ(c.vertex, 4);
+
+  const IntersectionAnalysis a = analyse_intersections(*topology, s.x, pairs);
+  EXPECT_EQ(a.pairs, 0u);
+  EXPECT_EQ(a.pinch_pairs, exact.pinches);
+  ASSERT_FALSE(a.contours.empty());
+  EXPECT_EQ(a.contours[0].pinches, std::vector<Index>{4});
+  // The corners of both faces of the pair are the tangle, so the fail-safe lets them through.
+  for (Index v : {0, 1, 4, 5, 8}) EXPECT_EQ(a.tangle[static_cast<std::size_t>(v)], 1) << v;
+
+  Sheets flat = s;  // the lattice back in its plane
+  flat.x[5] = Vec3(2, 0, 1);
+  flat.x[8] = Vec3(2, 0, 2);
+  EXPECT_EQ(count_pinch_pairs(*flat.topology(), flat.x), 0u);
+  EXPECT_EQ(testing::exact_intersections(*flat.topology(), flat.x).pinches, 0u);
+}
+
+// A pinch alone (no `tt` pair on its curve) is pulled apart: the end of the piercing side
+// nearer the pierced face's plane goes back through it.
+TEST(Untangle, PullsALonePinchApart) {
+  const Sheets s = pinched_star();
+  UntangleOptions options;
+  options.thickness = 0.01;
+  options.max_step = 0.05;
+  const int rounds = untangle_statically(s, s.x, options, 100);
+  EXPECT_GE(rounds, 1);
+  EXPECT_LE(rounds, 100);
+}
+
 TEST(Untangle, TangleExemptsOnlyPairsWithBothSidesInIt) {
   std::vector<char> tangle{1, 0, 1, 0, 0};
   const Face f{1, 3, 4};
@@ -240,6 +291,9 @@ TEST(Untangle, RejectsBadOptions) {
   EXPECT_THROW(Untangler(topology, options), InputError) << "a zero step";
   options.max_step = 0.1;
   options.contour_step = -1;
+  EXPECT_THROW(Untangler(topology, options), InputError);
+  options.contour_step = 0;
+  options.border_step = std::numeric_limits<Scalar>::infinity();
   EXPECT_THROW(Untangler(topology, options), InputError);
 }
 

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <tuple>
+#include <utility>
 
 namespace crumple::response {
 
@@ -38,6 +39,47 @@ Vec3 unit_normal(const Face& f, PositionsView x) {
 }
 }  // namespace
 
+std::vector<PinchCrossing> find_pinch_crossings(const Topology& topology, PositionsView x) {
+  CRUMPLE_CHECK(x.size() == at(topology.num_vertices()), "positions must have #V entries");
+  std::vector<PinchCrossing> out;
+  for (Index v = 0; v < topology.num_vertices(); ++v) {
+    const auto star = topology.vertex_faces()[v];
+    for (std::size_t i = 0; i < star.size(); ++i) {
+      for (std::size_t j = i + 1; j < star.size(); ++j) {
+        const Face& a = topology.face(star[i]);
+        const Face& b = topology.face(star[j]);
+        const auto in_b = [&](Index u) { return u == b[0] || u == b[1] || u == b[2]; };
+        if (in_b(a[0]) + in_b(a[1]) + in_b(a[2]) != 1) continue;
+        // Two triangles meeting only at v intersect elsewhere exactly when the side opposite v
+        // of one meets the other (their common part is a segment from v, which leaves them
+        // through such a side); the sides through v meet the other's plane at v only.
+        for (const auto& [f, g] : {std::pair{star[i], star[j]}, std::pair{star[j], star[i]}}) {
+          const Face& t = topology.face(g);
+          for (Index e : topology.face_edges(f)) {
+            const Edge& ed = topology.edge(e);
+            if (ed[0] == v || ed[1] == v) continue;
+            if (geometry::segment_triangle_intersect(x[at(ed[0])], x[at(ed[1])], x[at(t[0])], x[at(t[1])],
+                                                     x[at(t[2])])) {
+              out.push_back({v, e, f, g});
+            }
+          }
+        }
+      }
+    }
+  }
+  return out;
+}
+
+std::size_t count_pinch_pairs(const Topology& topology, PositionsView x) {
+  const std::vector<PinchCrossing> c = find_pinch_crossings(topology, x);
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    n += i == 0 || c[i - 1].vertex != c[i].vertex ||
+         std::minmax(c[i - 1].edge_face, c[i - 1].face) != std::minmax(c[i].edge_face, c[i].face);
+  }
+  return n;
+}
+
 IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsView x,
                                            std::span<const TriangleTriangleContact> pairs,
                                            std::span<const Scalar> inv_mass) {
@@ -64,43 +106,26 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
       }
     }
   }
-  // 1b. Pinches: a vertex whose star passes through itself (two of its faces sharing only it
-  // intersect; the `tt` pairs leave them out). A curve of a single sheet that ends without
-  // reaching the border ends at such vertices, its two preimages meeting there: the pinch's
-  // crossing joins the pinch to the curve, and the flood fill below goes around the pinch.
-  // Only corners of intersecting faces can end a curve.
+  // 1b. Pinches: a vertex whose star passes through itself. A curve of a single sheet that ends
+  // without reaching the border ends at such vertices, its two preimages meeting there: the
+  // pinch's crossings join the pinch to the curve, and the flood fill below goes around the
+  // pinch. A pinch with no `tt` pair near it is a curve of its own (inside one star).
+  const std::vector<PinchCrossing> pinch_crossings = find_pinch_crossings(topology, x);
   std::vector<Index> pinch_vertex;  // per pinch pair, after the `tt` pairs
-  {
-    std::vector<char> seen(x.size(), 0);
-    for (const TriangleTriangleContact& c : pairs) {
-      for (Index f : {c.face0, c.face1}) {
-        for (Index v : topology.face(f)) {
-          if (seen[at(v)]) continue;
-          seen[at(v)] = 1;
-          const auto star = topology.vertex_faces()[v];
-          for (std::size_t i = 0; i < star.size(); ++i) {
-            for (std::size_t j = 0; j < star.size(); ++j) {
-              if (i == j) continue;
-              const Face& a = topology.face(star[i]);
-              const Face& b = topology.face(star[j]);
-              const auto in_b = [&](Index u) { return u == b[0] || u == b[1] || u == b[2]; };
-              if (in_b(a[0]) + in_b(a[1]) + in_b(a[2]) != 1) continue;
-              // The side of a opposite v against b (the sides through v meet b's plane at v).
-              for (Index e : topology.face_edges(star[i])) {
-                const Edge& ed = topology.edge(e);
-                if (ed[0] == v || ed[1] == v) continue;
-                if (geometry::segment_triangle_intersect(x[at(ed[0])], x[at(ed[1])], x[at(b[0])], x[at(b[1])],
-                                                         x[at(b[2])])) {
-                  records.push_back({e, star[j], static_cast<Index>(pairs.size() + pinch_vertex.size())});
-                  pinch_vertex.push_back(v);
-                }
-              }
-            }
-          }
-        }
-      }
+  for (std::size_t i = 0; i < pinch_crossings.size(); ++i) {
+    const PinchCrossing& c = pinch_crossings[i];
+    // Crossings of one pinch pair (its two faces, either way round) are listed together.
+    const bool same_pair = i > 0 && pinch_crossings[i - 1].vertex == c.vertex &&
+                           std::minmax(pinch_crossings[i - 1].edge_face, pinch_crossings[i - 1].face) ==
+                               std::minmax(c.edge_face, c.face);
+    if (!same_pair) pinch_vertex.push_back(c.vertex);
+    records.push_back({c.edge, c.face, static_cast<Index>(pairs.size() + pinch_vertex.size() - 1)});
+    // Intersecting faces, like those of the `tt` pairs: their corners are the tangle.
+    for (Index f : {c.edge_face, c.face}) {
+      for (Index v : topology.face(f)) out.tangle[at(v)] = 1;
     }
   }
+  out.pinch_pairs = pinch_vertex.size();
   std::sort(records.begin(), records.end());
   std::vector<Index> record_crossing(records.size());
   for (std::size_t r = 0; r < records.size(); ++r) {
@@ -249,6 +274,9 @@ UntangleOptions checked(UntangleOptions o) {
   if (!(o.contour_step >= 0) || !std::isfinite(o.contour_step)) {
     throw InputError("untangle contour step must be finite and >= 0");
   }
+  if (!(o.border_step >= 0) || !std::isfinite(o.border_step)) {
+    throw InputError("untangle border step must be finite and >= 0");
+  }
   return o;
 }
 }  // namespace
@@ -268,6 +296,7 @@ std::size_t Untangler::count(PositionsView x) {
   detector_->update(x, contacts_);
   analysis_ = {};
   analysis_.pairs = contacts_.tt.size();
+  analysis_.pinch_pairs = count_pinch_pairs(*topology_, x);
   analysis_.tangle.assign(x.size(), 0);
   pulls_.clear();
   shifts_.clear();
@@ -300,6 +329,15 @@ std::size_t Untangler::analyse(PositionsView x, std::span<const Scalar> inv_mass
       continue;
     }
     if (!k.inside.empty()) continue;
+    if (k.pairs == 0) {
+      // A pinch alone: its star folded beyond flat. The end of the crossing side nearer the
+      // face's plane goes back through it.
+      const Scalar d0 = n.dot(x[at(ed[0])] - x[at(t[0])]), d1 = n.dot(x[at(ed[1])] - x[at(t[0])]);
+      const Index inner = std::abs(d0) < std::abs(d1) ? ed[0] : ed[1];
+      const Scalar side = std::abs(d0) < std::abs(d1) ? d1 : d0;
+      if (side != 0) pulls_.push_back(vertex_face_stencil(inner, t, c.barycentric, side > 0 ? n : Vec3(-n)));
+      continue;
+    }
     // No inside: shorten the curve (contour minimisation).
     const Vec3 p = c.barycentric[0] * x[at(t[0])] + c.barycentric[1] * x[at(t[1])] + c.barycentric[2] * x[at(t[2])];
     const Vec3 along = x[at(ed[1])] - x[at(ed[0])];
@@ -326,6 +364,8 @@ std::size_t Untangler::analyse(PositionsView x, std::span<const Scalar> inv_mass
     Shift s;
     s.vertex = {ed[0], ed[1], t[0], t[1], t[2]};
     s.direction = g.normalized();
+    const bool border_end = !k.pinches.empty() && topo.edge_faces()[c.edge].size() == 1;
+    s.step = border_end ? options_.border_step : options_.contour_step;
     shifts_.push_back(s);
   }
   return analysis_.pairs;
@@ -349,21 +389,20 @@ UntangleStats Untangler::apply(std::span<const Scalar> inv_mass, std::span<Vec3>
     }
     correct_velocity(s, inv_mass, v);
   }
-  if (options_.contour_step > 0) {
-    for (const Shift& s : shifts_) {
-      bool moved = false;
-      for (int k = 0; k < 5; ++k) {
-        const Index i = s.vertex[at(k)];
-        if (inv_mass[at(i)] == 0) continue;
-        const Vec3 d = k < 2 ? Vec3(s.direction) : Vec3(-s.direction);
-        x[at(i)] += options_.contour_step * d;
-        // The move is kept: a velocity against it would undo it at the next step.
-        const Scalar back = v[at(i)].dot(d);
-        if (back < 0) v[at(i)] -= back * d;
-        moved = true;
-      }
-      stats.contour_moves += moved ? 1 : 0;
+  for (const Shift& s : shifts_) {
+    if (!(s.step > 0)) continue;
+    bool moved = false;
+    for (int k = 0; k < 5; ++k) {
+      const Index i = s.vertex[at(k)];
+      if (inv_mass[at(i)] == 0) continue;
+      const Vec3 d = k < 2 ? Vec3(s.direction) : Vec3(-s.direction);
+      x[at(i)] += s.step * d;
+      // The move is kept: a velocity against it would undo it at the next step.
+      const Scalar back = v[at(i)].dot(d);
+      if (back < 0) v[at(i)] -= back * d;
+      moved = true;
     }
+    stats.contour_moves += moved ? 1 : 0;
   }
   return stats;
 }

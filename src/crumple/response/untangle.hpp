@@ -15,8 +15,10 @@
 ///     (the intersection curve reaches the cloth's border).
 ///  2b. **Pinches**: a curve of one sheet that ends inside the cloth ends at a vertex whose star
 ///     passes through itself (two of its faces sharing only that vertex intersect; `tt` pairs
-///     leave such faces out), where the curve's two preimages meet. The crossings of those
-///     faces join the pinch to its contour.
+///     leave such faces out), where the curve's two preimages meet. Every vertex of the mesh is
+///     tried (`find_pinch_crossings`); the crossings of those faces join the pinch to its
+///     contour, or make a contour of their own (a pinch alone: no `tt` pair), and the faces'
+///     corners join the tangle.
 ///  3. **Regions**: the mesh's vertices flood-filled along edges, the contour's crossing edges
 ///     cut and its pinches removed (they are on the curve, which closes through them). In each
 ///     connected piece of the mesh the largest part is *outside*; every other part is *inside*:
@@ -34,11 +36,16 @@
 ///    repulsion with its sign flipped for the pair, so the inside end passes back through the
 ///    face to a gap of the thickness h — at most `max_step` per call, and their approaching
 ///    relative velocity along it is removed;
+///  - a crossing of a pinch alone (a contour with no `tt` pair): the end of the edge nearer the
+///    face's plane is pulled back through it, as above;
 ///  - any other crossing of a contour with no inside: its edge's ends move by +σG, the face's
 ///    corners by −σG (σ = `contour_step`), G the direction that shortens the intersection curve:
 ///    Σ over the edge's faces f of R_f − (E·R_f)/(E·N) N (E the edge's direction, N the
 ///    face's normal, R_f the curve's direction into f), normalised — the first-order change of
-///    the curve's length when the edge moves (the N term dropped when |E·N| is tiny).
+///    the curve's length when the edge moves (the N term dropped when |E·N| is tiny). The
+///    border crossings of a contour that ends at a pinch move by σ_b (`border_step`) instead:
+///    a curve from the border to a pinch encloses nothing, and its border end is the only end
+///    that can leave the cloth.
 /// The vertices of inside regions and of intersecting faces form the *tangle*; a contact or
 /// impact whose two sides both touch the tangle is exempt from the regular response and the
 /// fail-safe (`touches_tangle_on_both_sides`), which would otherwise hold the intersection in
@@ -80,9 +87,25 @@ struct Contour {
   std::vector<Index> inside;     ///< vertices of its inside parts (sorted; empty: no inside)
 };
 
+/// A side of a face of a vertex's star passing through another face of that star sharing only
+/// the vertex: the star passes through itself (a *pinch*; `tt` pairs leave such faces out).
+struct PinchCrossing {
+  Index vertex = -1;     ///< the pinch
+  Index edge = -1;       ///< the side of `edge_face` opposite `vertex`
+  Index edge_face = -1;
+  Index face = -1;       ///< the face it passes through
+};
+
+/// Every pinch crossing of the mesh at `x` (exact), by vertex, a face pair's crossings adjacent.
+/// O(Σ star size²).
+std::vector<PinchCrossing> find_pinch_crossings(const Topology& topology, PositionsView x);
+/// Intersecting face pairs sharing exactly one vertex (the pinch pairs), each counted once.
+std::size_t count_pinch_pairs(const Topology& topology, PositionsView x);
+
 /// What `analyse_intersections` found.
 struct IntersectionAnalysis {
   std::size_t pairs = 0;            ///< intersecting face pairs analysed
+  std::size_t pinch_pairs = 0;      ///< intersecting face pairs sharing one vertex (all of the mesh)
   std::vector<Crossing> crossings;  ///< sorted by (edge, face)
   std::vector<Contour> contours;
   /// Per vertex: 1 for the tangle (inside some contour, or a corner of an intersecting face).
@@ -105,6 +128,9 @@ struct UntangleOptions {
   Scalar thickness = 0;     ///< h: a pulled-through end goes to the gap h beyond the face (>= 0)
   Scalar max_step = 0;      ///< largest position impulse of one push per `apply` (m, > 0)
   Scalar contour_step = 0;  ///< σ: contour-minimisation displacement per `apply` (m, >= 0)
+  /// σ_b: the same for a border crossing of a contour that ends at a pinch and has no inside
+  /// (the curve's only end that can leave the cloth; m, >= 0).
+  Scalar border_step = 0;
   int threads = 1;          ///< threads of the intersection detector (0 = all)
 };
 
@@ -123,7 +149,8 @@ class Untangler {
   /// Detects the intersecting pairs at `positions`, analyses them and builds the pushes (from
   /// these positions). Returns the number of intersecting pairs.
   std::size_t analyse(PositionsView positions, std::span<const Scalar> inv_mass);
-  /// Only counts the intersecting pairs at `positions` (no analysis; the pushes are cleared).
+  /// Only counts the intersecting pairs (and the pinch pairs) at `positions` (no analysis; the
+  /// pushes are cleared).
   std::size_t count(PositionsView positions);
 
   /// Applies the pushes of the last analysis at the current positions (see the file comment).
@@ -133,13 +160,17 @@ class Untangler {
   const IntersectionAnalysis& analysis() const { return analysis_; }
   /// The tangle of the last analysis (#V flags, all 0 when the mesh was clean).
   std::span<const char> tangle() const { return analysis_.tangle; }
-  bool tangled() const { return analysis_.pairs > 0; }
+  /// Intersecting face pairs sharing one vertex at the last analysis or count.
+  std::size_t pinch_pairs() const { return analysis_.pinch_pairs; }
+  /// Some face pair intersected at the last analysis (a `tt` pair or a pinch pair).
+  bool tangled() const { return analysis_.pairs > 0 || analysis_.pinch_pairs > 0; }
   const UntangleOptions& options() const { return options_; }
 
  private:
   struct Shift {
     std::array<Index, 5> vertex{-1, -1, -1, -1, -1};  ///< the edge's two ends, the face's corners
     Vec3 direction = Vec3::Zero();                     ///< G (unit)
+    Scalar step = 0;                                   ///< σ or σ_b
   };
 
   std::shared_ptr<const Topology> topology_;

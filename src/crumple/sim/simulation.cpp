@@ -89,6 +89,8 @@ Simulation::Simulation(Model model, State state, ForceField field,
                 "untangle_step must be finite and > 0");
   CRUMPLE_CHECK(settings_.contour_step >= 0 && std::isfinite(settings_.contour_step),
                 "contour_step must be finite and >= 0");
+  CRUMPLE_CHECK(settings_.border_step >= 0 && std::isfinite(settings_.border_step),
+                "border_step must be finite and >= 0");
   if (settings_.response && settings_.untangle) {
     response::UntangleOptions options;
     const Scalar h = settings_.detector.thickness;
@@ -97,6 +99,7 @@ Simulation::Simulation(Model model, State state, ForceField field,
     const Scalar unit = h > 0 ? h : 0.1 * mean_edge(model_.topology(), state_.x);
     options.max_step = settings_.untangle_step * unit;
     options.contour_step = settings_.contour_step * unit;
+    options.border_step = settings_.border_step * unit;
     options.threads = settings_.detector.threads;
     if (options.max_step > 0) untangler_ = std::make_unique<response::Untangler>(model_.topology_ptr(), options);
   }
@@ -106,13 +109,14 @@ void Simulation::untangle_check() {
   if (!untangler_ || untangle_valid_) return;
   untangle_valid_ = true;
   if (known_clean_ && ccd_ && !fail_safe_) {
-    intersecting_ = 0;
+    intersecting_ = pinches_ = 0;
     return;
   }
   const auto start = Clock::now();
   intersecting_ = static_cast<std::int64_t>(untangler_->analyse(state_.x, model_.inv_mass()));
-  if (ccd_) ccd_->set_tangle(intersecting_ > 0 ? untangler_->tangle() : std::span<const char>{});
-  known_clean_ = intersecting_ == 0 && ccd_ && !fail_safe_;
+  pinches_ = static_cast<std::int64_t>(untangler_->pinch_pairs());
+  if (ccd_) ccd_->set_tangle(untangler_->tangled() ? untangler_->tangle() : std::span<const char>{});
+  known_clean_ = !untangler_->tangled() && ccd_ && !fail_safe_;
   untangle_ms_ += ms_since(start);
 }
 
@@ -307,7 +311,8 @@ FrameStats Simulation::frame_stats() {
   }
   untangle_check();
   s.intersecting_pairs = intersecting_;
-  if (untangler_ && !(known_clean_ && intersecting_ == 0)) s.contours = untangler_->analysis().contours.size();
+  s.pinches = pinches_;
+  if (untangler_ && !known_clean_) s.contours = untangler_->analysis().contours.size();
   s.untangle_pulls = untangle_pulls_;
   s.untangle_ms = untangle_ms_;
   s.cg_iterations = cg_iterations_;

@@ -116,6 +116,9 @@ struct Settings {
   Scalar untangle_step = 0.25;
   /// Contour-minimisation displacement per step (contours bounding no region), fraction of h_c.
   Scalar contour_step = 0.1;
+  /// The same for the border end of a curve from the cloth's border to a pinch, fraction of h_c
+  /// (>= 0; `response::UntangleOptions::border_step`).
+  Scalar border_step = 0.5;
 };
 
 /// Figures of one frame (timings summed over its steps).
@@ -143,9 +146,13 @@ struct FrameStats {
   Bounds bounds{Vec3::Zero(), Vec3::Zero()};  ///< box of the particles at the frame's end
   /// Intersecting triangle pairs (sharing no vertex) at the frame's end, by the exact `kdop`
   /// detector; -1 when not measured (response or `Settings::untangle` off). After a frame that
-  /// started intersection-free with the built-in fail-safe it is 0 by the fail-safe's
-  /// guarantee, without a query.
+  /// started intersection-free (no such pair and no pinch pair, measured) with the built-in
+  /// fail-safe it is 0 by the fail-safe's guarantee, without a query.
   std::int64_t intersecting_pairs = -1;
+  /// Intersecting triangle pairs sharing exactly one vertex (a vertex's star passing through
+  /// itself, a *pinch*), which `intersecting_pairs` leaves out; measured and inferred with it
+  /// (-1 when it is). The mesh is intersection-free when both are 0.
+  std::int64_t pinches = -1;
   std::size_t contours = 0;        ///< intersection contours at the frame's end
   std::size_t untangle_pulls = 0;  ///< pull-through and contour pushes over the frame's steps
   double untangle_ms = 0;          ///< intersection analysis and pushes
@@ -229,6 +236,7 @@ class Simulation {
   bool untangle_valid_ = false;  ///< the untangler's analysis is of the current positions
   bool known_clean_ = false;     ///< a frame started intersection-free with the built-in fail-safe
   std::int64_t intersecting_ = -1;
+  std::int64_t pinches_ = -1;
   std::size_t untangle_pulls_ = 0;
   double untangle_ms_ = 0;
   std::vector<response::Stencil> stencils_;
