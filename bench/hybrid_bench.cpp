@@ -17,8 +17,15 @@
 //   build/release/bench/hybrid_bench --clock cpu ... # budgets in processor time (clock=cpu)
 //   build/release/bench/hybrid_bench --only kdop ... # only the budgeted families whose spec
 //                                                   # starts with "kdop", no unbudgeted rows
+//                                                   # (a comma list; "hybrid$": that spec only)
 //   build/release/bench/hybrid_bench --lean ...     # fewer rows: no thesis-rule, every=4, 64-face
 //                                                   # exact zones; budgets 0.25-8 x kdop
+//   build/release/bench/hybrid_bench --per-frame ... # each frame's budget is the fraction of
+//                                                   # kdop's time on that frame (Detector::
+//                                                   # set_budget); writes hybrid-per-frame.{md,csv}
+//                                                   # and hybrid-per-frame-<scene>.svg
+//   build/release/bench/hybrid_bench --why ...      # stderr: the stage times of the frames
+//                                                   # over 1.1 x their budget
 //
 // kdop is run again after the budgeted runs (reported, with the load average at both times: on
 // a shared machine the unit of the budgets drifts). The budgets are wall-clock deadlines; the
@@ -110,6 +117,9 @@ struct Run {
   std::size_t close = 0, close_found = 0;
   double worst = 1, mean_ms = 0, p99_ms = 0;
   double cpu_mean_ms = 0, cpu_p99_ms = 0;  ///< the thread's processor time (not descheduled time)
+  double cpu_p99_over = 0;  ///< p99 over the frames of each frame's processor time / its budget
+  double p99_over = 0;      ///< the same, wall-clock time
+  double cpu_p90_over = 0;  ///< the 90th percentile of each frame's processor time / its budget
   double zones_left = 0;  ///< frames where a due zone was left (hybrid)
 };
 
@@ -126,12 +136,15 @@ double mean(const std::vector<double>& v) {
   return v.empty() ? 0 : sum / static_cast<double>(v.size());
 }
 
-double p99(std::vector<double> v) {
+/// The q-quantile (nearest rank) of v.
+double percentile(std::vector<double> v, double q) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
-  const auto rank = static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(v.size())));
+  const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())));
   return v[std::min(v.size(), std::max<std::size_t>(rank, 1)) - 1];
 }
+
+double p99(std::vector<double> v) { return percentile(std::move(v), 0.99); }
 
 bool contains(const ContactSet& got, const VertexFaceContact& c) {
   return std::binary_search(got.vf.begin(), got.vf.end(), c, CanonicalLess{});
@@ -140,9 +153,19 @@ bool contains(const ContactSet& got, const EdgeEdgeContact& c) {
   return std::binary_search(got.ee.begin(), got.ee.end(), c, CanonicalLess{});
 }
 
+/// Where the frames over 1.1 x their budget spent their time: the detector's `*_ms` counters
+/// summed over those frames (`--why`, printed to stderr).
+struct Overruns {
+  std::size_t frames = 0;
+  double cpu_ms = 0, budget_ms = 0;
+  DetectorStats ms;
+};
+
 /// Runs `spec` on every frame (previous positions as motion), against the reference contacts.
+/// With `budgets` (one per frame), frame i runs under budget budgets[i] (`Detector::set_budget`).
 Run run(const Scene& s, const std::string& spec, const std::vector<ContactSet>& ref,
-        std::vector<double>* cpu_times = nullptr) {
+        std::vector<double>* cpu_times = nullptr, const std::vector<double>& budgets = {},
+        Overruns* overruns = nullptr, double budget_ms = 0) {
   auto d = make_detector(MethodSpec::parse(spec), {.thickness = s.h, .threads = 1});
   d->set_topology(s.frames->mesh().topology_ptr());
   Run r;
@@ -153,11 +176,23 @@ Run run(const Scene& s, const std::string& spec, const std::vector<ContactSet>& 
   const Scalar close2 = s.h / 4;
   for (std::size_t i = 0; i < s.frames->size(); ++i) {
     const Positions x = s.frames->positions(i);
+    if (!budgets.empty()) {
+      budget_ms = budgets[i];
+      d->set_budget(budget_ms);
+    }
     const double c0 = thread_cpu_ms();
     const auto t0 = Clock::now();
     d->update(previous.empty() ? PositionsView{} : PositionsView(previous), x, got);
     ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
     cpu.push_back(thread_cpu_ms() - c0);
+    if (overruns && i > 0 && budget_ms > 0 && cpu.back() > 1.1 * budget_ms) {
+      ++overruns->frames;
+      overruns->cpu_ms += cpu.back();
+      overruns->budget_ms += budget_ms;
+      for (const auto& [key, value] : d->stats().items()) {
+        if (key.ends_with("_ms")) overruns->ms.add(key, value);
+      }
+    }
     if (!ref.empty()) {
       const ContactMatch m = match_contacts(got, ref[i]);
       if (m.false_contacts > 0) {
@@ -191,6 +226,17 @@ Run run(const Scene& s, const std::string& spec, const std::vector<ContactSet>& 
   r.p99_ms = p99(ms);
   r.cpu_mean_ms = mean(cpu);
   r.cpu_p99_ms = p99(cpu);
+  if (budget_ms > 0) {
+    std::vector<double> over, wall_over;
+    for (std::size_t i = 0; i < cpu.size(); ++i) {
+      const double b = budgets.empty() ? budget_ms : budgets[i + (budgets.size() - cpu.size())];
+      over.push_back(cpu[i] / b);
+      wall_over.push_back(ms[i] / b);
+    }
+    r.cpu_p99_over = p99(over);
+    r.cpu_p90_over = percentile(over, 0.90);
+    r.p99_over = p99(wall_over);
+  }
   return r;
 }
 
@@ -215,7 +261,7 @@ std::string fmt(double v, const char* f = "%.4f") {
 
 int main(int argc, char** argv) {
   using namespace crumple;
-  bool quick = false, lean = false;
+  bool quick = false, lean = false, per_frame = false, why = false;
   std::string clock = "wall";  // what the budgets count: wall-clock time, or processor time
   std::string only;            // --only P: the budgeted families whose spec starts with P, no free rows
   std::string out_dir = ".";
@@ -234,6 +280,10 @@ int main(int argc, char** argv) {
       }
     } else if (a == "--only" && i + 1 < argc) {
       only = argv[++i];
+    } else if (a == "--per-frame") {
+      per_frame = true;
+    } else if (a == "--why") {
+      why = true;
     } else if (a == "--lean") {
       lean = true;
     } else if (a == "--out" && i + 1 < argc) {
@@ -243,7 +293,7 @@ int main(int argc, char** argv) {
       std::stringstream list(argv[++i]);
       for (std::string n; std::getline(list, n, ',');) names.push_back(n);
     } else {
-      std::cerr << "usage: hybrid_bench [--quick] [--lean] [--clock wall|cpu] [--only SPEC_PREFIX] [--out DIR] [--scenes a,b,...]\n";
+      std::cerr << "usage: hybrid_bench [--quick] [--lean] [--clock wall|cpu] [--only SPEC_PREFIX] [--per-frame] [--why] [--out DIR] [--scenes a,b,...]\n";
       return 2;
     }
   }
@@ -276,7 +326,16 @@ int main(int argc, char** argv) {
     std::erase_if(free, [](const Family& f) { return !f.lean; });
   }
   if (!only.empty()) {
-    std::erase_if(budgeted, [&](const Family& f) { return !std::string(f.spec).starts_with(only); });
+    // A comma-separated list of spec prefixes; an item ending in '$' is a whole spec.
+    std::vector<std::string> items;
+    std::stringstream list(only);
+    for (std::string item; std::getline(list, item, ',');) items.push_back(item);
+    std::erase_if(budgeted, [&](const Family& f) {
+      const std::string spec = f.spec;
+      return std::none_of(items.begin(), items.end(), [&](const std::string& item) {
+        return item.ends_with('$') ? spec == item.substr(0, item.size() - 1) : spec.starts_with(item);
+      });
+    });
     free.clear();
   }
   std::ostringstream md, csv;
@@ -284,7 +343,7 @@ int main(int argc, char** argv) {
          "p99_over_budget,cpu_mean_ms,cpu_p99_ms,false_contacts,frames_due_zone_left\n";
   md << "# Hybrid detector: recall against a time budget\n\n"
      << "Generated by `build/release/bench/hybrid_bench" << (quick ? " --quick" : "") << (lean ? " --lean" : "")
-     << (clock == "cpu" ? " --clock cpu" : "") << " --out DIR`"
+     << (clock == "cpu" ? " --clock cpu" : "") << (per_frame ? " --per-frame" : "") << " --out DIR`"
      << " (one thread per detector; the budget is a multiple of kdop's mean time per frame on the same scene,"
      << " measured in the same run, in processor time; the budgets count " << (clock == "cpu" ? "the thread's processor time (`clock=cpu`)" : "wall-clock time") << "; \"cpu\" columns are"
      << " the thread's processor time, without the time spent descheduled; times are of the frames after the first,"
@@ -339,7 +398,20 @@ int main(int argc, char** argv) {
         spec += (spec.find(':') == std::string::npos ? ":budget=" : ",budget=") + json_number(B);
         if (clock == "cpu") spec += ",clock=cpu";
         std::cerr << "  " << spec << "\n";
-        Run r = run(s, spec, ref);
+        // Per frame: frame i's budget is the fraction of kdop's processor time on frame i (the
+        // lesser of its two runs); the spec's budget is then only the first frame's.
+        std::vector<double> budgets;
+        if (per_frame) {
+          for (std::size_t i = 0; i < kdop_cpu.size(); ++i) budgets.push_back(fr * std::min(kdop_cpu[i], again_cpu[i]));
+        }
+        Overruns over;
+        Run r = run(s, spec, ref, nullptr, budgets, why ? &over : nullptr, B);
+        if (why && over.frames > 0) {
+          std::cerr << "    over 1.1x budget: " << over.frames << " frames, cpu " << fmt(over.cpu_ms / double(over.frames), "%.3f")
+                    << " ms for a budget of " << fmt(over.budget_ms / double(over.frames), "%.3f") << " ms; wall-clock stages:";
+          for (const auto& [key, value] : over.ms.items()) std::cerr << " " << key << " " << fmt(value / double(over.frames), "%.3f");
+          std::cerr << "\n";
+        }
         r.label = budgeted[k].label;
         r.fraction = fr;
         r.budget_ms = B;
@@ -355,27 +427,29 @@ int main(int argc, char** argv) {
        << fmt(kd.mean_ms, "%.3f") << " ms, load average " << load_before << "); run again after the budgeted runs: "
        << fmt(kd_after.cpu_mean_ms, "%.3f") << " ms processor, " << fmt(kd_after.mean_ms, "%.3f")
        << " ms wall-clock (load average " << load_average() << ").\n\n"
-       << "| method | budget (× kdop) | recall | recall d < h/4 | worst frame | mean ms | p99 ms | p99 / budget | "
-          "cpu p99 ms | cpu p99 / budget | false |\n"
-       << "|---|---|---|---|---|---|---|---|---|---|---|\n";
+       << "| method | " << (per_frame ? "budget (× kdop's frame)" : "budget (× kdop)") << " | recall | recall d < h/4 | worst frame | mean ms | p99 ms | p99 / budget | "
+          "cpu p99 ms | cpu p99 / budget | cpu p90 / budget | false |\n"
+       << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for (const Run& r : rows) {
       const double close = r.close == 0 ? 1.0 : double(r.close_found) / double(r.close);
       section << "| " << r.label << " | " << (r.fraction > 0 ? fmt(r.fraction, "%.2f") : "–") << " | "
          << fmt(r.total.recall()) << " | " << fmt(close) << " | " << fmt(r.worst, "%.3f") << " | "
          << fmt(r.mean_ms, "%.3f") << " | " << fmt(r.p99_ms, "%.3f") << " | "
-         << (r.fraction > 0 ? fmt(r.p99_ms / r.budget_ms, "%.2f") : "–") << " | " << fmt(r.cpu_p99_ms, "%.3f")
-         << " | " << (r.fraction > 0 ? fmt(r.cpu_p99_ms / r.budget_ms, "%.2f") : "–") << " | "
+         << (r.fraction > 0 ? fmt(r.p99_over, "%.2f") : "–") << " | " << fmt(r.cpu_p99_ms, "%.3f")
+         << " | " << (r.fraction > 0 ? fmt(r.cpu_p99_over, "%.2f") : "–") << " | "
+         << (r.fraction > 0 ? fmt(r.cpu_p90_over, "%.2f") : "–") << " | "
          << r.total.false_contacts << " |\n";
       csv << s.name << ",\"" << r.label << "\",\"" << r.spec << "\"," << r.fraction << "," << r.budget_ms << "," << T
           << "," << r.total.recall() << "," << close << "," << r.worst << "," << r.mean_ms << "," << r.p99_ms << ","
-          << (r.fraction > 0 ? r.p99_ms / r.budget_ms : 0) << "," << r.cpu_mean_ms << "," << r.cpu_p99_ms << ","
+          << (r.fraction > 0 ? r.p99_over : 0) << "," << r.cpu_mean_ms << "," << r.cpu_p99_ms << ","
           << r.total.false_contacts << "," << r.zones_left
           << "\n";
     }
-    section << "\n![" << s.name << "](hybrid-" << s.name << ".svg)\n\n";
-    std::ofstream(out_dir + "/hybrid-" + s.name + ".svg")
+    section << "\n![" << s.name << "](hybrid-" << (per_frame ? "per-frame-" : "") << s.name << ".svg)\n\n";
+    std::ofstream(out_dir + "/hybrid-" + (per_frame ? "per-frame-" : "") + s.name + ".svg")
         << bench::render_svg({.title = "Recall against time budget: " + s.name,
-                              .x_label = "budget per frame (x kdop's mean processor time)",
+                              .x_label = per_frame ? "budget per frame (x kdop's processor time on that frame)"
+                                                  : "budget per frame (x kdop's mean processor time)",
                               .y_label = "recall",
                               .log_x = true,
                               .x_categories = {}},
@@ -383,7 +457,7 @@ int main(int argc, char** argv) {
     std::cout << section.str() << std::flush;
     md << section.str();
   }
-  std::ofstream(out_dir + "/hybrid.md") << md.str();
-  std::ofstream(out_dir + "/hybrid.csv") << csv.str();
+  std::ofstream(out_dir + (per_frame ? "/hybrid-per-frame.md" : "/hybrid.md")) << md.str();
+  std::ofstream(out_dir + (per_frame ? "/hybrid-per-frame.csv" : "/hybrid.csv")) << csv.str();
   return 0;
 }

@@ -5,6 +5,7 @@
 /// without the time the scheduler gave to other processes, for measuring budgets on a shared
 /// machine; one thread).
 
+#include <algorithm>
 #include <chrono>
 #include <ctime>
 #include <stdexcept>
@@ -26,27 +27,63 @@ inline BudgetClock parse_budget_clock(std::string_view text) {
 /// The deadline `budget_ms` after construction on `clock`; none when budget_ms <= 0 (then
 /// `passed` is always false). Not thread-safe with `BudgetClock::cpu`: checked by the thread
 /// that made it.
+///
+/// The stages of a frame that no budget can cut (the gather of the result, a stage that runs
+/// whole or not at all) are kept inside the budget by a reserve: `passed(r)` is true once less
+/// than r ms are left, so that work stops early enough for a stage of cost r to end within the
+/// budget. `now_ms` reads the budget's own clock, to measure those stages for the next frame.
 class FrameDeadline {
  public:
   using Wall = std::chrono::steady_clock;
+  /// A clock for tests: milliseconds from any origin, nondecreasing. It replaces both the wall
+  /// and the processor clock (the deadline then depends only on its readings).
+  using TestClock = double (*)();
   FrameDeadline() = default;
-  FrameDeadline(double budget_ms, BudgetClock clock)
-      : active_(budget_ms > 0), clock_(clock), start_(Wall::now()), wall_(start_ + to_duration(budget_ms)) {
-    if (active_ && clock_ == BudgetClock::cpu) cpu_end_ms_ = thread_cpu_ms() + budget_ms;
+  FrameDeadline(double budget_ms, BudgetClock clock, TestClock test_clock = nullptr)
+      : active_(budget_ms > 0), clock_(clock), test_clock_(test_clock), start_(Wall::now()),
+        wall_(start_ + to_duration(budget_ms)) {
+    if (test_clock_ != nullptr || clock_ == BudgetClock::cpu) {
+      origin_ms_ = test_clock_ != nullptr ? test_clock_() : thread_cpu_ms();
+      end_ms_ = origin_ms_ + budget_ms;
+    }
   }
   bool active() const { return active_; }
-  /// True once the budget is spent. The processor clock (a system call, microseconds) is read
-  /// only when the wall clock has advanced by what was left of the budget at the last reading:
-  /// a thread cannot use more processor time than wall time.
-  bool passed() const {
+  /// True once less than `reserve_ms` of the budget is left (reserve 0: once it is spent). The
+  /// processor clock (a system call, microseconds) is read only when the wall clock has
+  /// advanced by what was left of the budget at the last reading, less the reserve: a thread
+  /// cannot use more processor time than wall time.
+  /// Once the budget itself is spent the answer is kept, clocks unread (a loop that checks
+  /// its deadline per item then costs nothing more past it).
+  bool passed(double reserve_ms = 0) const {
     if (!active_) return false;
-    const Wall::time_point now = Wall::now();
-    if (now < wall_) return false;
-    if (clock_ == BudgetClock::wall) return true;
-    const double left = cpu_end_ms_ - thread_cpu_ms();
-    if (left <= kResolutionMs) return true;
-    wall_ = now + to_duration(left);
-    return false;
+    if (spent_) return true;
+    reserve_ms = std::max(reserve_ms, 0.0);
+    bool out = false;
+    double left = 0;
+    if (test_clock_ != nullptr) {
+      left = end_ms_ - test_clock_();
+      out = left <= reserve_ms;
+    } else {
+      const Wall::time_point now = Wall::now();
+      if (reserve_ms > 0 ? now + to_duration(reserve_ms) < wall_ : now < wall_) return false;
+      if (clock_ == BudgetClock::wall) {
+        left = std::chrono::duration<double, std::milli>(wall_ - now).count();
+        out = true;
+      } else {
+        left = end_ms_ - thread_cpu_ms();
+        out = left <= reserve_ms + kResolutionMs;
+        if (!out) wall_ = now + to_duration(left);
+      }
+    }
+    if (out && left <= (test_clock_ != nullptr ? 0 : kResolutionMs)) spent_ = true;
+    return out;
+  }
+  /// The budget's clock in ms from construction: processor time with `BudgetClock::cpu`, wall
+  /// time otherwise (a test clock's readings when one was given). For measuring stages.
+  double now_ms() const {
+    if (test_clock_ != nullptr) return test_clock_() - origin_ms_;
+    if (clock_ == BudgetClock::cpu) return thread_cpu_ms() - origin_ms_;
+    return elapsed_ms();
   }
   /// Milliseconds on the wall clock since construction.
   double elapsed_ms() const { return std::chrono::duration<double, std::milli>(Wall::now() - start_).count(); }
@@ -64,9 +101,25 @@ class FrameDeadline {
 
   bool active_ = false;
   BudgetClock clock_ = BudgetClock::wall;
+  TestClock test_clock_ = nullptr;
   Wall::time_point start_{};
   mutable Wall::time_point wall_{};  ///< no need to look before this
-  double cpu_end_ms_ = 0;            ///< the thread's processor time at which the budget ends
+  mutable bool spent_ = false;       ///< the budget itself is spent
+  double origin_ms_ = 0;              ///< cpu or test clock: its reading at construction
+  double end_ms_ = 0;                 ///< cpu or test clock: its reading at which the budget ends
+};
+
+/// The cost of a stage that a budget cannot cut, for reserving it from later frames' budgets:
+/// the largest of its measurements, each older one worth 10% less per measurement since, so
+/// that a stage whose cost varies between frames is reserved at its dear end. 0 until measured.
+class StageCost {
+ public:
+  void measured(double ms) { ms_ = std::max(ms, kDecay * ms_); }
+  double ms() const { return ms_; }
+
+ private:
+  static constexpr double kDecay = 0.9;
+  double ms_ = 0;
 };
 
 }  // namespace crumple

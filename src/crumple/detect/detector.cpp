@@ -1,4 +1,5 @@
 #include <crumple/core/error.hpp>
+#include <crumple/detect/budget_spec_detail.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/detect/scale_detail.hpp>
 
@@ -105,6 +106,18 @@ void Detector::update(const VertexView& previous, const VertexView& positions, C
   const PositionsView x = doubles(positions, converted_);
   const PositionsView x0 = capabilities().uses_motion ? doubles(previous, converted_previous_) : PositionsView();
   update(x0, x, out);
+}
+
+void Detector::set_budget(double ms) {
+  const std::string name(to_string(method()));
+  const auto params = method_info(method()).params;
+  if (std::none_of(params.begin(), params.end(), [](const ParamInfo& p) { return p.key == "budget"; })) {
+    throw InputError("method " + name + " has no time budget (set_budget)");
+  }
+  check_budget_ms(ms, name);
+  check_budget(ms);
+  budget_ms_ = ms;
+  budget_set_ = true;
 }
 
 void Detector::load_state(std::string_view text) {

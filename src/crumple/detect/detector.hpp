@@ -80,6 +80,14 @@ class Detector {
   void update(const VertexView& positions, ContactSet& out);
   void update(const VertexView& previous, const VertexView& positions, ContactSet& out);
 
+  /// Sets the time budget of the frames that follow, in ms (0 = none), in place of the `budget`
+  /// key of the methods that keep one (`kdop`, `stochastic`, `hybrid`; counted on the clock of
+  /// their `clock` key): a caller may give each frame its own budget. The method's parameters,
+  /// and its saved state, keep the spec's value. Throws `InputError` for a method without a
+  /// `budget` key, a budget outside [0, 1e6], or one this detector cannot count (`kdop` with
+  /// `clock=cpu` needs one thread).
+  void set_budget(double ms);
+
   /// Counters of the last update (pairs tested, candidates, ...), method-specific.
   const DetectorStats& stats() const { return stats_; }
 
@@ -114,6 +122,13 @@ class Detector {
   /// contact), and the tests check the order of their output instead.
   virtual bool sorted_output() const { return false; }
 
+  /// This frame's time budget in ms: the last `set_budget`, or `spec_ms` (the method's `budget`
+  /// key) when it was never called.
+  double frame_budget(double spec_ms) const { return budget_set_ ? budget_ms_ : spec_ms; }
+  /// Called by `set_budget` with a budget in [0, 1e6]; throws `InputError` when this detector
+  /// cannot keep it.
+  virtual void check_budget(double /*ms*/) const {}
+
   /// The thickness in the coordinates `detect` is given: 2^scale_exponent() h (h from
   /// `options()`), capped where every pair would be a contact (detect/scale_detail.hpp).
   Scalar thickness() const { return thickness_; }
@@ -130,6 +145,8 @@ class Detector {
   Scalar thickness_ = 0;
   int exponent_ = 0;
   bool framed_ = false;                 // a frame ran since the topology was set
+  bool budget_set_ = false;             // set_budget was called: budget_ms_ replaces the spec's
+  double budget_ms_ = 0;
   Positions scaled_, scaled_previous_;  // the positions times 2^exponent_, when it is not 0
 };
 

@@ -1,5 +1,6 @@
 #include <crumple/core/parallel.hpp>
 #include <crumple/core/timing.hpp>
+#include <crumple/detect/budget_spec_detail.hpp>
 #include <crumple/detect/exact/narrow_frame.hpp>
 #include <crumple/detect/exact/orphans.hpp>
 #include <crumple/detect/exact/ownership.hpp>
@@ -35,6 +36,15 @@ struct ExactDetector::State {
   /// The last frame's contacts (`ExactParams::track`): (vertex, face) and (edge, edge).
   std::vector<std::array<Index, 2>> seed_vf, seed_ee;
   int orphans_waited = 0;  ///< cut-off frames since the orphan stages last ran whole (`track`)
+  /// Cut-off frames, on the budget's clock: the cost of the work after the cut-off point (from
+  /// the moment the budget stopped the candidates, or when it did not the start of the gather,
+  /// to the end of the call: the rest of the traversal's task, the gather, the merge of the
+  /// tracked contacts), and of each orphan stage when it ran. A frame reserves the former from
+  /// its budget and starts a stage only when its cost fits in what is left (a stage not yet
+  /// measured runs when the budget is not spent, and is measured).
+  StageCost tail_cost;
+  double gather_start_ms = 0;  ///< this frame's, on the budget's clock
+  std::array<StageCost, 3> stage_cost;
 };
 
 namespace {
@@ -117,15 +127,12 @@ ExactParams ExactParams::from_spec(const MethodSpec& spec) {
   p.max_contacts = static_cast<std::size_t>(cap);
   static constexpr std::array<std::string_view, 2> kOverflow{"error", "truncate"};
   p.overflow_error = spec.get_choice("overflow", "error", kOverflow) == "error";
-  p.budget_ms = spec.get_double("budget", 0);
-  if (!(p.budget_ms >= 0 && p.budget_ms <= 1e6)) {
-    throw InputError("method " + spec.to_string() + ": budget must be in [0, 1e6] ms (0 = none)");
-  }
+  const BudgetSpec budget = budget_from_spec(spec);
+  p.budget_ms = budget.budget_ms;
+  p.clock = budget.clock;
   const long long pairs = spec.get_int("pairs", 0);
   if (pairs < 0) throw InputError("method " + spec.to_string() + ": pairs must be >= 0");
   p.pairs = static_cast<std::size_t>(pairs);
-  static constexpr std::array<std::string_view, 2> kClock{"wall", "cpu"};
-  p.clock = parse_budget_clock(spec.get_choice("clock", "wall", kClock));
   p.track = spec.get_bool("track", false);
   return p;
 }
@@ -133,13 +140,17 @@ ExactParams ExactParams::from_spec(const MethodSpec& spec) {
 ExactDetector::ExactDetector(DetectorOptions options, ExactParams params, std::unique_ptr<BroadPhase> broad_phase)
     : Detector(options), params_(params), broad_phase_(std::move(broad_phase)), state_(std::make_unique<State>()) {
   CRUMPLE_CHECK(broad_phase_ != nullptr, "ExactDetector: null broad phase");
-  if (params_.clock == BudgetClock::cpu && params_.budget_ms > 0 && resolve_threads(options.threads) != 1) {
-    throw InputError("exact detector: clock=cpu counts one thread's processor time: it needs threads = 1");
-  }
+  if (params_.budget_ms > 0) check_budget(params_.budget_ms);
   if (const BoundingHierarchy* inner = broad_phase_->hierarchy()) unscaled_ = std::make_unique<Unscaled>(*inner, *this);
 }
 
 ExactDetector::~ExactDetector() = default;
+
+void ExactDetector::check_budget(double ms) const {
+  if (params_.clock == BudgetClock::cpu && ms > 0 && resolve_threads(options().threads) != 1) {
+    throw InputError("exact detector: clock=cpu counts one thread's processor time: it needs threads = 1");
+  }
+}
 
 const BoundingHierarchy* ExactDetector::hierarchy() const {
   return unscaled_.get();
@@ -159,6 +170,8 @@ void ExactDetector::on_topology() {
   s.seed_vf.clear();
   s.seed_ee.clear();
   s.orphans_waited = 0;
+  s.tail_cost = {};
+  s.stage_cost = {};
   s.sleep = {};
   s.face_owns = own.face_owns();
   s.edge_rank = exact::edge_ranks(topo);
@@ -210,8 +223,10 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
 
   // Broad phase, with each face inflated by half the padded thickness (file comment).
   const auto t0 = std::chrono::steady_clock::now();
-  // A budget counts from the start of the frame: refit and gather included.
-  const FrameDeadline deadline(params_.budget_ms, params_.clock);
+  // A budget counts from the start of the frame: refit and gather included (the measured cost
+  // of the work after the cut-off point is reserved: the candidates stop that much earlier).
+  const double budget_ms = frame_budget(params_.budget_ms);
+  const FrameDeadline deadline(budget_ms, params_.clock);
   const Scalar magnitude = prepare_frame(previous, x);
   const bool proximity = kinds.vf || kinds.ee;
   const Scalar h = thickness();
@@ -223,30 +238,41 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
   if (const double cell = stats_.get("cell_size"); cell != 0 && scale_exponent() != 0) {
     stats_.set("cell_size", std::scalbn(cell, -scale_exponent()));
   }
-  if (params_.cut_off()) {
-    exact::Cutoff cut(params_.pairs, deadline);
+  if (budget_ms > 0 || params_.pairs > 0) {
+    const double reserve_ms = budget_ms > 0 ? s.tail_cost.ms() : 0;
+    exact::Cutoff cut(params_.pairs, deadline, reserve_ms);
+    stats_.set("reserve_ms", reserve_ms);
     stats_.set("broad_ms", ms_since(t0));
     narrow_phase(x, pad, magnitude, out, &cut);
-  } else {
-    // Triangle intersections alone: each candidate may be a contact, and is as large as one, so
-    // the candidates are not all held: the broad phase streams them to the narrow phase, whose
-    // memory then follows the contacts.
-    const bool stream = !proximity;
-    if (!stream) {
-      broad_phase_->self_pairs(s.candidates, stats_);
-      stats_.set("candidates", static_cast<double>(s.candidates.total()));
-    }
-    stats_.set("broad_ms", ms_since(t0));
-    narrow_phase(x, pad, magnitude, out, nullptr, stream);
+    s.candidates.clear();
+    cap_contacts(out);
+    keep_seeds(out);
+    const double spent_at = cut.spent_at_ms();
+    s.tail_cost.measured(deadline.now_ms() - (spent_at >= 0 ? spent_at : s.gather_start_ms));
+    return;
   }
+  // Triangle intersections alone: each candidate may be a contact, and is as large as one, so
+  // the candidates are not all held: the broad phase streams them to the narrow phase, whose
+  // memory then follows the contacts.
+  const bool stream = !proximity;
+  if (!stream) {
+    broad_phase_->self_pairs(s.candidates, stats_);
+    stats_.set("candidates", static_cast<double>(s.candidates.total()));
+  }
+  stats_.set("broad_ms", ms_since(t0));
+  narrow_phase(x, pad, magnitude, out, nullptr, stream);
   s.candidates.clear();
   cap_contacts(out);
-  if (params_.track) {
-    s.seed_vf.clear();
-    s.seed_ee.clear();
-    for (const VertexFaceContact& c : out.vf) s.seed_vf.push_back({c.vertex, c.face});
-    for (const EdgeEdgeContact& c : out.ee) s.seed_ee.push_back({c.edge0, c.edge1});
-  }
+  keep_seeds(out);
+}
+
+void ExactDetector::keep_seeds(const ContactSet& out) {
+  if (!params_.track) return;
+  State& s = *state_;
+  s.seed_vf.clear();
+  s.seed_ee.clear();
+  for (const VertexFaceContact& c : out.vf) s.seed_vf.push_back({c.vertex, c.face});
+  for (const EdgeEdgeContact& c : out.ee) s.seed_ee.push_back({c.edge0, c.edge1});
 }
 
 void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, ContactSet& out,
@@ -270,31 +296,53 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   bool stopped = false;  // the budget left candidates untested
   ContactSet tracked;    // the last frame's contacts found again (`ExactParams::track`)
   // The orphan stages, each whole or, once a budget is spent, not at all (a skipped stage
-  // leaves its sleep state as it was: the next frame wakes from the last refresh).
-  const auto go_on = [&] { return cut == nullptr || !cut->spent(); };
+  // leaves its sleep state as it was: the next frame wakes from the last refresh). Cut off, a
+  // stage starts only when its cost (`StageCost`, or an estimate) fits in what is left.
+  const auto clock_ms = [&] { return cut == nullptr ? 0.0 : cut->deadline().now_ms(); };
+  const double narrow_clock = clock_ms();
+  const auto go_on = [&](std::size_t stage) {
+    if (cut == nullptr) return true;
+    double cost = s.stage_cost[stage].ms();
+    // The orphan pairs' stage not yet measured: its pairs at this frame's cost per candidate
+    // (traversal included: an overestimate), when candidates were tested.
+    if (stage == 0 && cost == 0 && cut->tested() > 0) {
+      const double per_pair = (clock_ms() - narrow_clock) / static_cast<double>(cut->tested());
+      cost = per_pair * static_cast<double>(s.orphans.vf.size() + s.orphans.ee.size());
+    }
+    return cut->fits(cost);
+  };
   std::size_t tested_blocks = 0, star_pairs = 0;
   int skipped = 0;
   double orphan_ms = 0;
   const auto orphan_stages = [&] {
     const auto orphans_start = std::chrono::steady_clock::now();
-    if (go_on()) {
+    double t = clock_ms();
+    const auto measured = [&](std::size_t stage) {
+      const double now = clock_ms();
+      s.stage_cost[stage].measured(now - t);
+      t = now;
+    };
+    if (go_on(0)) {
       const bool refresh = frame.proximity && exact::wake_orphan_blocks(s.orphans, s.sleep, x, pad, threads, stats_);
       stats_.set("orphan_wake_ms", ms_since(orphans_start));
       tested_blocks = exact::narrow_orphans(frame, s.orphans, refresh);
       if (refresh) s.sleep.ref.assign(x.begin(), x.end());
       stats_.set("orphan_refresh", refresh ? 1 : 0);
+      measured(0);
     } else {
       ++skipped;
       stats_.set("orphan_wake_ms", 0);
       stats_.set("orphan_refresh", 0);
     }
-    if (go_on()) {
+    if (go_on(1)) {
       star_pairs = exact::narrow_stars(frame, s.orphans.stars, s.own);
+      measured(1);
     } else {
       ++skipped;
     }
-    if (go_on()) {
+    if (go_on(2)) {
       exact::narrow_isolated(frame, s.own.isolated);
+      measured(2);
     } else {
       ++skipped;
     }
@@ -342,6 +390,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
 
   // The frame's set in canonical order (`sorted_output`: the base class does not sort it again).
   const auto gather_start = std::chrono::steady_clock::now();
+  s.gather_start_ms = clock_ms();
   exact::gather_contacts(frame, s.edge_by_rank, s.gather, out);
   merge_unique(out.vf, tracked.vf);
   merge_unique(out.ee, tracked.ee);

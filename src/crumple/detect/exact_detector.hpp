@@ -97,6 +97,8 @@ class ExactDetector final : public Detector {
  protected:
   /// The contacts are gathered in canonical order (`exact::gather_contacts`).
   bool sorted_output() const override { return true; }
+  /// `clock=cpu` counts one thread: a time budget then needs `threads` = 1.
+  void check_budget(double ms) const override;
 
  private:
   struct State;  // exact_detector.cpp
@@ -115,6 +117,8 @@ class ExactDetector final : public Detector {
                     bool stream = false);
   /// Applies `max_contacts` (throws or truncates) and sets the contact stats.
   void cap_contacts(ContactSet& out);
+  /// With `track`, keeps the frame's contacts to test again first next frame.
+  void keep_seeds(const ContactSet& out);
 
   ExactParams params_;
   std::unique_ptr<BroadPhase> broad_phase_;

@@ -4,6 +4,7 @@
 
 #include <crumple/core/error.hpp>
 #include <crumple/core/json.hpp>
+#include <crumple/detect/budget_spec_detail.hpp>
 #include <crumple/detect/hybrid.hpp>
 #include <crumple/detect/hybrid_detail.hpp>
 #include <crumple/detect/narrow_phase.hpp>
@@ -41,10 +42,9 @@ HybridParams HybridParams::from_spec(const MethodSpec& spec) {
   const long long every = spec.get_int("every", 1);
   if (every < 1 || every > 1'000'000) fail("every must be in [1, 1e6], got " + std::to_string(every));
   p.every = static_cast<int>(every);
-  p.budget_ms = spec.get_double("budget", 0);
-  if (!(p.budget_ms >= 0 && p.budget_ms <= 1e6)) fail("budget must be in [0, 1e6] ms (0 = none)");
-  static constexpr std::array<std::string_view, 2> kClock{"wall", "cpu"};
-  p.clock = parse_budget_clock(spec.get_choice("clock", "wall", kClock));
+  const BudgetSpec budget = budget_from_spec(spec);
+  p.budget_ms = budget.budget_ms;
+  p.clock = budget.clock;
   const long long zones = spec.get_int("zones", 0);
   if (zones < 0 || zones > 100'000'000) fail("zones must be in [0, 1e8] (0 = all), got " + std::to_string(zones));
   p.zones = static_cast<int>(zones);
@@ -205,7 +205,14 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
   const Scalar h = thickness();
   const ContactKinds& kinds = options().kinds;
   const bool has_previous = !previous.empty();
-  const FrameDeadline deadline(params_.budget_ms, params_.clock);
+  // The budget covers the whole call. The search stops early enough for the work after it (kept
+  // pairs, risk report, the sort of the contacts) at that work's cost on the last frame.
+  const double budget_ms = frame_budget(params_.budget_ms);
+  const FrameDeadline frame_clock(budget_ms, params_.clock);
+  const double reserve_ms = budget_ms > 0 ? m.post_cost.ms() : 0;
+  constexpr double kSpent = 1e-9;  // a budget the reserve used up: spent at the first look
+  const FrameDeadline deadline =
+      budget_ms > 0 ? FrameDeadline(std::max(budget_ms - reserve_ms, kSpent), params_.clock) : FrameDeadline();
   const auto ms_since = [](Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
   };
@@ -250,6 +257,7 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
   const double search_ms = ms_since(search_start);
 
   // 4. Kept pairs for the next frame.
+  const double post_start = frame_clock.now_ms();
   m.keep_pairs(search.carried);
 
   // 5. The risk report: contacts per zone, ages, estimated misses.
@@ -281,6 +289,9 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
   stats_.set("refit_ms", refit_ms);
   stats_.set("zones_ms", zones_ms);
   stats_.set("search_ms", search_ms);
+  stats_.set("reserve_ms", reserve_ms);
+  out.sort();
+  m.post_cost.measured(frame_clock.now_ms() - post_start);
 }
 
 }  // namespace crumple

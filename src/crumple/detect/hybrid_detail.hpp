@@ -240,6 +240,9 @@ struct HybridDetector::Impl {
   std::vector<Kept> saved_kept;
   std::mt19937_64 saved_rng;
   bool saved = false;
+  /// The cost of the last frame's work after the search (kept pairs, risk report, sort), on
+  /// the budget's clock: reserved from the next frame's budget. Not state: timing only.
+  StageCost post_cost;
 
   // ---- hybrid_zones.cpp: leaves, zones, schedule, kept pairs, risk report ----------------------
   void build(const Topology& topo, int leaf_size);

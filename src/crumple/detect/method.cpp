@@ -58,9 +58,9 @@ constexpr std::array<ParamInfo, 13> kKdopParams{{
      "error | truncate: over max_contacts, throw, or keep the first contacts in canonical "
      "order (stats: overflow, contacts_dropped)"},
     {"budget", "0",
-     "time budget per frame in ms (0 = none): the traversal and narrow phase stop when it is "
-     "spent and the frame returns the contacts found so far (a subset; results then depend on "
-     "the machine's speed)"},
+     "time budget per frame in ms (0 = none), from the start of the call: the traversal and "
+     "narrow phase stop early enough for the gather (its cost on the last frame) and the frame "
+     "returns the contacts found so far (a subset; results then depend on the machine's speed)"},
     {"pairs", "0",
      "most candidate face pairs narrow-tested per frame (0 = all): a budget counted in work, "
      "in the traversal's order (stats: cut, pairs_tested)"},
@@ -90,8 +90,9 @@ constexpr std::array<ParamInfo, 11> kHybridParams{{
     {"leaf", "64", "faces per leaf of the coarse hierarchy (4..4096); zones are overlapping leaf pairs"},
     {"every", "1", "coverage period: a zone not examined for this many frames is examined first"},
     {"budget", "0",
-     "time budget per frame in ms (0 = none): zones are examined in order until it is spent, the "
-     "rest come first next frame (results then depend on the machine's speed)"},
+     "time budget per frame in ms (0 = none), from the start of the call: zones are examined in "
+     "order until what is left only covers the work after the search (its cost on the last "
+     "frame), the rest come first next frame (results then depend on the machine's speed)"},
     {"clock", "wall",
      "wall | cpu: the clock the budget counts on; cpu = this thread's processor time (for "
      "measuring budgets on a shared machine; one thread)"},

@@ -1,5 +1,6 @@
 #include <crumple/core/error.hpp>
 #include <crumple/core/json.hpp>
+#include <crumple/detect/budget_spec_detail.hpp>
 #include <crumple/detect/narrow_phase.hpp>
 #include <crumple/detect/stochastic.hpp>
 #include <crumple/detect/stochastic_engine.hpp>
@@ -98,10 +99,9 @@ StochasticParams StochasticParams::from_spec(const MethodSpec& spec) {
   const long long seed = spec.get_int("seed", 1);
   if (seed < 0) fail("seed must be >= 0");
   p.seed = static_cast<std::uint64_t>(seed);
-  p.budget_ms = spec.get_double("budget", 0);
-  if (!(p.budget_ms >= 0 && p.budget_ms <= 1e6)) fail("budget must be in [0, 1e6] ms (0 = none)");
-  static constexpr std::array<std::string_view, 2> kClock{"wall", "cpu"};
-  p.clock = parse_budget_clock(spec.get_choice("clock", "wall", kClock));
+  const BudgetSpec budget = budget_from_spec(spec);
+  p.budget_ms = budget.budget_ms;
+  p.clock = budget.clock;
   return p;
 }
 
@@ -416,7 +416,7 @@ void StochasticDetector::load_state(std::string_view text) {
 
 void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, ContactSet& out) {
   out.clear();
-  const FrameDeadline deadline(params_.budget_ms, params_.clock);  // from the start of the frame
+  const FrameDeadline deadline(frame_budget(params_.budget_ms), params_.clock);  // from the start of the frame
   const Topology& topo = topology();
   const Scalar h = thickness();
   const Scalar near = params_.near * h;  // near_distance() in the scaled coordinates

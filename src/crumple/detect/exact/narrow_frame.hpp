@@ -291,37 +291,52 @@ void narrow_candidate_chunk(NarrowFrame& frame, std::span<const FacePair> chunk)
 /// candidates' order alone.
 class Cutoff {
  public:
-  /// At most `pairs` candidates (0: no limit), and none claimed once `deadline` has passed.
-  Cutoff(std::size_t pairs, const FrameDeadline& deadline) : limit_(pairs), deadline_(deadline) {}
+  /// At most `pairs` candidates (0: no limit), and none claimed once less than `reserve_ms` of
+  /// `deadline`'s budget is left (the stages after the cut-off's: `FrameDeadline::passed`).
+  Cutoff(std::size_t pairs, const FrameDeadline& deadline, double reserve_ms = 0)
+      : limit_(pairs), deadline_(deadline), reserve_ms_(reserve_ms) {}
   /// Claims up to n candidates: returns how many may be tested (0 once the budget is spent).
   std::size_t claim(std::size_t n) {
     if (spent_.load(std::memory_order_relaxed) || n == 0) return 0;
-    if (deadline_.passed()) {
-      spent_.store(true, std::memory_order_relaxed);
+    if (deadline_.passed(reserve_ms_)) {
+      mark_spent();
       return 0;
     }
     std::size_t take = n;
     if (limit_ != 0) {
       const std::size_t before = claimed_.fetch_add(n, std::memory_order_relaxed);
       take = before >= limit_ ? 0 : std::min(n, limit_ - before);
-      if (take < n) spent_.store(true, std::memory_order_relaxed);
+      if (take < n) mark_spent();
     }
     tested_.fetch_add(take, std::memory_order_relaxed);
     return take;
   }
   /// True once a claim was refused, or (when timed) the deadline has passed.
   bool spent() {
-    if (!spent_.load(std::memory_order_relaxed) && deadline_.passed()) {
-      spent_.store(true, std::memory_order_relaxed);
-    }
+    if (!spent_.load(std::memory_order_relaxed) && deadline_.passed(reserve_ms_)) mark_spent();
     return spent_.load(std::memory_order_relaxed);
   }
   /// Candidates granted so far.
   std::size_t tested() const { return tested_.load(std::memory_order_relaxed); }
+  /// Whether a stage of `cost_ms` that runs whole may start: the budget is not spent, and
+  /// `cost_ms` more still leaves the reserve.
+  bool fits(double cost_ms) {
+    if (spent()) return false;
+    return !deadline_.passed(reserve_ms_ + cost_ms);
+  }
+  const FrameDeadline& deadline() const { return deadline_; }
+  /// When the budget was first found spent, on the deadline's clock (`now_ms`); < 0: not yet.
+  double spent_at_ms() const { return spent_at_ms_.load(std::memory_order_relaxed); }
 
  private:
   std::size_t limit_;
   const FrameDeadline& deadline_;
+  void mark_spent() {
+    if (!spent_.exchange(true, std::memory_order_relaxed)) spent_at_ms_.store(deadline_.now_ms(), std::memory_order_relaxed);
+  }
+
+  double reserve_ms_;
+  std::atomic<double> spent_at_ms_{-1};
   std::atomic<std::size_t> claimed_{0}, tested_{0};
   std::atomic<bool> spent_{false};
 };
