@@ -46,7 +46,12 @@ namespace crumple::response {
 struct FailSafeOptions {
   /// δ ≥ 0 (scene units): impacts are pairs that come within δ during the frame.
   Scalar min_separation = 0;
-  int impulse_rounds = 3;  ///< rounds of CCD impulses (>= 0)
+  /// Rounds of CCD impulses (>= 0). Impulses change only the approaching normal part of a
+  /// pair's motion; a zone moves its vertices by up to their whole proposed displacement and
+  /// leaves the springs at its border stretched (many times their rest length in a squeezed
+  /// pile), energy the next step gives back as motion (docs/simulation.md, "Energy under
+  /// contact"). So impulses run until the query is clean, up to this many rounds, before zones.
+  int impulse_rounds = 20;
   int zone_rounds = 8;     ///< rounds of impact zones (>= 0)
   /// The continuous query's broad phase, threads and narrow-phase options.
   ContinuousOptions query{};
