@@ -160,12 +160,15 @@ constexpr const char* kQuickBench = "bench --quick --out ";
 #endif
 struct QuickRun {
   testing::TempDir dir;
-  testing::CliResult result = run_cli(kQuickBench + dir.path().string());
+  // Progress lines at once (CRUMPLE_PROGRESS_SECONDS=0), checked by expect_every_output.
+  testing::CliResult result =
+      testing::run_program("CRUMPLE_PROGRESS_SECONDS=0 " + std::string(CRUMPLE_CLI), kQuickBench + dir.path().string());
 };
 
 void expect_every_output(const QuickRun& run) {
   ASSERT_EQ(run.result.status, 0) << run.result.out;
   EXPECT_NE(run.result.out.find("wrote"), std::string::npos) << run.result.out;
+  EXPECT_NE(run.result.out.find("crumple bench: section "), std::string::npos) << run.result.out;
   for (const char* name : {"bench.md", "bench.json", "fig42.csv", "fig43.csv", "second.csv", "scaling.csv",
                            "budget.csv", "fig42-fps.svg", "fig42-speedup.svg", "scaling.svg", "budget.svg"}) {
     EXPECT_TRUE(std::filesystem::is_regular_file(run.dir / name)) << name;

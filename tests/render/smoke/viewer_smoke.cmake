@@ -56,8 +56,14 @@ endif()
 # Untangling, as `crumple simulate --response-from`: the 12 x 12 hanging cloth falls through
 # itself for 300 frames with the response off, then untangles; the headless run prints the
 # intersecting pairs' count (as the panel shows it) and the simulated frames per second.
+# With CRUMPLE_PROGRESS_SECONDS=0 the headless frames report their progress at once.
 set(UNTANGLED "${OUT}.untangled.png")
+set(ENV{CRUMPLE_PROGRESS_SECONDS} 0)
 run_viewer(" (untangling)" "${UNTANGLED}" hanging-cloth:nx=12,ny=12 --response-from 300 --frames 340)
+unset(ENV{CRUMPLE_PROGRESS_SECONDS})
+if(NOT err MATCHES "crumple-view: frame [0-9]+/340, ")
+  message(FATAL_ERROR "viewer.smoke: the headless frames printed no progress")
+endif()
 if(NOT rc EQUAL 0)
   message(FATAL_ERROR "viewer.smoke: the untangling run exited with '${rc}'")
 endif()
