@@ -57,7 +57,8 @@ struct FailSafeOptions {
   ContinuousOptions query{};
   /// After the first query of a frame, query only the pairs holding a vertex whose proposed
   /// end moved since the last query (`ContinuousQuery::update_moved`): the same impacts, bit
-  /// for bit, at a cost that follows the corrected region. Off: every query sweeps the mesh.
+  /// for bit, at a cost that follows the corrected region. A later `apply` from the same start
+  /// (bit for bit) continues likewise from the last query. Off: every query sweeps the mesh.
   bool restrict_queries = true;
 };
 
@@ -106,6 +107,10 @@ class CcdFailSafe {
   std::vector<Stencil> live_;
   std::vector<char> tangle_;
   std::vector<Vec3> queried_;  ///< the end positions of the last query (`restrict_queries`)
+  /// `impacts_` are the query of the motion from `start_` to `queried_` (a query answered).
+  bool queried_valid_ = false;
+  std::vector<Vec3> start_;  ///< the start of the last `apply` (`restrict_queries`)
+  bool same_start_ = false;  ///< this `apply`'s start is the last one's, bit for bit
   std::vector<char> moved_;    ///< per vertex, whether its end moved since the last query
 };
 
