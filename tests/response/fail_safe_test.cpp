@@ -240,6 +240,24 @@ TEST(FailSafe, RestrictedQueriesGiveTheSameCorrection) {
   EXPECT_GE(later_with_impacts, 12) << "most later calls (of 16) must have impacts to correct";
 }
 
+// Rounds that cannot change the motion are skipped, not queried: with every vertex pinned no
+// impulse applies and a zone cannot move, so after one impulse round and one zone round (whose
+// zones then stop growing) the fallback freezes the pair. Before, every impulse and zone round
+// ran (and counted) a query: 30 of them.
+TEST(FailSafe, RoundsThatCannotChangeTheMotionAreSkipped) {
+  Crossing c;
+  std::fill(c.inv_mass.begin(), c.inv_mass.end(), 0);
+  CcdFailSafe safe(c.topology, options(20, 8));
+  const FailSafeStats stats = safe.apply(c.start, c.inv_mass, 0.1, c.end, c.velocity);
+  EXPECT_GT(stats.impacts, 0u);
+  EXPECT_EQ(stats.impulse_rounds, 1);
+  EXPECT_EQ(stats.zone_rounds, 2);
+  EXPECT_LE(stats.queries, 5);
+  EXPECT_GT(stats.frozen, 0u);
+  EXPECT_EQ(testing::intersecting_triangles(c.topology, c.end).size(), 0u);
+  EXPECT_EQ(touching_pairs(c.topology, c.start, c.end), 0u);
+}
+
 TEST(FailSafe, CleanFrameIsLeftBitForBit) {
   Crossing c;
   for (int i = 3; i < 6; ++i) c.end[static_cast<std::size_t>(i)].z() = c.start[static_cast<std::size_t>(i)].z() - 0.5;
