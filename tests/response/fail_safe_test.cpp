@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <random>
 
 #include "support/intersections.hpp"
@@ -177,10 +178,11 @@ TEST(FailSafe, DefaultImpulseRoundsSettleTanglesWithoutZones) {
 
 // The later queries restricted to the vertices whose ends moved (`restrict_queries`) give
 // the same impacts as full queries, so the whole correction is the same, bit for bit: every
-// stage, on random tangles of a lattice (hundreds of impacts, several queries).
+// stage, on random tangles of a lattice (hundreds of impacts, several queries), and over a
+// second call from the same start (continuing from the first call's last query).
 TEST(FailSafe, RestrictedQueriesGiveTheSameCorrection) {
   const Index kSide = 8;  // small enough under the sanitizers too (~1 s)
-  int most_queries = 0;
+  int most_queries = 0, later_with_impacts = 0;
   for (const auto& [impulses, zones] : {std::pair{3, 8}, std::pair{0, 8}, std::pair{0, 0}, std::pair{1, 1}}) {
     for (const Scalar amplitude : {0.15, 0.3}) {
       SCOPED_TRACE(::testing::Message() << impulses << " impulse rounds, " << zones << " zone rounds, amplitude "
@@ -194,7 +196,7 @@ TEST(FailSafe, RestrictedQueriesGiveTheSameCorrection) {
       for (Vec3& p : proposed) p += Vec3(d(rng), d(rng), d(rng));
       std::vector<Scalar> inv_mass(start.size(), 1);
       inv_mass[0] = 0;
-      FailSafeStats stats[2];
+      FailSafeStats stats[2], stats2[2], stats3[2];
       Positions end[2], velocity[2];
       for (const bool restrict : {false, true}) {
         FailSafeOptions o = options(impulses, zones);
@@ -204,6 +206,24 @@ TEST(FailSafe, RestrictedQueriesGiveTheSameCorrection) {
         end[restrict] = proposed;
         velocity[restrict] = Positions(start.size(), Vec3::Zero());
         stats[restrict] = safe.apply(start, inv_mass, 1.0 / 60, end[restrict], velocity[restrict]);
+        EXPECT_EQ(touching_pairs(topology, start, end[restrict]), 0u);
+        // A second call from the same start after some ends moved (as the simulation's obstacle
+        // rounds do) continues from the last query; a third from another start queries afresh.
+        for (std::size_t i = 0; i < start.size(); i += 5) end[restrict][i] += Vec3(0.1, -0.2, 0.05);
+        stats2[restrict] = safe.apply(start, inv_mass, 1.0 / 60, end[restrict], velocity[restrict]);
+        std::mt19937_64 later(11);
+        Positions next = start;  // another start (a height field: no intersection), the same ends mostly
+        for (Vec3& p : next) p.z() = 0.25 * std::sin(7 * p.x()) * std::cos(5 * p.y());
+        // Every seventh end moves: the others are the last query's.
+        for (std::size_t i = 0; i < start.size(); i += 7) end[restrict][i] += Vec3(d(later), d(later), d(later));
+        stats3[restrict] = safe.apply(next, inv_mass, 1.0 / 60, end[restrict], velocity[restrict]);
+        EXPECT_EQ(touching_pairs(topology, next, end[restrict]), 0u);
+      }
+      for (const FailSafeStats* later : {stats2, stats3}) {
+        later_with_impacts += later[0].impacts > 0 ? 1 : 0;
+        EXPECT_EQ(later[1].queries, later[0].queries);
+        EXPECT_EQ(later[1].impacts, later[0].impacts);
+        EXPECT_EQ(later[1].frozen, later[0].frozen);
       }
       EXPECT_GE(stats[1].queries, 2) << "the correction must need later queries";
       most_queries = std::max(most_queries, stats[1].queries);
@@ -212,12 +232,30 @@ TEST(FailSafe, RestrictedQueriesGiveTheSameCorrection) {
       EXPECT_EQ(stats[1].zone_vertices, stats[0].zone_vertices);
       EXPECT_EQ(stats[1].frozen, stats[0].frozen);
       EXPECT_EQ(stats[1].static_left, stats[0].static_left);
-      EXPECT_TRUE(end[1] == end[0]) << "the corrected ends differ";
+      EXPECT_TRUE(end[1] == end[0]) << "the corrected ends differ (after the third call)";
       EXPECT_TRUE(velocity[1] == velocity[0]) << "the corrected velocities differ";
-      EXPECT_EQ(touching_pairs(topology, start, end[1]), 0u);
     }
   }
   EXPECT_GT(most_queries, 3) << "some correction must take several restricted queries";
+  EXPECT_GE(later_with_impacts, 12) << "most later calls (of 16) must have impacts to correct";
+}
+
+// Rounds that cannot change the motion are skipped, not queried: with every vertex pinned no
+// impulse applies and a zone cannot move, so after one impulse round and one zone round (whose
+// zones then stop growing) the fallback freezes the pair. Before, every impulse and zone round
+// ran (and counted) a query: 30 of them.
+TEST(FailSafe, RoundsThatCannotChangeTheMotionAreSkipped) {
+  Crossing c;
+  std::fill(c.inv_mass.begin(), c.inv_mass.end(), 0);
+  CcdFailSafe safe(c.topology, options(20, 8));
+  const FailSafeStats stats = safe.apply(c.start, c.inv_mass, 0.1, c.end, c.velocity);
+  EXPECT_GT(stats.impacts, 0u);
+  EXPECT_EQ(stats.impulse_rounds, 1);
+  EXPECT_EQ(stats.zone_rounds, 2);
+  EXPECT_LE(stats.queries, 5);
+  EXPECT_GT(stats.frozen, 0u);
+  EXPECT_EQ(testing::intersecting_triangles(c.topology, c.end).size(), 0u);
+  EXPECT_EQ(touching_pairs(c.topology, c.start, c.end), 0u);
 }
 
 TEST(FailSafe, CleanFrameIsLeftBitForBit) {

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <random>
 #include <vector>
 
 namespace crumple::response {
@@ -66,6 +67,76 @@ TEST(Obstacle, KinematicMotionWithStopTime) {
   resolve_obstacle(o, 1, inv_mass, x, v);
   EXPECT_NEAR(x[0].x(), 1.5, 1e-15);
   EXPECT_NEAR(v[0].x(), 1.0, 1e-15);
+}
+
+// `resolve_obstacle` and `max_penetration` skip the exact query for vertices provably farther
+// than the margin (a box's world bounding box, a sphere's radius): the result must be that of
+// querying every vertex, bit for bit, also for points within rounding of the skip's bounds.
+TEST(Obstacle, SkippingFarVerticesChangesNothing) {
+  const auto reference = [](const Obstacle& o, Scalar t, std::span<const Scalar> inv_mass, std::vector<Vec3>& x,
+                            std::vector<Vec3>& v) {
+    const Shape shape = o.at_time(t);
+    const Vec3 vo = o.velocity_at(t);
+    std::size_t count = 0;
+    Scalar deepest = 0;
+    for (const Vec3& p : x) deepest = std::max(deepest, -query(shape, p).distance);
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      const SurfaceQuery q = query(shape, x[i]);
+      if (inv_mass[i] == 0 || !(q.distance < o.margin)) continue;
+      ++count;
+      x[i] += (o.margin - q.distance) * q.normal;
+      const Vec3 vr = v[i] - vo;
+      const Scalar vn = vr.dot(q.normal);
+      if (vn < 0) {
+        Vec3 vt = vr - vn * q.normal;
+        const Scalar vt_len = vt.norm();
+        const Scalar reduced = std::max<Scalar>(0, vt_len - o.friction * (-vn));
+        vt = vt_len > 0 ? Vec3(vt * (reduced / vt_len)) : Vec3::Zero();
+        v[i] = vo + vt;
+      }
+    }
+    return std::pair{count, deepest};
+  };
+  Box box{Vec3(0.3, -0.2, 0.1), Vec3(0.05, 0.4, 1.0)};
+  box.rotation = Eigen::AngleAxis<Scalar>(0.3, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  Box wall{Vec3(1.1, 0.2, 0.5), Vec3(0.05, 0.4, 1.0)};  // axis-aligned: faces on the AABB's
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<Scalar> coord(-1.5, 1.5), unit(-1, 1);
+  for (const Shape& shape : {Shape{box}, Shape{wall}, Shape{Sphere{Vec3(0.1, 0.2, -0.3), 0.6}}}) {
+    Obstacle o{shape, Vec3(0.2, 0, 0), 1.0};
+    o.margin = 0.01;
+    o.friction = 0.3;
+    std::vector<Vec3> x, v;
+    std::vector<Scalar> inv_mass;
+    const Shape now = o.at_time(0.5);
+    for (int i = 0; i < 4000; ++i) {
+      Vec3 p(coord(rng), coord(rng), coord(rng));
+      if (i % 2 == 0) {  // onto the margin's surface or the AABB's bounds, within rounding
+        const SurfaceQuery q = query(now, p);
+        p -= (q.distance - (i % 4 == 0 ? o.margin : 0)) * q.normal;
+        if (i % 8 == 2) {
+          if (const auto* b = std::get_if<Box>(&now)) {
+            const int k = i % 3;
+            const Scalar reach = (b->rotation.cwiseAbs() * b->half_extents)[k] + o.margin;
+            p[k] = b->center[k] + (p[k] < b->center[k] ? -reach : reach);
+          }
+        }
+        p = p.unaryExpr([&](Scalar c) { return c * (1 + 1e-15 * unit(rng)); });
+      }
+      x.push_back(p);
+      v.emplace_back(unit(rng), unit(rng), unit(rng));
+      inv_mass.push_back(i % 17 == 0 ? 0 : 1);
+    }
+    std::vector<Vec3> x_ref = x, v_ref = v;
+    const auto [count, deepest] = reference(o, 0.5, inv_mass, x_ref, v_ref);
+    EXPECT_EQ(max_penetration(o, 0.5, x), deepest);
+    EXPECT_EQ(resolve_obstacle(o, 0.5, inv_mass, x, v), count);
+    EXPECT_GT(count, 100u) << "the points must straddle the margin";
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      ASSERT_EQ(x[i], x_ref[i]) << i;
+      ASSERT_EQ(v[i], v_ref[i]) << i;
+    }
+  }
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 #include <crumple/core/error.hpp>
 #include <crumple/geometry/ccd.hpp>
+#include <crumple/geometry/distance.hpp>
 #include <crumple/response/fail_safe.hpp>
 #include <crumple/response/union_find_detail.hpp>
 #include <crumple/response/untangle.hpp>
@@ -74,6 +75,54 @@ void rigidify(std::span<const Index> members, PositionsView start, std::span<con
 }  // namespace
 
 namespace {
+/// The pair of `s` re-tested alone over the motion from `start` to `positions`: false when it
+/// is no longer a live impact (no contact within δ, or within δ at the start only and certified
+/// never to touch, as in `CcdFailSafe::detect`); otherwise `s` becomes the pair's stencil at its
+/// new time of impact (weights and normal as the continuous query computes them).
+bool retest(Stencil& s, PositionsView start, std::span<const Vec3> positions, const geometry::CcdOptions& narrow) {
+  geometry::CcdPoints p0, p1;
+  for (std::size_t k = 0; k < 4; ++k) {
+    p0[k] = start[at(s.vertex[k])];
+    p1[k] = positions[at(s.vertex[k])];
+  }
+  const geometry::CcdPair kind = s.edge_edge ? geometry::CcdPair::kEdgeEdge : geometry::CcdPair::kVertexFace;
+  const geometry::CcdResult r = geometry::ccd(kind, p0, p1, narrow);
+  if (!r.hit) return false;
+  std::array<Vec3, 4> q;
+  for (std::size_t k = 0; k < 4; ++k) q[k] = p0[k] + r.toi * (p1[k] - p0[k]);
+  Vec3 from, to, fallback;
+  Scalar distance = 0;
+  if (s.edge_edge) {
+    const geometry::SegmentSegmentResult c = geometry::segment_segment(q[0], q[1], q[2], q[3]);
+    s.weight = {-(1 - c.s), -c.s, 1 - c.t, c.t};
+    from = c.closest0;
+    to = c.closest1;
+    distance = std::sqrt(c.sqr_distance);
+    fallback = (q[1] - q[0]).cross(q[3] - q[2]);
+  } else {
+    const geometry::PointTriangleResult c = geometry::point_triangle(q[0], q[1], q[2], q[3]);
+    s.weight = {1, -c.barycentric[0], -c.barycentric[1], -c.barycentric[2]};
+    from = c.closest;
+    to = q[0];
+    distance = std::sqrt(c.sqr_distance);
+    fallback = (q[2] - q[1]).cross(q[3] - q[1]);
+  }
+  const Vec3 d = to - from;
+  if (const Scalar len = d.norm(); len > 0) {
+    s.normal = d / len;
+  } else if (const Scalar len = fallback.norm(); len > 0) {
+    s.normal = fallback / len;
+  }  // else: the last normal stays
+  if (r.toi == 0 && distance <= narrow.min_separation) {
+    geometry::CcdOptions touching = narrow;
+    touching.min_separation = 0;
+    if (!geometry::ccd(kind, p0, p1, touching).hit) return false;
+  }
+  return true;
+}
+}  // namespace
+
+namespace {
 /// `options` with the query's δ set to the fail-safe's (checked first).
 FailSafeOptions checked(FailSafeOptions options) {
   CRUMPLE_CHECK(options.impulse_rounds >= 0 && options.zone_rounds >= 0, "fail-safe rounds must be >= 0");
@@ -90,7 +139,9 @@ CcdFailSafe::CcdFailSafe(std::shared_ptr<const Topology> topology, FailSafeOptio
 
 std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> positions, FailSafeStats& stats) {
   const PositionsView end(positions.data(), positions.size());
-  if (stats.queries == 0 || !options_.restrict_queries) {
+  const bool restrict = options_.restrict_queries && (stats.queries > 0 || same_start_);
+  queried_valid_ = false;  // until the query has answered
+  if (!restrict) {
     query_.query(start, end, impacts_);
   } else {
     // Only the pairs holding a vertex whose end moved since the last query can have changed
@@ -103,7 +154,10 @@ std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> posit
     }
     if (count > 0) query_.update_moved(start, end, moved_, impacts_);
   }
-  if (options_.restrict_queries) queried_.assign(positions.begin(), positions.end());
+  if (options_.restrict_queries) {
+    queried_.assign(positions.begin(), positions.end());
+    queried_valid_ = true;
+  }
   ++stats.queries;
   live_.clear();
   const Scalar delta = options_.min_separation;
@@ -142,6 +196,14 @@ FailSafeStats CcdFailSafe::apply(PositionsView start, std::span<const Scalar> in
                 "fail-safe: start, positions, velocities and inverse masses must have #V entries");
   CRUMPLE_CHECK(duration > 0, "fail-safe: the frame's duration must be > 0");
   FailSafeStats stats;
+  // A second call over the same start (the simulation's obstacle rounds) continues from the
+  // last query: its impacts are those of the motion from this start to `queried_`.
+  same_start_ = options_.restrict_queries && queried_valid_ && start_.size() == n &&
+                std::memcmp(start_.data(), start.data(), n * sizeof(Vec3)) == 0;
+  if (!same_start_) {
+    queried_valid_ = false;
+    start_.assign(start.begin(), start.end());
+  }
   if (detect(start, positions, stats) == 0) return stats;
   stats.impacts = live_.size();
 
@@ -168,35 +230,76 @@ FailSafeStats CcdFailSafe::apply(PositionsView start, std::span<const Scalar> in
     return stats;
   };
 
-  // 1. CCD impulses on the relative normal displacement.
-  for (int r = 0; r < options_.impulse_rounds; ++r) {
-    ++stats.impulse_rounds;
-    for (const Stencil& s : live_) {
-      if (s.normal.squaredNorm() > 0 && correct_velocity(s, inv_mass, u) > 0) mark(s);
+  // 1. CCD impulses on the relative normal displacement, a query after each round. When a
+  // query finds exactly the pairs of the last one (the impulses are not clearing them: e.g. two
+  // sides of a quad squeezed below δ), the rounds until the next query run on those pairs
+  // alone, each round re-testing them (`retest`, at their new times of impact), until none is
+  // left, a round applies no impulse, or the rounds run out. Only a query's answer ends the
+  // stage.
+  geometry::CcdOptions narrow = options_.query.narrow;
+  narrow.min_separation = options_.min_separation;
+  const auto pairs_of = [&] {
+    std::vector<std::array<Index, 5>> pairs;
+    pairs.reserve(live_.size());
+    for (const Stencil& s : live_) pairs.push_back({s.vertex[0], s.vertex[1], s.vertex[2], s.vertex[3], s.edge_edge});
+    return pairs;
+  };
+  std::vector<std::array<Index, 5>> last_pairs = pairs_of();
+  bool stalled = false;
+  for (int r = 0; r < options_.impulse_rounds;) {
+    bool applied = false;
+    for (;;) {
+      ++r;
+      ++stats.impulse_rounds;
+      bool any = false;
+      for (const Stencil& s : live_) {
+        if (s.normal.squaredNorm() > 0 && correct_velocity(s, inv_mass, u) > 0) {
+          mark(s);
+          any = true;
+        }
+      }
+      applied = applied || any;
+      move();
+      if (!stalled || !any || r >= options_.impulse_rounds) break;
+      std::erase_if(live_, [&](Stencil& s) { return !retest(s, start, positions, narrow); });
+      if (live_.empty()) break;
     }
-    move();
     if (detect(start, positions, stats) == 0) return finish();
+    // No impulse since the last query: the motion is that query's, and so would every later
+    // round be (each starts from the query's impacts): on to the zones.
+    if (!applied) break;
+    std::vector<std::array<Index, 5>> pairs = pairs_of();
+    stalled = pairs == last_pairs;
+    last_pairs = std::move(pairs);
   }
 
   // 2. Impact zones: merged, each moved rigidly.
   std::vector<Index> parent(n, -1);
   for (int r = 0; r < options_.zone_rounds; ++r) {
     ++stats.zone_rounds;
+    bool grown = false;  // a vertex joined a zone, or two zones merged
     for (const Stencil& s : live_) {
       for (int k = 0; k < s.count; ++k) {
         const Index v = s.vertex[static_cast<std::size_t>(k)];
         if (parent[at(v)] < 0) {
           parent[at(v)] = v;
           ++stats.zone_vertices;
+          grown = true;
         }
       }
       const Index first = root(parent, s.vertex[0]);
       for (int k = 1; k < s.count; ++k) {
         const Index other = root(parent, s.vertex[static_cast<std::size_t>(k)]);
-        if (other != first) parent[at(other)] = first;
+        if (other != first) {
+          parent[at(other)] = first;
+          grown = true;
+        }
       }
       mark(s);
     }
+    // The same zones as the last round, which already moved each rigidly: moving them again
+    // gives the same motion (up to rounding), and the same live impacts. On to the fallback.
+    if (r > 0 && !grown) break;
     std::vector<std::pair<Index, Index>> by_zone;  // (root, member)
     for (std::size_t i = 0; i < n; ++i) {
       if (parent[i] >= 0) by_zone.emplace_back(root(parent, static_cast<Index>(i)), static_cast<Index>(i));

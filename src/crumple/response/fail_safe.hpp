@@ -14,11 +14,14 @@
 ///  1. CCD impulses (Bridson, Fedkiw, Anderson, SIGGRAPH 2002, §7.2): for each impact, an
 ///     inelastic impulse in the stencil form of `contact_response.hpp` (weights and normal at
 ///     the time of impact) removes the pair's approaching relative normal displacement,
-///     Gauss–Seidel, for `impulse_rounds` rounds;
+///     Gauss–Seidel, for `impulse_rounds` rounds, a query after each; a round that applies no
+///     impulse ends the stage, and after a query that returns the last query's pairs again the
+///     rounds run on those pairs alone (re-tested per round) until the next query;
 ///  2. impact zones (Provot 1997; Bridson et al. 2002, §7.4): the vertices of impacting pairs
 ///     are merged into zones (union–find, zones only grow), and each zone moves rigidly with the
 ///     mass-weighted mean displacement and the rotation of its angular momentum
-///     (θ = I⁻¹ Σ mᵢ rᵢ × (uᵢ − ū), x¹ᵢ = x_c + ū + R(θ) rᵢ), for `zone_rounds` rounds;
+///     (θ = I⁻¹ Σ mᵢ rᵢ × (uᵢ − ū), x¹ᵢ = x_c + ū + R(θ) rᵢ), for `zone_rounds` rounds, ending
+///     early when a round's zones are the last round's (moving them again changes nothing);
 ///  3. the fallback that cannot fail: every vertex of a live impact keeps its start position
 ///     (uᵢ = 0), repeated until no live impact has a moving vertex. The frozen set grows every
 ///     round, so this ends within #V rounds; a live impact left has all its vertices frozen,
@@ -57,7 +60,8 @@ struct FailSafeOptions {
   ContinuousOptions query{};
   /// After the first query of a frame, query only the pairs holding a vertex whose proposed
   /// end moved since the last query (`ContinuousQuery::update_moved`): the same impacts, bit
-  /// for bit, at a cost that follows the corrected region. Off: every query sweeps the mesh.
+  /// for bit, at a cost that follows the corrected region. A later `apply` from the same start
+  /// (bit for bit) continues likewise from the last query. Off: every query sweeps the mesh.
   bool restrict_queries = true;
 };
 
@@ -106,6 +110,10 @@ class CcdFailSafe {
   std::vector<Stencil> live_;
   std::vector<char> tangle_;
   std::vector<Vec3> queried_;  ///< the end positions of the last query (`restrict_queries`)
+  /// `impacts_` are the query of the motion from `start_` to `queried_` (a query answered).
+  bool queried_valid_ = false;
+  std::vector<Vec3> start_;  ///< the start of the last `apply` (`restrict_queries`)
+  bool same_start_ = false;  ///< this `apply`'s start is the last one's, bit for bit
   std::vector<char> moved_;    ///< per vertex, whether its end moved since the last query
 };
 
