@@ -12,6 +12,7 @@
 #include <crumple/detect/exact/ownership.hpp>
 #include <crumple/detect/exact/stars.hpp>
 #include <crumple/detect/scale_detail.hpp>
+#include <crumple/geometry/ccd_detail.hpp>
 #include <crumple/geometry/distance.hpp>
 
 #include <algorithm>
@@ -187,11 +188,77 @@ void lower_to(std::atomic<Scalar>& bound, Scalar t) {
 /// Every sub-pair first goes through the slab test (`geometry::ccd_slabs_apart` with the
 /// step's bound), which drops only sub-pairs the narrow phase would reject by its hull filter:
 /// the impacts are those of the narrow phase on every sub-pair.
+///
+/// The sub-pairs that pass it wait in a small queue; the narrow phase's coplanarity filter
+/// (δ = 0) and separating-direction filter, where most of them end, run on the queue four at a
+/// time (geometry/ccd_detail.hpp), and the others go through the rest of the narrow phase
+/// (ccd_after_direction): together, exactly the narrow phase's results.
 struct Tester {
   const Step& step;
   ImpactSet found;
   Counts counts;
   std::atomic<Scalar>* earliest = nullptr;
+
+  Tester(const Step& s, std::atomic<Scalar>* e) : step(s), earliest(e) {}
+  Tester(const Tester&) = delete;
+  Tester& operator=(const Tester&) = delete;
+
+  /// A queued sub-pair: VF (i0 = vertex, i1 = face) or EE (i0, i1 = edge ids; a, b = their
+  /// vertices, a < b).
+  struct Waiting {
+    bool face;
+    Index i0, i1;
+    Edge a, b;
+  };
+  static constexpr std::size_t kQueue = 16;
+  std::array<geometry::detail::CcdQuery, kQueue> queued_points;
+  std::array<Waiting, kQueue> queued;
+  std::size_t queue_size = 0;
+
+  /// Runs the narrow phase on every queued sub-pair (called when the queue is full and before
+  /// the tester's results are taken).
+  void flush() {
+    const std::size_t n = queue_size;
+    queue_size = 0;
+    if (n == 0 || done()) return;
+    const std::span<const geometry::detail::CcdQuery> points{queued_points.data(), n};
+    // 1: rejected by the coplanarity filter (δ = 0), 2: by a separating direction.
+    std::array<std::uint8_t, kQueue> apart{};
+    const bool touching = step.narrow.min_separation == 0;
+    if (touching) geometry::detail::ccd_never_coplanar(points, apart.data());
+    // The direction filter on the rest, one pair type at a time.
+    for (const bool face : {true, false}) {
+      std::array<std::uint8_t, kQueue> index{}, result{};
+      std::size_t count = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        if (apart[i] == 0 && queued[i].face == face) index[count++] = static_cast<std::uint8_t>(i);
+      }
+      if (count == 0) continue;
+      geometry::detail::ccd_separated_by_a_direction(
+          face ? geometry::CcdPair::kVertexFace : geometry::CcdPair::kEdgeEdge, points, {index.data(), count},
+          step.narrow.min_separation, result.data());
+      for (std::size_t j = 0; j < count; ++j) apart[index[j]] = static_cast<std::uint8_t>(2 * result[j]);
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      const Waiting& w = queued[i];
+      const geometry::detail::CcdQuery& q = queued_points[i];
+      ++(w.face ? counts.vf_tests : counts.ee_tests);
+      if (apart[i] != 0) {
+        ++counts.outcomes[static_cast<std::size_t>(apart[i] == 1 ? geometry::CcdOutcome::kSeparatedCoplanarity
+                                                                 : geometry::CcdOutcome::kSeparatedDirection)];
+        continue;
+      }
+      if (done()) return;
+      const geometry::CcdPair pair = w.face ? geometry::CcdPair::kVertexFace : geometry::CcdPair::kEdgeEdge;
+      const geometry::CcdResult r = geometry::detail::ccd_after_direction(pair, q.start, q.end, narrow_options());
+      if (!keep(r)) continue;
+      if (w.face) {
+        record_vertex_face(w.i0, w.i1, q.start, q.end, r);
+      } else {
+        record_edge_edge(w.i0, w.i1, w.a, w.b, q.start, q.end, r);
+      }
+    }
+  }
 
   /// True when only the step is wanted and it is already 0: no test can lower it.
   bool done() const { return earliest != nullptr && earliest->load(std::memory_order_relaxed) == 0; }
@@ -212,12 +279,17 @@ struct Tester {
     return false;
   }
 
-  /// The narrow phase of vertex v (s[0], e[0]) against face f (s[1..3], e[1..3], corners in
-  /// order), after the slab test.
+  /// Queues vertex v (s[0], e[0]) against face f (s[1..3], e[1..3], corners in order) for the
+  /// narrow phase, after the slab test.
   void narrow_vertex_face(Index v, Index f, const geometry::CcdPoints& s, const geometry::CcdPoints& e) {
-    ++counts.vf_tests;
-    const geometry::CcdResult r = geometry::vertex_face_ccd(s, e, narrow_options());
-    if (!keep(r)) return;
+    if (queue_size == kQueue) flush();
+    queued_points[queue_size] = {s, e};
+    queued[queue_size++] = {true, v, f, {}, {}};
+  }
+
+  /// The impact of a hit `r` of vertex v against face f.
+  void record_vertex_face(Index v, Index f, const geometry::CcdPoints& s, const geometry::CcdPoints& e,
+                          const geometry::CcdResult& r) {
     VertexFaceImpact impact;
     impact.vertex = v;
     impact.face = f;
@@ -240,13 +312,18 @@ struct Tester {
     found.vf.push_back(impact);
   }
 
-  /// The narrow phase of edges a (s[0..1], e[0..1]) and b (s[2..3], e[2..3]), a < b, each
-  /// edge's vertices increasing, after the slab test.
+  /// Queues edges a (s[0..1], e[0..1]) and b (s[2..3], e[2..3]), a < b, each edge's vertices
+  /// increasing, for the narrow phase, after the slab test.
   void narrow_edge_edge(Index e0, Index e1, const Edge& a, const Edge& b, const geometry::CcdPoints& s,
                         const geometry::CcdPoints& e) {
-    ++counts.ee_tests;
-    const geometry::CcdResult r = geometry::edge_edge_ccd(s, e, narrow_options());
-    if (!keep(r)) return;
+    if (queue_size == kQueue) flush();
+    queued_points[queue_size] = {s, e};
+    queued[queue_size++] = {false, e0, e1, a, b};
+  }
+
+  /// The impact of a hit `r` of edges a and b.
+  void record_edge_edge(Index e0, Index e1, const Edge& a, const Edge& b, const geometry::CcdPoints& s,
+                        const geometry::CcdPoints& e, const geometry::CcdResult& r) {
     EdgeEdgeImpact impact;
     impact.edge0 = e0;
     impact.edge1 = e1;
@@ -400,6 +477,7 @@ struct Sink {
   Counts counts;
   double narrow_cpu_ms = 0;
   void take(Tester& t, double ms) {
+    t.flush();
     const std::lock_guard lock(mutex);
     impacts.vf.insert(impacts.vf.end(), t.found.vf.begin(), t.found.vf.end());
     impacts.ee.insert(impacts.ee.end(), t.found.ee.begin(), t.found.ee.end());
@@ -784,8 +862,9 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
     });
     parallel_for_chunks(pairs.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
       const auto c0 = std::chrono::steady_clock::now();
-      Tester tester{step, {}, {}, earliest};
+      Tester tester(step, earliest);
       for (std::size_t i = begin; i < end; ++i) tester.face_pair(pairs[i][0], pairs[i][1]);
+      tester.flush();
       sink.take(tester, ms_since(c0));
     });
     stats_.set("moved_faces", static_cast<double>(touched.size()));
@@ -801,7 +880,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
     const auto t1 = std::chrono::steady_clock::now();
     const StreamedPairs streamed = stream_self_pairs(*s.broad, s.candidates, stats_, [&](std::span<const FacePair> chunk) {
       const auto c0 = std::chrono::steady_clock::now();
-      Tester tester{step, {}, {}, earliest};
+      Tester tester(step, earliest);
       // The records of a pair a few pairs ahead are fetched while this one is tested (the face
       // ids of a chunk are scattered: the loop is otherwise bound by memory latency).
       constexpr std::size_t kAhead = 16;
@@ -814,6 +893,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
         }
         tester.face_pair(chunk[i][0], chunk[i][1]);
       }
+      tester.flush();
       sink.take(tester, ms_since(c0));
     });
     stats_.set("candidates", static_cast<double>(streamed.candidates));
@@ -827,12 +907,12 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
   const auto& oee = s.orphans.ee;
   if (step.moved == nullptr) {
     parallel_for_chunks(ovf.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-      Tester tester{step, {}, {}, earliest};
+      Tester tester(step, earliest);
       for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[i][0], ovf[i][1]);
       sink.take(tester, 0);
     });
     parallel_for_chunks(oee.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
-      Tester tester{step, {}, {}, earliest};
+      Tester tester(step, earliest);
       for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[i].e[0], oee[i].e[1]);
       sink.take(tester, 0);
     });
@@ -852,12 +932,12 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
     const std::vector<std::uint32_t> vf_list = gather(s.orphans_of.vf_begin, s.orphans_of.vf);
     const std::vector<std::uint32_t> ee_list = gather(s.orphans_of.ee_begin, s.orphans_of.ee);
     parallel_for_chunks(vf_list.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
-      Tester tester{step, {}, {}, earliest};
+      Tester tester(step, earliest);
       for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[vf_list[i]][0], ovf[vf_list[i]][1]);
       sink.take(tester, 0);
     });
     parallel_for_chunks(ee_list.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
-      Tester tester{step, {}, {}, earliest};
+      Tester tester(step, earliest);
       for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[ee_list[i]].e[0], oee[ee_list[i]].e[1]);
       sink.take(tester, 0);
     });
@@ -866,7 +946,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
   // (exact/stars.hpp); the vertices of no face against the faces whose swept boxes they meet.
   std::atomic<std::size_t> star_pairs{0};
   parallel_for_chunks(s.orphans.stars.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
-    Tester tester{step, {}, {}, earliest};
+    Tester tester(step, earliest);
     exact::StarScratch scratch;
     for (std::size_t i = begin; i < end; ++i) {
       const Index v = s.orphans.stars[i];
@@ -896,7 +976,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
     detail::BoxTree tree;
     tree.build(boxes);
     parallel_for_chunks(isolated.size(), threads, 64, [&](std::size_t begin, std::size_t end) {
-      Tester tester{step, {}, {}, earliest};
+      Tester tester(step, earliest);
       for (std::size_t i = begin; i < end; ++i) {
         Box near = swept_box(isolated[i]);
         near.inflate(half);

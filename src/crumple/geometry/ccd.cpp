@@ -1,12 +1,19 @@
 #include <crumple/geometry/ccd.hpp>
 
 #include <crumple/core/error.hpp>
+#include <crumple/geometry/ccd_detail.hpp>
 #include <crumple/geometry/distance.hpp>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <queue>
 #include <vector>
+
+// The lanes' vector type has a different ABI with and without AVX, which GCC warns about at
+// every function taking or returning one; all of those are inlined into the two kernels.
+#pragma GCC diagnostic ignored "-Wpsabi"
 
 namespace crumple::geometry {
 
@@ -389,6 +396,219 @@ bool never_coplanar(const CcdPoints& start, const CcdPoints& end) {
   return certified_sign(b1, 3) == s && certified_sign(b2, 3) == s && certified_sign(b3, 1) == s;
 }
 
+// never_coplanar on four queries at once, one per lane of GCC's vector extension (one AVX2
+// register, or two SSE2 halves in the portable kernel). Every operation is the scalar code's,
+// in its order, on IEEE doubles with contraction off: each lane computes bit for bit what
+// never_coplanar computes for its query.
+using Lanes = Scalar __attribute__((vector_size(32)));
+using LaneMask = long long __attribute__((vector_size(32)));
+
+#define CRUMPLE_CCD_LANES inline __attribute__((always_inline))
+
+CRUMPLE_CCD_LANES Lanes splat(Scalar x) { return Lanes{x, x, x, x}; }
+CRUMPLE_CCD_LANES Lanes abs(Lanes x) {
+  const LaneMask sign = reinterpret_cast<LaneMask>(splat(-0.0));
+  return reinterpret_cast<Lanes>(reinterpret_cast<LaneMask>(x) & ~sign);
+}
+
+struct DetLanes {
+  Lanes value, error;
+};
+
+CRUMPLE_CCD_LANES DetLanes det3(const Lanes (&a)[3], const Lanes (&b)[3], const Lanes (&c)[3]) {
+  const Lanes bxcy = b[0] * c[1], cxby = c[0] * b[1];
+  const Lanes cxay = c[0] * a[1], axcy = a[0] * c[1];
+  const Lanes axby = a[0] * b[1], bxay = b[0] * a[1];
+  const Lanes value = a[2] * (bxcy - cxby) + b[2] * (cxay - axcy) + c[2] * (axby - bxay);
+  const Lanes permanent = (abs(bxcy) + abs(cxby)) * abs(a[2]) + (abs(cxay) + abs(axcy)) * abs(b[2]) +
+                          (abs(axby) + abs(bxay)) * abs(c[2]);
+  return {value, splat(8 * kU) * permanent};
+}
+
+/// certified_sign, lane by lane: `pos` where it is +1, `neg` where it is -1.
+CRUMPLE_CCD_LANES void certified_sign(const DetLanes* d, int n, LaneMask& pos, LaneMask& neg) {
+  Lanes sum = splat(0), abs_sum = splat(0), error = splat(0);
+  for (int i = 0; i < n; ++i) {
+    sum += d[i].value;
+    abs_sum += abs(d[i].value);
+    error += d[i].error;
+  }
+  const Lanes bound = (error + splat(3 * kU) * abs_sum) * splat(1 + 8 * kU) + splat(kUnderflowSlack);
+  pos = sum > bound;
+  neg = sum < -bound;
+}
+
+/// The points of queries q[index[0..3]] (lanes past `count` repeat the first), x[τ][point][axis],
+/// and per axis their largest |coordinate| (max_abs_coordinates).
+struct QueryLanes {
+  Lanes x[2][4][3];
+  Lanes m[3];
+};
+
+CRUMPLE_CCD_LANES void load_lanes(const detail::CcdQuery* q, const std::uint8_t* index, std::size_t count,
+                                  QueryLanes& out) {
+  const detail::CcdQuery* l[4];
+  for (std::size_t i = 0; i < 4; ++i) l[i] = &q[index[i < count ? i : 0]];
+  for (std::size_t i = 0; i < 4; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      out.x[0][i][k] = Lanes{l[0]->start[i][k], l[1]->start[i][k], l[2]->start[i][k], l[3]->start[i][k]};
+      out.x[1][i][k] = Lanes{l[0]->end[i][k], l[1]->end[i][k], l[2]->end[i][k], l[3]->end[i][k]};
+    }
+  }
+  for (int k = 0; k < 3; ++k) {
+    Lanes m = splat(0);
+    for (int tau = 0; tau < 2; ++tau) {
+      for (int i = 0; i < 4; ++i) m = m > abs(out.x[tau][i][k]) ? m : abs(out.x[tau][i][k]);
+    }
+    out.m[k] = m;
+  }
+}
+
+/// Lanes whose query `ccd` computes unscaled, with every filter: largest |coordinate| in
+/// [2^-300, 2^300] (0, where no filter rejects, is left out too). NaN compares false.
+CRUMPLE_CCD_LANES LaneMask unscaled_lanes(const QueryLanes& q) {
+  Lanes m = q.m[0] > q.m[1] ? q.m[0] : q.m[1];
+  m = m > q.m[2] ? m : q.m[2];
+  return (m >= splat(kMinUnscaledMagnitude)) & (m <= splat(kMaxSignFilterMagnitude));
+}
+
+CRUMPLE_CCD_LANES unsigned lane_bits(LaneMask yes, std::size_t count) {
+  unsigned bits = 0;
+  for (std::size_t l = 0; l < count; ++l) bits |= (yes[l] != 0 ? 1u : 0u) << l;
+  return bits;
+}
+
+/// Bit l set: query l of `q` (l < count; the other lanes repeat query 0) has its largest
+/// |coordinate| in [2^-300, 2^300] and never_coplanar would return true for it.
+CRUMPLE_CCD_LANES unsigned never_coplanar_lanes(const QueryLanes& q, std::size_t count) {
+  Lanes col[2][3][3];
+  for (int tau = 0; tau < 2; ++tau) {
+    for (int i = 0; i < 3; ++i) {
+      for (int k = 0; k < 3; ++k) col[tau][i][k] = q.x[tau][i + 1][k] - q.x[tau][0][k];
+    }
+  }
+  const auto mixed = [&](int t0, int t1, int t2) { return det3(col[t0][0], col[t1][1], col[t2][2]); };
+  const DetLanes b0[1] = {mixed(0, 0, 0)};
+  const DetLanes b1[3] = {mixed(1, 0, 0), mixed(0, 1, 0), mixed(0, 0, 1)};
+  const DetLanes b2[3] = {mixed(0, 1, 1), mixed(1, 0, 1), mixed(1, 1, 0)};
+  const DetLanes b3[1] = {mixed(1, 1, 1)};
+  LaneMask pos[4], neg[4];
+  certified_sign(b0, 1, pos[0], neg[0]);
+  certified_sign(b1, 3, pos[1], neg[1]);
+  certified_sign(b2, 3, pos[2], neg[2]);
+  certified_sign(b3, 1, pos[3], neg[3]);
+  const LaneMask apart = (pos[0] & pos[1] & pos[2] & pos[3]) | (neg[0] & neg[1] & neg[2] & neg[3]);
+  return lane_bits(apart & unscaled_lanes(q), count);
+}
+
+/// separated_along(n, hull, err, delta) lane by lane, the hull's `count` points in `d`.
+CRUMPLE_CCD_LANES LaneMask separated_along_lanes(const Lanes (&n)[3], const Lanes (*d)[3], int count,
+                                                 const Lanes (&err)[3], Lanes delta) {
+  const Lanes nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+  const LaneMask usable = (nn > splat(0)) & (nn <= splat(std::numeric_limits<Scalar>::max()));  // > 0, finite
+  Lanes lo = splat(INFINITY), hi = splat(-INFINITY), mag = splat(0);
+  for (int i = 0; i < count; ++i) {
+    const Lanes x = d[i][0] * n[0], y = d[i][1] * n[1], z = d[i][2] * n[2];
+    const Lanes s = (x + y) + z;
+    lo = s < lo ? s : lo;  // std::min(lo, s)
+    hi = hi < s ? s : hi;  // std::max(hi, s)
+    const Lanes a = abs(x) + abs(y) + abs(z);
+    mag = mag < a ? a : mag;
+  }
+  const Lanes slack = abs(n[0]) * err[0] + abs(n[1]) * err[1] + abs(n[2]) * err[2];
+  Lanes root = nn;
+  for (int l = 0; l < 4; ++l) root[l] = std::sqrt(nn[l]);
+  const Lanes bound = (delta * root + slack + splat(4 * kU) * mag) * splat(1 + 16 * kU) + splat(kUnderflowSlack);
+  return usable & ((lo > bound) | (hi < -bound));
+}
+
+CRUMPLE_CCD_LANES void cross(const Lanes (&a)[3], const Lanes (&b)[3], Lanes (&out)[3]) {
+  out[0] = a[1] * b[2] - a[2] * b[1];  // Eigen's cross, in its order
+  out[1] = a[2] * b[0] - a[0] * b[2];
+  out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/// Bit l set: query l is computed unscaled by `ccd` and separated_by_a_direction (after
+/// hull_may_touch built its hull and set_bounds its err) would return true for it.
+CRUMPLE_CCD_LANES unsigned separated_by_a_direction_lanes(CcdPair pair, const QueryLanes& q, Scalar delta,
+                                                          std::size_t count) {
+  const auto& x = q.x;
+  Lanes err[3];
+  for (int k = 0; k < 3; ++k) err[k] = splat(kCornerErrorFactor) * q.m[k] + splat(kUnderflowSlack);
+  Lanes hull[8][3];
+  int points = 0;
+  for (int tau = 0; tau < 2; ++tau) {
+    const auto add = [&](int i, int j) {
+      for (int k = 0; k < 3; ++k) hull[points][k] = x[tau][i][k] - x[tau][j][k];
+      ++points;
+    };
+    if (pair == CcdPair::kVertexFace) {
+      add(0, 1);
+      add(0, 2);
+      add(0, 3);
+    } else {
+      add(0, 2);
+      add(0, 3);
+      add(1, 2);
+      add(1, 3);
+    }
+  }
+  const Lanes d = splat(delta);
+  LaneMask apart = LaneMask{0, 0, 0, 0};
+  for (int tau = 0; tau < 2; ++tau) {
+    const auto diff = [&](int i, int j, Lanes (&out)[3]) {
+      for (int k = 0; k < 3; ++k) out[k] = x[tau][i][k] - x[tau][j][k];  // (times square = 1)
+    };
+    Lanes n[3];
+    if (pair == CcdPair::kVertexFace) {
+      Lanes e1[3], e2[3];
+      diff(2, 1, e1);
+      diff(3, 1, e2);
+      cross(e1, e2, n);
+      apart |= separated_along_lanes(n, hull, points, err, d);
+    } else {
+      Lanes da[3], db[3], w[3];
+      diff(1, 0, da);
+      diff(3, 2, db);
+      cross(da, db, n);
+      apart |= separated_along_lanes(n, hull, points, err, d);
+      const Lanes aa = da[0] * da[0] + da[1] * da[1] + da[2] * da[2];
+      diff(2, 0, w);
+      const Lanes c = (w[0] * da[0] + w[1] * da[1] + w[2] * da[2]) / aa;
+      for (int k = 0; k < 3; ++k) n[k] = w[k] - c * da[k];
+      apart |= (aa > splat(0)) & separated_along_lanes(n, hull, points, err, d);
+    }
+  }
+  return lane_bits(apart & unscaled_lanes(q), count);
+}
+
+/// The two filters over `index[0..count)` of `queries`, four at a time: bit set in out[i] =
+/// 1 (never coplanar, for `coplanarity`) or 2 (a separating direction, for `pair`).
+CRUMPLE_CCD_LANES void filter_batch(std::span<const detail::CcdQuery> queries, const std::uint8_t* index,
+                                    std::size_t count, bool coplanarity, CcdPair pair, Scalar delta,
+                                    std::uint8_t* out) {
+  for (std::size_t i = 0; i < count; i += 4) {
+    const std::size_t n = std::min<std::size_t>(4, count - i);
+    QueryLanes q;
+    load_lanes(queries.data(), index + i, n, q);
+    const unsigned bits = coplanarity ? never_coplanar_lanes(q, n) : separated_by_a_direction_lanes(pair, q, delta, n);
+    for (std::size_t l = 0; l < n; ++l) out[i + l] = static_cast<std::uint8_t>(bits >> l & 1u);
+  }
+}
+
+void filter_portable(std::span<const detail::CcdQuery> queries, const std::uint8_t* index, std::size_t count,
+                     bool coplanarity, CcdPair pair, Scalar delta, std::uint8_t* out) {
+  filter_batch(queries, index, count, coplanarity, pair, delta, out);
+}
+
+__attribute__((target("avx2"))) void filter_avx2(std::span<const detail::CcdQuery> queries,
+                                                 const std::uint8_t* index, std::size_t count, bool coplanarity,
+                                                 CcdPair pair, Scalar delta, std::uint8_t* out) {
+  filter_batch(queries, index, count, coplanarity, pair, delta, out);
+}
+
+#undef CRUMPLE_CCD_LANES
+
 struct Box {
   Scalar t0, t1, u0, u1, v0, v1;
   int depth;
@@ -557,7 +777,17 @@ Vec3 ccd_rounding_bound(const CcdPoints& start, const CcdPoints& end) {
   return err;
 }
 
-CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {
+namespace {
+
+/// Filters of an unscaled query known not to reject (their batched versions in ccd_detail.hpp
+/// gave 0), and so skipped.
+constexpr unsigned kCoplanarityDone = 1, kDirectionDone = 2;
+
+/// `ccd` after its option checks, skipping the filters in `done` for an unscaled query.
+CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options,
+                      unsigned done);
+
+void check_options(const CcdOptions& options) {
   const Scalar delta = options.min_separation;
   CRUMPLE_CHECK(delta >= 0 && delta <= kMaxMagnitude, "ccd: min_separation must be finite and >= 0");
   CRUMPLE_CHECK(options.max_boxes >= 1, "ccd: max_boxes must be >= 1");
@@ -565,8 +795,16 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   CRUMPLE_CHECK(options.max_time >= 0 && options.max_time <= 1, "ccd: max_time must be in [0, 1]");
   CRUMPLE_CHECK(options.distance_tolerance >= 0 && options.time_tolerance >= 0 && options.separation_tolerance >= 0,
                 "ccd: tolerances must be >= 0");
+}
+
+CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options,
+                      unsigned done) {
+  const Scalar delta = options.min_separation;
   CcdResult result;
   const Vec3 m = max_abs_coordinates(start, end);
+  // The batched filters vouch only for queries in [2^-300, 2^300] (unscaled_lanes): any other
+  // query, scaled or not, runs every filter.
+  if (!(m.maxCoeff() >= kMinUnscaledMagnitude && m.maxCoeff() <= kMaxSignFilterMagnitude)) done = 0;
   if (const Scalar largest = m.maxCoeff();
       largest <= kMaxMagnitude && (largest > kMaxUnscaledMagnitude || (largest > 0 && largest < kMinUnscaledMagnitude))) {
     // The same query scaled by 2^k into [1, 2), when no coordinate loses a bit: the underflow
@@ -590,7 +828,8 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
       if (std::scalbn(d, -k) < delta) d = std::nextafter(d, INFINITY);
       // A δ beyond 2^1000 at magnitude 1 keeps every pair within it, as the unscaled δ does.
       scaled.min_separation = std::min(d, kMaxMagnitude);
-      return ccd(pair, s, e, scaled);
+      // ccd_never_coplanar gives 0 for every scaled query: the filter runs on the scaled one.
+      return ccd_checked(pair, s, e, scaled, 0);
     }
   }
   if (!in_range(start, end)) {
@@ -609,11 +848,12 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   }
   prepare(p, pair, start, end);
   const Scalar magnitude = m.maxCoeff();
-  if (delta == 0 && magnitude <= kMaxSignFilterMagnitude && never_coplanar(start, end)) {
+  if (delta == 0 && magnitude <= kMaxSignFilterMagnitude && (done & kCoplanarityDone) == 0 &&
+      never_coplanar(start, end)) {
     result.outcome = CcdOutcome::kSeparatedCoplanarity;
     return result;
   }
-  if (separated_by_a_direction(pair, start, end, hull, p.err, delta, p.square)) {
+  if ((done & kDirectionDone) == 0 && separated_by_a_direction(pair, start, end, hull, p.err, delta, p.square)) {
     result.outcome = CcdOutcome::kSeparatedDirection;
     return result;
   }
@@ -646,6 +886,62 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
   result.advance_steps = steps;
   return result;
 }
+
+}  // namespace
+
+CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {
+  check_options(options);
+  return ccd_checked(pair, start, end, options, 0);
+}
+
+namespace detail {
+
+bool ccd_has_avx2() {
+  static const bool yes = [] {
+    __builtin_cpu_init();  // in case the first call comes before libgcc's own initialisation
+    return __builtin_cpu_supports("avx2") != 0;
+  }();
+  return yes;
+}
+
+namespace {
+
+void run_filter(std::span<const CcdQuery> queries, const std::uint8_t* index, std::size_t count, bool coplanarity,
+                CcdPair pair, Scalar delta, std::uint8_t* out, bool avx2) {
+  if (avx2 && ccd_has_avx2()) {
+    filter_avx2(queries, index, count, coplanarity, pair, delta, out);
+  } else {
+    filter_portable(queries, index, count, coplanarity, pair, delta, out);
+  }
+}
+
+}  // namespace
+
+void ccd_never_coplanar(std::span<const CcdQuery> queries, std::uint8_t* out, bool avx2) {
+  constexpr std::uint8_t kFirst[4] = {0, 1, 2, 3};
+  for (std::size_t i = 0; i < queries.size(); i += 4) {
+    const std::size_t n = std::min<std::size_t>(4, queries.size() - i);
+    run_filter(queries.subspan(i), kFirst, n, true, CcdPair::kVertexFace, 0, out + i, avx2);
+  }
+}
+
+void ccd_separated_by_a_direction(CcdPair pair, std::span<const CcdQuery> queries,
+                                  std::span<const std::uint8_t> index, Scalar delta, std::uint8_t* out, bool avx2) {
+  run_filter(queries, index.data(), index.size(), false, pair, delta, out, avx2);
+}
+
+CcdResult ccd_after_coplanarity(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
+                                const CcdOptions& options) {
+  check_options(options);
+  return ccd_checked(pair, start, end, options, kCoplanarityDone);
+}
+
+CcdResult ccd_after_direction(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {
+  check_options(options);
+  return ccd_checked(pair, start, end, options, kCoplanarityDone | kDirectionDone);
+}
+
+}  // namespace detail
 
 CcdResult vertex_face_ccd(const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {
   return ccd(CcdPair::kVertexFace, start, end, options);
