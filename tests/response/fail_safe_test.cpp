@@ -221,13 +221,13 @@ TEST(FailSafe, RestrictedQueriesGiveTheSameCorrection) {
       }
       for (const FailSafeStats* later : {stats2, stats3}) {
         later_with_impacts += later[0].impacts > 0 ? 1 : 0;
-        EXPECT_EQ(later[1].queries, later[0].queries);
+        EXPECT_EQ(later[1].queries + later[1].unchanged, later[0].queries);
         EXPECT_EQ(later[1].impacts, later[0].impacts);
         EXPECT_EQ(later[1].frozen, later[0].frozen);
       }
       EXPECT_GE(stats[1].queries, 2) << "the correction must need later queries";
-      most_queries = std::max(most_queries, stats[1].queries);
-      EXPECT_EQ(stats[1].queries, stats[0].queries);
+      most_queries = std::max(most_queries, stats[1].queries + stats[1].unchanged);
+      EXPECT_EQ(stats[1].queries + stats[1].unchanged, stats[0].queries);
       EXPECT_EQ(stats[1].impacts, stats[0].impacts);
       EXPECT_EQ(stats[1].zone_vertices, stats[0].zone_vertices);
       EXPECT_EQ(stats[1].frozen, stats[0].frozen);
@@ -268,6 +268,42 @@ TEST(FailSafe, CleanFrameIsLeftBitForBit) {
   EXPECT_EQ(stats.impacts, 0u);
   EXPECT_EQ(c.end, before);
   EXPECT_EQ(c.velocity, v_before);
+}
+
+// `queries` counts the continuous queries that ran; a check that finds no end moved since the
+// last query reuses its answer and counts in `unchanged`. A second apply from the same start
+// with the corrected ends runs no query at all; full queries (restrict_queries off) run one for
+// every check, the same count as queries + unchanged.
+TEST(FailSafe, QueriesCountOnlyQueriesThatRan) {
+  for (const bool restrict : {false, true}) {
+    SCOPED_TRACE(restrict ? "restricted queries" : "full queries");
+    Crossing c;
+    FailSafeOptions o = options(3, 8);
+    o.restrict_queries = restrict;
+    CcdFailSafe safe(c.topology, o);
+    const FailSafeStats first = safe.apply(c.start, c.inv_mass, 0.1, c.end, c.velocity);
+    EXPECT_GT(first.impacts, 0u);
+    EXPECT_GE(first.queries, 2);
+    const Positions corrected = c.end;
+    const FailSafeStats again = safe.apply(c.start, c.inv_mass, 0.1, c.end, c.velocity);
+    EXPECT_EQ(again.impacts, 0u);
+    EXPECT_EQ(c.end, corrected);
+    EXPECT_EQ(again.queries + again.unchanged, 1);
+    EXPECT_EQ(again.queries, restrict ? 0 : 1) << "no end moved: the last query's answer stands";
+  }
+  // All pinned: the impulse round moves nothing, so its check needs no query.
+  FailSafeStats stats[2];
+  for (const bool restrict : {false, true}) {
+    Crossing c;
+    std::fill(c.inv_mass.begin(), c.inv_mass.end(), 0);
+    FailSafeOptions o = options(20, 8);
+    o.restrict_queries = restrict;
+    CcdFailSafe safe(c.topology, o);
+    stats[restrict] = safe.apply(c.start, c.inv_mass, 0.1, c.end, c.velocity);
+  }
+  EXPECT_EQ(stats[0].unchanged, 0);
+  EXPECT_GT(stats[1].unchanged, 0);
+  EXPECT_EQ(stats[1].queries + stats[1].unchanged, stats[0].queries);
 }
 
 TEST(FailSafe, RejectsBadOptions) {

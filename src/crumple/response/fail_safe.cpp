@@ -139,7 +139,7 @@ CcdFailSafe::CcdFailSafe(std::shared_ptr<const Topology> topology, FailSafeOptio
 
 std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> positions, FailSafeStats& stats) {
   const PositionsView end(positions.data(), positions.size());
-  const bool restrict = options_.restrict_queries && (stats.queries > 0 || same_start_);
+  const bool restrict = options_.restrict_queries && (stats.queries + stats.unchanged > 0 || same_start_);
   queried_valid_ = false;  // until the query has answered
   if (!restrict) {
     query_.query(start, end, impacts_);
@@ -153,12 +153,13 @@ std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> posit
       count += static_cast<std::size_t>(moved_[i]);
     }
     if (count > 0) query_.update_moved(start, end, moved_, impacts_);
+    ++(count > 0 ? stats.queries : stats.unchanged);
   }
+  if (!restrict) ++stats.queries;
   if (options_.restrict_queries) {
     queried_.assign(positions.begin(), positions.end());
     queried_valid_ = true;
   }
-  ++stats.queries;
   live_.clear();
   const Scalar delta = options_.min_separation;
   geometry::CcdOptions touching = options_.query.narrow;
