@@ -264,6 +264,7 @@ FailSafeStats CcdFailSafe::apply(PositionsView start, std::span<const Scalar> in
       if (!stalled || !any || r >= options_.impulse_rounds) break;
       std::erase_if(live_, [&](Stencil& s) { return !retest(s, start, positions, narrow); });
       if (live_.empty()) break;
+      ++stats.retested_rounds;  // the next round runs on the re-tested pairs
     }
     if (detect(start, positions, stats) == 0) return finish();
     // No impulse since the last query: the motion is that query's, and so would every later

@@ -76,7 +76,10 @@ struct FailSafeStats {
   /// each of them is a full query instead: `queries + unchanged` is the same either way.
   int unchanged = 0;
   std::size_t impacts = 0;     ///< live impacts of the proposed motion (first check)
-  int impulse_rounds = 0;      ///< impulse rounds run
+  int impulse_rounds = 0;      ///< impulse rounds run (including `retested_rounds`)
+  /// Impulse rounds run on the last query's pairs alone, each re-tested by the narrow phase
+  /// instead of queried (after a query returned the pairs of the one before; file comment).
+  int retested_rounds = 0;
   int zone_rounds = 0;         ///< zone rounds run
   std::size_t zone_vertices = 0;  ///< vertices in impact zones
   std::size_t frozen = 0;      ///< vertices kept at their start positions by the fallback
