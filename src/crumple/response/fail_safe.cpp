@@ -139,7 +139,7 @@ CcdFailSafe::CcdFailSafe(std::shared_ptr<const Topology> topology, FailSafeOptio
 
 std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> positions, FailSafeStats& stats) {
   const PositionsView end(positions.data(), positions.size());
-  const bool restrict = options_.restrict_queries && (stats.queries > 0 || same_start_);
+  const bool restrict = options_.restrict_queries && (stats.queries + stats.unchanged > 0 || same_start_);
   queried_valid_ = false;  // until the query has answered
   if (!restrict) {
     query_.query(start, end, impacts_);
@@ -153,12 +153,13 @@ std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> posit
       count += static_cast<std::size_t>(moved_[i]);
     }
     if (count > 0) query_.update_moved(start, end, moved_, impacts_);
+    ++(count > 0 ? stats.queries : stats.unchanged);
   }
+  if (!restrict) ++stats.queries;
   if (options_.restrict_queries) {
     queried_.assign(positions.begin(), positions.end());
     queried_valid_ = true;
   }
-  ++stats.queries;
   live_.clear();
   const Scalar delta = options_.min_separation;
   geometry::CcdOptions touching = options_.query.narrow;
@@ -263,6 +264,7 @@ FailSafeStats CcdFailSafe::apply(PositionsView start, std::span<const Scalar> in
       if (!stalled || !any || r >= options_.impulse_rounds) break;
       std::erase_if(live_, [&](Stencil& s) { return !retest(s, start, positions, narrow); });
       if (live_.empty()) break;
+      ++stats.retested_rounds;  // the next round runs on the re-tested pairs
     }
     if (detect(start, positions, stats) == 0) return finish();
     // No impulse since the last query: the motion is that query's, and so would every later

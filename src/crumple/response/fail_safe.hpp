@@ -67,9 +67,19 @@ struct FailSafeOptions {
 
 /// What one `apply` did.
 struct FailSafeStats {
-  int queries = 0;             ///< continuous queries run (1 when the frame was clean)
-  std::size_t impacts = 0;     ///< live impacts of the proposed motion (first query)
-  int impulse_rounds = 0;      ///< impulse rounds run
+  /// Continuous queries run (full sweeps or `update_moved` calls). A clean frame is one check:
+  /// a query, or an `unchanged` one.
+  int queries = 0;
+  /// Checks answered without a query (`restrict_queries`): no end had moved since the last
+  /// query, so its impacts stand, bit for bit (e.g. after a round that applied no impulse, or
+  /// a second `apply` from the same start with the same ends). With `restrict_queries` off,
+  /// each of them is a full query instead: `queries + unchanged` is the same either way.
+  int unchanged = 0;
+  std::size_t impacts = 0;     ///< live impacts of the proposed motion (first check)
+  int impulse_rounds = 0;      ///< impulse rounds run (including `retested_rounds`)
+  /// Impulse rounds run on the last query's pairs alone, each re-tested by the narrow phase
+  /// instead of queried (after a query returned the pairs of the one before; file comment).
+  int retested_rounds = 0;
   int zone_rounds = 0;         ///< zone rounds run
   std::size_t zone_vertices = 0;  ///< vertices in impact zones
   std::size_t frozen = 0;      ///< vertices kept at their start positions by the fallback
