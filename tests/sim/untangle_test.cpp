@@ -26,6 +26,9 @@ struct Untangled {
   int misreported = 0;  ///< frames whose `FrameStats::intersecting_pairs` or `pinches` is not the count
   int intersecting_after_clean = 0;  ///< frames with pairs after the first clean one
   response::IntersectionAnalysis start;  ///< the analysis of the state when the response starts
+  /// Frames whose start holds a curve from the border to a pinch, closed to the border with an
+  /// inside (`response::Contour::closure`).
+  int closed_border_to_pinch = 0;
 };
 
 /// `spec` simulated `off_frames` frames with the response off, then `on_frames` with it on;
@@ -55,6 +58,14 @@ Untangled run(const std::string& spec, int off_frames, int on_frames, bool untan
       topology, sim.state().x, testing::intersecting_triangles(sim.model().topology_ptr(), sim.state().x),
       sim.model().inv_mass());
   for (int f = 1; f <= on_frames; ++f) {
+    if (f > 1 && r.last_pairs > 0) {
+      const response::IntersectionAnalysis a = response::analyse_intersections(
+          topology, sim.state().x, testing::intersecting_triangles(sim.model().topology_ptr(), sim.state().x),
+          sim.model().inv_mass());
+      bool closed = false;
+      for (const response::Contour& k : a.contours) closed |= !k.closure.empty() && !k.inside.empty();
+      r.closed_border_to_pinch += closed;
+    }
     const FrameStats st = sim.advance_frame();
     const testing::ExactIntersections now = testing::exact_intersections(topology, sim.state().x);
     r.last_pairs = now.disjoint + now.pinches;
@@ -119,10 +130,26 @@ TEST(Untangle, CurveFromTheBorderToAPinchIsUntangled) {
   const Untangled r = run("hanging-cloth:nx=20,ny=20", 200, 60, true, 2);
   bool border_to_pinch = false;
   for (const response::Contour& k : r.start.contours) {
-    border_to_pinch |= k.open && !k.pinches.empty() && k.inside.empty() && k.pairs >= 20;
+    border_to_pinch |= k.open && !k.pinches.empty() && !k.closure.empty() && k.pairs >= 20;
   }
-  EXPECT_TRUE(border_to_pinch) << "the start holds a curve from the border to a pinch, enclosing nothing";
+  EXPECT_TRUE(border_to_pinch) << "the start holds a curve from the border to a pinch, closed to the border";
   EXPECT_GT(r.tangled_pairs, 100u);
+  EXPECT_GE(r.frames_to_clean, 1);
+  EXPECT_LE(r.frames_to_clean, 60);
+  EXPECT_EQ(r.last_pairs, 0u);
+  EXPECT_EQ(r.intersecting_after_clean, 0);
+  EXPECT_EQ(r.misreported, 0);
+}
+
+// The 20 x 20 hanging cloth, seed 3, after 300 frames without response: its curves from the
+// border to a pinch come and go, and the last of them lasts: without closing such a curve to
+// the border (`Contour::closure`) and pulling the flap it then cuts off back through, only the
+// border step acted on it and 22 pairs and a pinch were left after 100 frames. Closed, the
+// cloth is intersection-free, pinches included, within 60 frames (measured: 22) and stays so.
+TEST(Untangle, CurveFromTheBorderToAPinchIsClosedAndItsFlapFlipped) {
+  const Untangled r = run("hanging-cloth:nx=20,ny=20", 300, 60, true, 3);
+  EXPECT_GT(r.tangled_pairs, 100u);
+  EXPECT_GT(r.closed_border_to_pinch, 0) << "some frame closes a curve from the border to a pinch";
   EXPECT_GE(r.frames_to_clean, 1);
   EXPECT_LE(r.frames_to_clean, 60);
   EXPECT_EQ(r.last_pairs, 0u);

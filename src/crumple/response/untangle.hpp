@@ -27,6 +27,12 @@
 ///     outside instead. This also handles open contours: a flap of the cloth whose intersection
 ///     curve runs from its border to its border is cut off and is the inside; a curve that cuts
 ///     nothing (from the border of one sheet to the border of another, a slit) has no inside.
+///     A curve from the border to a pinch cuts nothing either (its second preimage ends inside
+///     the face its border side passes through); it is closed from that face to the border
+///     across the fewest edges (`Contour::closure`, also cut), which cuts off the flap on that
+///     side of the curve: flipping it through moves the pinch along the fold to the cloth's end.
+///     When that flap is not the smaller side (it holds a pin) the closure is dropped and the
+///     curve has no inside.
 ///
 /// Pushes (`Untangler::apply`), built at the analysed positions, applied after each step:
 ///  - a crossing whose edge has one end inside (or at a pinch of its contour: the part of the
@@ -85,6 +91,10 @@ struct Contour {
   /// curve cuts nothing off).
   std::size_t parts = 0;
   std::vector<Index> inside;     ///< vertices of its inside parts (sorted; empty: no inside)
+  /// A curve from the border to a pinch: the edges that close it to the border, cutting off
+  /// `inside` (see the file comment, 3); empty for any other curve, or when the flap it cut
+  /// off held a pin.
+  std::vector<Index> closure;
 };
 
 /// A side of a face of a vertex's star passing through another face of that star sharing only
