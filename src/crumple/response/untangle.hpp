@@ -50,8 +50,8 @@
 ///    face's normal, R_f the curve's direction into f), normalised — the first-order change of
 ///    the curve's length when the edge moves (the N term dropped when |E·N| is tiny). The
 ///    border crossings of a contour that ends at a pinch move by σ_b (`border_step`) instead:
-///    a curve from the border to a pinch encloses nothing, and its border end is the only end
-///    that can leave the cloth.
+///    a curve from the border to a pinch left with no inside (its flap holds a pin) encloses
+///    nothing, and its border end is the only end that can leave the cloth.
 /// The vertices of inside regions and of intersecting faces form the *tangle*; a contact or
 /// impact whose two sides both touch the tangle is exempt from the regular response and the
 /// fail-safe (`touches_tangle_on_both_sides`), which would otherwise hold the intersection in
