@@ -324,6 +324,25 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
       }
     }
   }
+  // A closed curve between pinches is a stretch of a fold folded beyond flat, its two sides
+  // through each other. Flipping it back moves its vertices through faces next to the
+  // intersecting ones, which the contacts and the fail-safe would hold: the vertices one edge
+  // from the curve's crossing edges and crossed faces join the tangle.
+  std::vector<char> ring(at(nv), 0);
+  for (const Contour& k : out.contours) {
+    if (k.pinches.size() < 2 || k.open) continue;
+    for (Index i : k.crossings) {
+      const Crossing& c = out.crossings[at(i)];
+      for (Index v : topology.edge(c.edge)) ring[at(v)] = 1;
+      for (Index v : topology.face(c.face)) ring[at(v)] = 1;
+    }
+  }
+  for (Index v = 0; v < nv; ++v) {
+    if (!ring[at(v)]) continue;
+    for (Index e : topology.vertex_edges()[v]) {
+      for (Index w : topology.edge(e)) out.tangle[at(w)] = 1;
+    }
+  }
   out.inside_vertices = static_cast<std::size_t>(std::count(inside_any.begin(), inside_any.end(), 1));
   return out;
 }
