@@ -32,6 +32,52 @@ struct Record {
   bool operator<(const Record& o) const { return std::tie(edge, face, pair) < std::tie(o.edge, o.face, o.pair); }
 };
 
+/// The fewest mesh edges crossed going from a face that a boundary crossing of `k` passes
+/// through to the cloth's border (its last edge a boundary edge), not crossing `cut` edges;
+/// empty when there is none. Breadth-first over faces; `came_from` (#F, all -1) is left so.
+void closure_to_border(const Topology& topology, const std::vector<Crossing>& crossings, const Contour& k,
+                       const std::vector<char>& cut, std::vector<Index>& came_from, std::vector<Index>& queue,
+                       std::vector<Index>& closure) {
+  queue.clear();
+  for (Index i : k.crossings) {
+    const Crossing& c = crossings[at(i)];
+    if (topology.edge_faces()[c.edge].size() == 1 && came_from[at(c.face)] < 0) {
+      came_from[at(c.face)] = c.face;  // a start: its own origin
+      queue.push_back(c.face);
+    }
+  }
+  Index end_face = -1, end_edge = -1;
+  for (std::size_t head = 0; head < queue.size() && end_face < 0; ++head) {
+    const Index f = queue[head];
+    for (Index e : topology.face_edges(f)) {
+      if (cut[at(e)]) continue;
+      const auto faces = topology.edge_faces()[e];
+      if (faces.size() == 1) {
+        end_face = f;
+        end_edge = e;
+        break;
+      }
+      for (Index g : faces) {
+        if (came_from[at(g)] < 0) {
+          came_from[at(g)] = f;
+          queue.push_back(g);
+        }
+      }
+    }
+  }
+  if (end_face >= 0) {
+    closure.push_back(end_edge);
+    for (Index f = end_face; came_from[at(f)] != f; f = came_from[at(f)]) {
+      const Index g = came_from[at(f)];
+      for (Index e : topology.face_edges(f)) {
+        const auto faces = topology.edge_faces()[e];
+        if (faces.size() == 2 && (faces[0] == g || faces[1] == g)) closure.push_back(e);
+      }
+    }
+  }
+  for (Index f : queue) came_from[at(f)] = -1;
+}
+
 Vec3 unit_normal(const Face& f, PositionsView x) {
   const Vec3 n = (x[at(f[1])] - x[at(f[0])]).cross(x[at(f[2])] - x[at(f[0])]);
   const Scalar len = n.norm();
@@ -225,10 +271,20 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
   std::vector<Index> piece_of_part;
   std::vector<Index> outside_of_piece(pieces);
   std::vector<char> piece_pinned(pieces);
+  std::vector<Index> came_from(at(topology.num_faces()), -1), queue;
   for (Contour& k : out.contours) {
     for (Index i : k.crossings) cut[at(out.crossings[at(i)].edge)] = 1;
     for (Index v : k.pinches) blocked[at(v)] = 1;
     k.parts = fill(part);
+    if (k.parts == pieces && k.open && !k.pinches.empty() && k.pairs > 0) {
+      // A curve from the border to a pinch cuts nothing off: its second preimage ends inside the
+      // face its border side passes through. Closed from that face to the border along the
+      // fewest mesh edges, it cuts off the flap on that side of the curve, which goes through.
+      closure_to_border(topology, out.crossings, k, cut, came_from, queue, k.closure);
+      for (Index e : k.closure) cut[at(e)] = 1;
+      if (!k.closure.empty()) k.parts = fill(part);
+      for (Index e : k.closure) cut[at(e)] = 0;
+    }
     for (Index i : k.crossings) cut[at(out.crossings[at(i)].edge)] = 0;
     for (Index v : k.pinches) blocked[at(v)] = 0;
     if (k.parts == pieces) continue;  // the curve cuts nothing off
@@ -246,6 +302,19 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
       Index& outside = outside_of_piece[at(pc)];
       if (outside < 0 || size[id] > size[at(outside)]) outside = static_cast<Index>(id);
     }
+    if (!k.closure.empty()) {
+      // The closure chose the flap; one holding a pin cannot go through (and the rest of the
+      // cloth is no flap): the curve is left with no inside.
+      bool pinned_flap = false;
+      for (std::size_t id = 0; id < k.parts; ++id) {
+        pinned_flap |= size[id] > size[at(outside_of_piece[at(piece_of_part[id])])];
+      }
+      if (pinned_flap) {
+        k.closure.clear();
+        k.parts = pieces;
+        continue;
+      }
+    }
     for (Index v = 0; v < nv; ++v) {
       const Index id = part[at(v)];
       if (id >= 0 && id != outside_of_piece[at(piece[at(v)])] && !pinned[at(id)]) {
@@ -253,6 +322,25 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
         inside_any[at(v)] = 1;
         out.tangle[at(v)] = 1;
       }
+    }
+  }
+  // A closed curve between pinches is a stretch of a fold folded beyond flat, its two sides
+  // through each other. Flipping it back moves its vertices through faces next to the
+  // intersecting ones, which the contacts and the fail-safe would hold: the vertices one edge
+  // from the curve's crossing edges and crossed faces join the tangle.
+  std::vector<char> ring(at(nv), 0);
+  for (const Contour& k : out.contours) {
+    if (k.pinches.size() < 2 || k.open) continue;
+    for (Index i : k.crossings) {
+      const Crossing& c = out.crossings[at(i)];
+      for (Index v : topology.edge(c.edge)) ring[at(v)] = 1;
+      for (Index v : topology.face(c.face)) ring[at(v)] = 1;
+    }
+  }
+  for (Index v = 0; v < nv; ++v) {
+    if (!ring[at(v)]) continue;
+    for (Index e : topology.vertex_edges()[v]) {
+      for (Index w : topology.edge(e)) out.tangle[at(w)] = 1;
     }
   }
   out.inside_vertices = static_cast<std::size_t>(std::count(inside_any.begin(), inside_any.end(), 1));

@@ -27,6 +27,12 @@
 ///     outside instead. This also handles open contours: a flap of the cloth whose intersection
 ///     curve runs from its border to its border is cut off and is the inside; a curve that cuts
 ///     nothing (from the border of one sheet to the border of another, a slit) has no inside.
+///     A curve from the border to a pinch cuts nothing either (its second preimage ends inside
+///     the face its border side passes through); it is closed from that face to the border
+///     across the fewest edges (`Contour::closure`, also cut), which cuts off the flap on that
+///     side of the curve: flipping it through moves the pinch along the fold to the cloth's end.
+///     When that flap is not the smaller side (it holds a pin) the closure is dropped and the
+///     curve has no inside.
 ///
 /// Pushes (`Untangler::apply`), built at the analysed positions, applied after each step:
 ///  - a crossing whose edge has one end inside (or at a pinch of its contour: the part of the
@@ -44,9 +50,11 @@
 ///    face's normal, R_f the curve's direction into f), normalised — the first-order change of
 ///    the curve's length when the edge moves (the N term dropped when |E·N| is tiny). The
 ///    border crossings of a contour that ends at a pinch move by σ_b (`border_step`) instead:
-///    a curve from the border to a pinch encloses nothing, and its border end is the only end
-///    that can leave the cloth.
-/// The vertices of inside regions and of intersecting faces form the *tangle*; a contact or
+///    a curve from the border to a pinch left with no inside (its flap holds a pin) encloses
+///    nothing, and its border end is the only end that can leave the cloth.
+/// The vertices of inside regions and of intersecting faces, and for a closed curve between two
+/// or more pinches (a stretch of a fold folded beyond flat) every vertex one edge from its
+/// crossing edges and crossed faces, form the *tangle*; a contact or
 /// impact whose two sides both touch the tangle is exempt from the regular response and the
 /// fail-safe (`touches_tangle_on_both_sides`), which would otherwise hold the intersection in
 /// place.
@@ -85,6 +93,10 @@ struct Contour {
   /// curve cuts nothing off).
   std::size_t parts = 0;
   std::vector<Index> inside;     ///< vertices of its inside parts (sorted; empty: no inside)
+  /// A curve from the border to a pinch: the edges that close it to the border, cutting off
+  /// `inside` (see the file comment, 3); empty for any other curve, or when the flap it cut
+  /// off held a pin.
+  std::vector<Index> closure;
 };
 
 /// A side of a face of a vertex's star passing through another face of that star sharing only
