@@ -291,13 +291,15 @@ double number_option(const std::string& arg, std::size_t prefix) {
 }  // namespace
 
 /// `--check-frames=SPEC [--frames=N] [--fail-safe=off] [--response=on] [--search-factor=F]
-/// [--rho=R] [--threads=T] [--verbose]`:
+/// [--rho=R] [--iterations=N] [--settle=F] [--substeps=S] [--threads=T] [--verbose]`:
 /// runs N frames (1000) of the built-in scene SPEC with the `frame/` rows' settings
 /// (`--response=on` turns the response, and with it the fail-safe, on for scenes that have it
 /// off, e.g. hanging-cloth), counting the intersecting triangle pairs after every frame with the
 /// exact detector (kdop, kinds tt, as the rows do). `--search-factor` sets
-/// `Settings::search_factor` (the proximity radius in thicknesses), `--rho` the projective
-/// step's Chebyshev ρ, `--threads` the detector's and the integrator's threads (0: all).
+/// `Settings::search_factor` (the proximity radius in thicknesses); `--rho`, `--iterations` and
+/// `--settle` the projective step's Chebyshev ρ, iterations and settling tolerance (a fraction of
+/// h_c, as the ribbon's `settle` key); `--substeps` the steps per frame (the frame's length kept);
+/// `--threads` the detector's and the integrator's threads (0: all).
 /// Prints every frame with intersections (`--verbose`: every frame), a progress line every 10 s
 /// (CRUMPLE_PROGRESS_SECONDS sets the period) and a summary line, also when the run stops early:
 /// on a divergence, or on SIGINT / SIGTERM (after the current frame). Output is line-buffered,
@@ -310,6 +312,8 @@ int check_frames(int argc, char** argv) {
   bool fail_safe = true, response = false, verbose = false;
   double search_factor = 0;  // 0: the scene's
   double rho = -1;           // < 0: the scene's
+  double settle = -1;        // < 0: the scene's
+  int iterations_option = 0, substeps = 0;  // 0: the scene's
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
@@ -331,6 +335,17 @@ int check_frames(int argc, char** argv) {
       } else if (a.rfind("--rho=", 0) == 0) {
         rho = number_option(a, 6);
         if (!(rho >= 0 && rho < 1)) throw InputError("--rho expects a number in [0, 1)");
+      } else if (a.rfind("--iterations=", 0) == 0) {
+        const double v = number_option(a, 13);
+        if (!(v >= 1) || v != std::floor(v) || v > 1000) throw InputError("--iterations expects an integer >= 1");
+        iterations_option = static_cast<int>(v);
+      } else if (a.rfind("--settle=", 0) == 0) {
+        settle = number_option(a, 9);
+        if (!(settle >= 0)) throw InputError("--settle expects a number >= 0");
+      } else if (a.rfind("--substeps=", 0) == 0) {
+        const double v = number_option(a, 11);
+        if (!(v >= 1) || v != std::floor(v) || v > 1000) throw InputError("--substeps expects an integer >= 1");
+        substeps = static_cast<int>(v);
       } else if (a.rfind("--threads=", 0) == 0) {
         const double v = number_option(a, 10);
         if (!(v >= 0) || v != std::floor(v) || v > 1024) throw InputError("--threads expects an integer >= 0");
@@ -357,6 +372,12 @@ int check_frames(int argc, char** argv) {
   settings.fail_safe = fail_safe;
   if (search_factor > 0) settings.search_factor = search_factor;
   if (rho >= 0) settings.integrator_options.projective_rho = rho;
+  if (iterations_option > 0) settings.integrator_options.projective_iterations = iterations_option;
+  if (settle >= 0) settings.integrator_options.projective_tolerance = settle * settings.detector.thickness;
+  if (substeps > 0) {
+    settings.dt *= static_cast<double>(settings.substeps) / substeps;
+    settings.substeps = substeps;
+  }
   if (threads >= 0) settings.detector.threads = settings.integrator_options.threads = threads;
   Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
                  settings);
@@ -365,8 +386,16 @@ int check_frames(int argc, char** argv) {
   tt->update(sim.state().x, intersections);
   std::string step(to_string(settings.integrator));
   if (settings.integrator == IntegratorKind::Projective) {
-    char buffer[64];
-    std::snprintf(buffer, sizeof buffer, " (rho %.2g)", settings.integrator_options.projective_rho);
+    char buffer[96];
+    std::snprintf(buffer, sizeof buffer, " (rho %.2g, %d iterations, settle %.3g m)",
+                  settings.integrator_options.projective_rho, settings.integrator_options.projective_iterations,
+                  settings.integrator_options.projective_tolerance);
+    step += buffer;
+  }
+  {
+    char buffer[96];
+    std::snprintf(buffer, sizeof buffer, ", %d steps of %.4g s, search %.3g h_c", settings.substeps, settings.dt,
+                  settings.search_factor);
     step += buffer;
   }
   std::printf("%s: %d vertices, response %s, fail-safe %s, %s, start: %zu intersecting pairs\n", spec.c_str(),

@@ -60,6 +60,16 @@ TEST(SimBenchCheckFrames, CleanRunReportsProgressEveryPeriodAndASummary) {
   EXPECT_GT(number_after(summary, "fastest "), 0) << summary;
 }
 
+TEST(SimBenchCheckFrames, StepOptionsReachTheSimulation) {
+  const testing::CliResult defaults = check("cloth-on-sphere:n=4 --frames=1 --threads=1");
+  EXPECT_TRUE(has(defaults.out, "projective (rho 0.8, 5 iterations, settle 0 m), 4 steps of 0.004167 s")) << defaults.out;
+  const testing::CliResult set =
+      check("cloth-on-sphere:n=4 --frames=1 --threads=1 --rho=0 --iterations=7 --settle=0.5 --substeps=2");
+  EXPECT_EQ(set.status, 0) << set.out;
+  EXPECT_TRUE(has(set.out, "projective (rho 0, 7 iterations, settle ")) << set.out;
+  EXPECT_TRUE(has(set.out, "), 2 steps of 0.008333 s")) << set.out;
+}
+
 TEST(SimBenchCheckFrames, IntersectingFramesAreListedAndFailTheRun) {
   // The thesis scene without response falls through itself (docs/simulation.md): the 6x6 cloth's
   // folds pass through each other within 60 frames.
@@ -131,6 +141,9 @@ TEST(SimBenchCheckFrames, BadArgumentsAreClearErrors) {
                         Case{"cloth-on-sphere:n=4 --frames=0", "--frames expects an integer >= 1"},
                         Case{"cloth-on-sphere:n=4 --rho=1", "--rho expects a number in [0, 1)"},
                         Case{"cloth-on-sphere:n=4 --threads=-1", "--threads expects an integer >= 0"},
+                        Case{"cloth-on-sphere:n=4 --iterations=0", "--iterations expects an integer >= 1"},
+                        Case{"cloth-on-sphere:n=4 --settle=-1", "--settle expects a number >= 0"},
+                        Case{"cloth-on-sphere:n=4 --substeps=2.5", "--substeps expects an integer >= 1"},
                         Case{"cloth-on-sphere:n=4 --bogus", "unknown argument '--bogus'"},
                         Case{"bogus-scene", "unknown scene 'bogus-scene'"},
                         Case{"cloth-on-sphere:n=0", "key 'n' must be between 1"}}) {
