@@ -19,9 +19,15 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <limits>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 
 namespace {
@@ -91,10 +97,12 @@ void BM_Response(benchmark::State& bench, int n) {
 
 /// Whole frames of a built-in scene with its default settings (`fail_safe` off: the baseline).
 /// Intersecting triangle pairs are counted at every frame, warm-up included, outside the timing.
-/// The exact detector of intersecting triangle pairs (`kdop`, kinds `tt`) over `sim`'s mesh.
-std::unique_ptr<Detector> intersection_counter(const Simulation& sim) {
+/// The exact detector of intersecting triangle pairs (`kdop`, kinds `tt`) over `sim`'s mesh, on
+/// `threads` threads (< 0: the detector's default).
+std::unique_ptr<Detector> intersection_counter(const Simulation& sim, int threads = -1) {
   DetectorOptions options;
   options.kinds = ContactKinds::parse("tt");
+  if (threads >= 0) options.threads = threads;
   auto tt = make_detector(MethodSpec::parse("kdop"), options);
   tt->set_topology(sim.model().topology_ptr());
   return tt;
@@ -239,64 +247,200 @@ void register_all() {
 
 }  // namespace
 
+namespace {
+
+/// The signal (SIGINT or SIGTERM, e.g. from `timeout`) that asked `--check-frames` to stop after
+/// the current frame, or 0.
+volatile std::sig_atomic_t g_stop_signal = 0;
+extern "C" void on_stop_signal(int signal) { g_stop_signal = signal; }
+
+/// Longest spring of `model` at positions `x`, as a multiple of its rest length (0 without
+/// springs): the stretch that position corrections leave behind.
+double longest_spring_ratio(const Model& model, PositionsView x) {
+  double most = 0;
+  for (const Spring& s : model.springs()) {
+    if (!(s.rest_length > 0)) continue;
+    const double length = (x[static_cast<std::size_t>(s.a)] - x[static_cast<std::size_t>(s.b)]).norm();
+    most = std::max(most, length / s.rest_length);
+  }
+  return most;
+}
+
+/// Seconds between progress lines of `--check-frames`: CRUMPLE_PROGRESS_SECONDS (as for the
+/// `crumple` program) or 10.
+double progress_period() {
+  if (const char* env = std::getenv("CRUMPLE_PROGRESS_SECONDS")) {
+    char* end = nullptr;
+    const double v = std::strtod(env, &end);
+    if (end != env && v >= 0) return v;
+  }
+  return 10;
+}
+
+/// A number option's value, or an error naming the option.
+double number_option(const std::string& arg, std::size_t prefix) {
+  const std::string value = arg.substr(prefix);
+  char* end = nullptr;
+  const double v = std::strtod(value.c_str(), &end);
+  if (value.empty() || end != value.c_str() + value.size() || !std::isfinite(v)) {
+    throw InputError("sim_bench --check-frames: '" + arg + "' expects a number");
+  }
+  return v;
+}
+
+}  // namespace
+
 /// `--check-frames=SPEC [--frames=N] [--fail-safe=off] [--response=on] [--search-factor=F]
-/// [--verbose]` (`--verbose`: a line for every frame):
+/// [--rho=R] [--iterations=N] [--settle=F] [--substeps=S] [--threads=T] [--verbose]`:
 /// runs N frames (1000) of the built-in scene SPEC with the `frame/` rows' settings
 /// (`--response=on` turns the response, and with it the fail-safe, on for scenes that have it
-/// off, e.g. hanging-cloth),
-/// counting the intersecting triangle pairs after every frame with the exact detector (kdop,
-/// kinds tt, as the rows do); `--search-factor` sets `Settings::search_factor` (the proximity
-/// radius in thicknesses). Prints every frame with intersections, progress every 100 frames
-/// and a summary line; exit status 1 when some frame intersects.
+/// off, e.g. hanging-cloth), counting the intersecting triangle pairs after every frame with the
+/// exact detector (kdop, kinds tt, as the rows do). `--search-factor` sets
+/// `Settings::search_factor` (the proximity radius in thicknesses); `--rho`, `--iterations` and
+/// `--settle` the projective step's Chebyshev ρ, iterations and settling tolerance (a fraction of
+/// h_c, as the ribbon's `settle` key); `--substeps` the steps per frame (the frame's length kept);
+/// `--threads` the detector's and the integrator's threads (0: all).
+/// Prints every frame with intersections (`--verbose`: every frame), a progress line every 10 s
+/// (CRUMPLE_PROGRESS_SECONDS sets the period) and a summary line, also when the run stops early:
+/// on a divergence, or on SIGINT / SIGTERM (after the current frame). Output is line-buffered,
+/// so a log of a killed run keeps every line printed. Exit status: 0 when every frame of the N
+/// ran clean, 1 when a frame intersects or the run diverged, 3 when stopped by a signal first.
 int check_frames(int argc, char** argv) {
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);
   std::string spec;
-  int frames = 1000;
+  int frames = 1000, threads = -1;
   bool fail_safe = true, response = false, verbose = false;
   double search_factor = 0;  // 0: the scene's
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a.rfind("--check-frames=", 0) == 0) {
-      spec = a.substr(15);
-    } else if (a.rfind("--frames=", 0) == 0) {
-      frames = std::stoi(a.substr(9));
-    } else if (a == "--fail-safe=off") {
-      fail_safe = false;
-    } else if (a == "--response=on") {
-      response = true;
-    } else if (a == "--verbose") {
-      verbose = true;
-    } else if (a.rfind("--search-factor=", 0) == 0) {
-      search_factor = std::stod(a.substr(16));
-    } else {
-      std::fprintf(stderr, "sim_bench --check-frames: unknown argument '%s'\n", a.c_str());
-      return 2;
+  double rho = -1;           // < 0: the scene's
+  double settle = -1;        // < 0: the scene's
+  int iterations_option = 0, substeps = 0;  // 0: the scene's
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      if (a.rfind("--check-frames=", 0) == 0) {
+        spec = a.substr(15);
+      } else if (a.rfind("--frames=", 0) == 0) {
+        const double v = number_option(a, 9);
+        if (!(v >= 1) || v != std::floor(v) || v > 1e9) throw InputError("--frames expects an integer >= 1");
+        frames = static_cast<int>(v);
+      } else if (a == "--fail-safe=off") {
+        fail_safe = false;
+      } else if (a == "--response=on") {
+        response = true;
+      } else if (a == "--verbose") {
+        verbose = true;
+      } else if (a.rfind("--search-factor=", 0) == 0) {
+        search_factor = number_option(a, 16);
+        if (!(search_factor > 1)) throw InputError("--search-factor expects a number > 1");
+      } else if (a.rfind("--rho=", 0) == 0) {
+        rho = number_option(a, 6);
+        if (!(rho >= 0 && rho < 1)) throw InputError("--rho expects a number in [0, 1)");
+      } else if (a.rfind("--iterations=", 0) == 0) {
+        const double v = number_option(a, 13);
+        if (!(v >= 1) || v != std::floor(v) || v > 1000) throw InputError("--iterations expects an integer >= 1");
+        iterations_option = static_cast<int>(v);
+      } else if (a.rfind("--settle=", 0) == 0) {
+        settle = number_option(a, 9);
+        if (!(settle >= 0)) throw InputError("--settle expects a number >= 0");
+      } else if (a.rfind("--substeps=", 0) == 0) {
+        const double v = number_option(a, 11);
+        if (!(v >= 1) || v != std::floor(v) || v > 1000) throw InputError("--substeps expects an integer >= 1");
+        substeps = static_cast<int>(v);
+      } else if (a.rfind("--threads=", 0) == 0) {
+        const double v = number_option(a, 10);
+        if (!(v >= 0) || v != std::floor(v) || v > 1024) throw InputError("--threads expects an integer >= 0");
+        threads = static_cast<int>(v);
+      } else {
+        throw InputError("unknown argument '" + a + "'");
+      }
     }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "sim_bench --check-frames: %s\n", e.what());
+    return 2;
   }
-  Scene s = make_scene(SceneSpec::parse(spec), 1);
+  std::optional<Scene> made;
+  try {
+    made = make_scene(SceneSpec::parse(spec), 1);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "sim_bench --check-frames: %s\n", e.what());
+    return 2;
+  }
+  Scene& s = *made;
   Settings settings = s.settings;
   settings.method = MethodSpec::parse("kdop");
   settings.response = settings.response || response;
   settings.fail_safe = fail_safe;
   if (search_factor > 0) settings.search_factor = search_factor;
+  if (rho >= 0) settings.integrator_options.projective_rho = rho;
+  if (iterations_option > 0) settings.integrator_options.projective_iterations = iterations_option;
+  if (settle >= 0) settings.integrator_options.projective_tolerance = settle * settings.detector.thickness;
+  if (substeps > 0) {
+    settings.dt *= static_cast<double>(settings.substeps) / substeps;
+    settings.substeps = substeps;
+  }
+  if (threads >= 0) settings.detector.threads = settings.integrator_options.threads = threads;
   Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
                  settings);
-  auto tt = intersection_counter(sim);
+  auto tt = intersection_counter(sim, threads);
   ContactSet intersections;
   tt->update(sim.state().x, intersections);
-  std::printf("%s: %d vertices, response %s, fail-safe %s, start: %zu intersecting pairs\n", spec.c_str(),
-              sim.model().num_particles(), settings.response ? "on" : "off", fail_safe ? "on" : "off",
+  std::string step(to_string(settings.integrator));
+  if (settings.integrator == IntegratorKind::Projective) {
+    char buffer[96];
+    std::snprintf(buffer, sizeof buffer, " (rho %.2g, %d iterations, settle %.3g m)",
+                  settings.integrator_options.projective_rho, settings.integrator_options.projective_iterations,
+                  settings.integrator_options.projective_tolerance);
+    step += buffer;
+  }
+  {
+    char buffer[96];
+    std::snprintf(buffer, sizeof buffer, ", %d steps of %.4g s, search %.3g h_c", settings.substeps, settings.dt,
+                  settings.search_factor);
+    step += buffer;
+  }
+  std::printf("%s: %d vertices, response %s, fail-safe %s, %s, start: %zu intersecting pairs\n", spec.c_str(),
+              sim.model().num_particles(), settings.response ? "on" : "off", fail_safe ? "on" : "off", step.c_str(),
               intersections.tt.size());
+
+  g_stop_signal = 0;
+  struct sigaction action {};
+  action.sa_handler = on_stop_signal;
+  sigemptyset(&action.sa_mask);
+  ::sigaction(SIGINT, &action, nullptr);
+  ::sigaction(SIGTERM, &action, nullptr);
+
+  using Clock = std::chrono::steady_clock;
+  const Clock::time_point started = Clock::now();
+  Clock::time_point last_report = started;
+  const double period = progress_period();
   int bad = 0, run = 0;
-  std::size_t most = 0, impacts = 0, frozen = 0;
+  std::size_t most = 0, impacts = 0, frozen = 0, most_impacts = 0, zone_vertices = 0;
+  int most_impacts_frame = 0, zone_frames = 0;
   double iterations = 0;
   double ms = 0, ccd_ms = 0, queries = 0, integrate_ms = 0, detect_ms = 0, response_ms = 0, contacts = 0;
-  std::string diverged;
+  double stretch = 0, most_stretch = 0, fastest = 0, most_energy = -std::numeric_limits<double>::infinity();
+  double speed = 0, energy = 0;
+  int most_stretch_frame = 0;
+  std::string stopped;
+  const auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - started).count(); };
+  const auto progress = [&](const char* what) {
+    const double seconds = elapsed();
+    std::printf("%s %s: frame %d of %d, %.0f s, %.2f frames/s, %d with intersections (most %zu), live impacts "
+                "max %zu (frame %d), %zu zone vertices and %zu frozen in all; now: fastest %.3g m/s, longest "
+                "spring %.3gx rest (max %.3gx at frame %d), energy %.4g J\n",
+                what, spec.c_str(), run, frames, seconds, run / std::max(seconds, 1e-9), bad, most, most_impacts,
+                most_impacts_frame, zone_vertices, frozen, speed, stretch, most_stretch, most_stretch_frame, energy);
+  };
   for (int f = 1; f <= frames; ++f) {
+    if (g_stop_signal != 0) {
+      stopped = g_stop_signal == SIGINT ? "SIGINT" : "SIGTERM";
+      break;
+    }
     FrameStats st;
     try {
       st = sim.advance_frame();
     } catch (const DivergenceError& e) {
-      diverged = e.what();
+      stopped = std::string("DIVERGED: ") + e.what();
       break;
     }
     ++run;
@@ -309,37 +453,55 @@ int check_frames(int argc, char** argv) {
     contacts += static_cast<double>(st.vf + st.ee);
     impacts += st.ccd_impacts;
     frozen += st.ccd_frozen;
+    zone_vertices += st.ccd_zone_vertices;
+    zone_frames += st.ccd_zone_vertices > 0 ? 1 : 0;
     queries += st.ccd_queries;
+    if (st.ccd_impacts > most_impacts) {
+      most_impacts = st.ccd_impacts;
+      most_impacts_frame = f;
+    }
+    speed = st.max_speed;
+    energy = st.energy;
+    fastest = std::max(fastest, speed);
+    most_energy = std::max(most_energy, energy);
+    stretch = longest_spring_ratio(sim.model(), sim.state().x);
+    if (stretch > most_stretch) {
+      most_stretch = stretch;
+      most_stretch_frame = f;
+    }
     tt->update(sim.state().x, intersections);
     const std::size_t pairs = intersections.tt.size();
     if (verbose) {
-      Scalar fastest = 0;
-      for (const Vec3& v : sim.state().v) fastest = std::max(fastest, v.norm());
       std::printf("frame %d: %.1f ms, CCD %.1f ms, %zu live impacts, %d queries, %zu zone vertices, %zu frozen, "
-                  "%zu contacts, fastest %.3g m/s, %zu intersecting pairs\n",
+                  "%zu contacts, fastest %.3g m/s, longest spring %.3gx rest, energy %.4g J, %zu intersecting "
+                  "pairs\n",
                   f, st.integrate_ms + st.detect_ms + st.response_ms + st.ccd_ms, st.ccd_ms, st.ccd_impacts,
-                  st.ccd_queries, st.ccd_zone_vertices, st.ccd_frozen, st.vf + st.ee, fastest, pairs);
+                  st.ccd_queries, st.ccd_zone_vertices, st.ccd_frozen, st.vf + st.ee, speed, stretch, energy, pairs);
     }
     if (pairs > 0) {
       ++bad;
       most = std::max(most, pairs);
       std::printf("frame %d: %zu intersecting pairs\n", f, pairs);
     }
-    if (f % 100 == 0) {
-      std::fprintf(stderr, "%s: frame %d, %d with intersections\n", spec.c_str(), f, bad);
+    if (std::chrono::duration<double>(Clock::now() - last_report).count() >= period) {
+      progress("progress");
+      last_report = Clock::now();
     }
   }
+  const double per = std::max(run, 1);
   std::printf(
       "summary %s: %d frames run of %d, %d with intersections (most %zu); %.1f ms/frame (integrate %.1f, "
-      "detect %.1f, response %.1f, CCD %.1f), %.0f contacts/frame, %.1f live impacts/frame, %.2f queries/frame, "
-      "%zu frozen in all, %.1f solver iterations/frame%s%s\n",
-      spec.c_str(), run, frames, bad, most, ms / std::max(run, 1), integrate_ms / std::max(run, 1),
-      detect_ms / std::max(run, 1), response_ms / std::max(run, 1), ccd_ms / std::max(run, 1),
-      contacts / std::max(run, 1),
-      static_cast<double>(impacts) / std::max(run, 1), queries / std::max(run, 1), frozen,
-      iterations / std::max(run, 1),
-      diverged.empty() ? "" : "; DIVERGED: ", diverged.c_str());
-  return bad > 0 || !diverged.empty() ? 1 : 0;
+      "detect %.1f, response %.1f, CCD %.1f), %.2f frames/s of wall time; %.0f contacts/frame, %.1f live "
+      "impacts/frame (max %zu at frame %d), %.2f queries/frame, %d frames with impact zones (%zu zone vertices "
+      "in all), %zu frozen in all; fastest %.3g m/s, longest spring %.3gx rest (frame %d), energy at most %.4g "
+      "J; %.1f solver iterations/frame%s%s\n",
+      spec.c_str(), run, frames, bad, most, ms / per, integrate_ms / per, detect_ms / per, response_ms / per,
+      ccd_ms / per, run / std::max(elapsed(), 1e-9), contacts / per, static_cast<double>(impacts) / per,
+      most_impacts, most_impacts_frame, queries / per, zone_frames, zone_vertices, frozen, fastest, most_stretch,
+      most_stretch_frame, run > 0 ? most_energy : 0.0, iterations / per, stopped.empty() ? "" : "; STOPPED: ",
+      stopped.c_str());
+  if (bad > 0 || stopped.rfind("DIVERGED", 0) == 0) return 1;
+  return stopped.empty() ? 0 : 3;
 }
 
 int main(int argc, char** argv) {

@@ -6,6 +6,8 @@
 
 #include <chrono>
 #include <cstdio>
+#include <string>
+#include <utility>
 
 namespace crumple::sim {
 namespace {
@@ -48,6 +50,26 @@ TEST(Scene, EveryBuiltInSceneIsDeterministicAndSeeded) {
     EXPECT_LT(a.settings.detector.thickness, 0.7 * a.edge_length) << "a flat lattice starts contact-free";
     EXPECT_EQ(a.spec, std::string(info.name));
   }
+}
+
+// The frame's proximity search keeps a radius in metres (key `search`, 0.01 m) and at least 2
+// thicknesses: the thesis-size lattices keep 2, a fine one (the edges of n = 200 on the 1.5 m
+// cloth, here 40 quads on 0.3 m) searches farther, as the landing skirt's motion needs.
+TEST(Scene, ClothOnSphereSearchesAFixedRadius) {
+  const auto radius = [](const std::string& spec) {
+    const Scene s = make_scene(SceneSpec::parse(spec), 1);
+    EXPECT_GE(s.settings.search_factor, 2.0) << spec;
+    return std::pair{s.settings.search_factor, s.settings.search_factor * s.settings.detector.thickness};
+  };
+  EXPECT_EQ(radius("cloth-on-sphere:n=16").first, 2.0);
+  EXPECT_EQ(radius("cloth-on-sphere:n=40").first, 2.0);
+  const auto [factor, metres] = radius("cloth-on-sphere:n=40,size=0.3");
+  EXPECT_GT(factor, 3.5);
+  EXPECT_NEAR(metres, 0.01, 1e-12);
+  EXPECT_EQ(radius("cloth-on-sphere:n=40,size=0.3,search=0").first, 2.0);
+  EXPECT_NEAR(radius("cloth-on-sphere:n=40,size=0.3,sweep-speed=5,search=0.02").second, 0.02, 1e-12);
+  EXPECT_THROW(make_scene(SceneSpec::parse("cloth-on-sphere:n=4,search=-1"), 1), InputError);
+  EXPECT_THROW(make_scene(SceneSpec::parse("cloth-on-sphere:n=4,search=inf"), 1), InputError);
 }
 
 TEST(Scene, FileScenesFromMeshAndModel) {
