@@ -95,8 +95,6 @@ void BM_Response(benchmark::State& bench, int n) {
   bench.counters["contacts"] = static_cast<double>(contacts.size());
 }
 
-/// Whole frames of a built-in scene with its default settings (`fail_safe` off: the baseline).
-/// Intersecting triangle pairs are counted at every frame, warm-up included, outside the timing.
 /// The exact detector of intersecting triangle pairs (`kdop`, kinds `tt`) over `sim`'s mesh, on
 /// `threads` threads (< 0: the detector's default).
 std::unique_ptr<Detector> intersection_counter(const Simulation& sim, int threads = -1) {
@@ -108,6 +106,8 @@ std::unique_ptr<Detector> intersection_counter(const Simulation& sim, int thread
   return tt;
 }
 
+/// Whole frames of a built-in scene with its default settings (`fail_safe` off: the baseline).
+/// Intersecting triangle pairs are counted at every frame, warm-up included, outside the timing.
 void BM_Frame(benchmark::State& bench, const std::string& spec, bool fail_safe) {
   Scene s = make_scene(SceneSpec::parse(spec), 1);
   Settings settings = s.settings;
