@@ -223,10 +223,11 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
 
   // Broad phase, with each face inflated by half the padded thickness (file comment).
   const auto t0 = std::chrono::steady_clock::now();
-  // A budget counts from the start of the frame: refit and gather included (the measured cost
-  // of the work after the cut-off point is reserved: the candidates stop that much earlier).
+  // A budget counts from the entry of `update` (`frame_deadline`): refit and gather included
+  // (the measured cost of the work after the cut-off point is reserved: the candidates stop
+  // that much earlier).
   const double budget_ms = frame_budget(params_.budget_ms);
-  const FrameDeadline deadline(budget_ms, params_.clock);
+  const FrameDeadline& deadline = frame_deadline();
   const Scalar magnitude = prepare_frame(previous, x);
   const bool proximity = kinds.vf || kinds.ee;
   const Scalar h = thickness();
