@@ -370,7 +370,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
         [&](std::span<const FacePair> chunk) {
           if (!exact::narrow_candidates(frame, chunk, *cut)) s.candidates.stop();
         },
-        1, params_.track);
+        1, params_.track, [cut] { return cut->spent(); });
     stopped = streamed.stopped || cut->tested() < streamed.candidates;
     stats_.set("candidates", static_cast<double>(streamed.candidates));
     stats_.set("pairs_tested", static_cast<double>(cut->tested()));
