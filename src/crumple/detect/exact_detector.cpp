@@ -45,6 +45,9 @@ struct ExactDetector::State {
   StageCost tail_cost;
   double gather_start_ms = 0;  ///< this frame's, on the budget's clock
   std::array<StageCost, 3> stage_cost;
+  /// The cost of a kernel test in the last cut-off frame that made some (traversal included:
+  /// an overestimate), to price the orphan pairs' stage before it has run (`narrow_phase`).
+  double per_test_ms = 0;
 };
 
 namespace {
@@ -172,6 +175,7 @@ void ExactDetector::on_topology() {
   s.orphans_waited = 0;
   s.tail_cost = {};
   s.stage_cost = {};
+  s.per_test_ms = 0;
   s.sleep = {};
   s.face_owns = own.face_owns();
   s.edge_rank = exact::edge_ranks(topo);
@@ -301,14 +305,21 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // stage starts only when its cost (`StageCost`, or an estimate) fits in what is left.
   const auto clock_ms = [&] { return cut == nullptr ? 0.0 : cut->deadline().now_ms(); };
   const double narrow_clock = clock_ms();
+  // The cost of a kernel test so far this frame (0 before any).
+  const auto per_test_ms = [&] {
+    const std::size_t tests = frame.vf_tests + frame.ee_tests;
+    return tests == 0 ? 0.0 : (clock_ms() - narrow_clock) / static_cast<double>(tests);
+  };
   const auto go_on = [&](std::size_t stage) {
     if (cut == nullptr) return true;
     double cost = s.stage_cost[stage].ms();
-    // The orphan pairs' stage not yet measured: its pairs at this frame's cost per candidate
-    // (traversal included: an overestimate), when candidates were tested.
-    if (stage == 0 && cost == 0 && cut->tested() > 0) {
-      const double per_pair = (clock_ms() - narrow_clock) / static_cast<double>(cut->tested());
-      cost = per_pair * static_cast<double>(s.orphans.vf.size() + s.orphans.ee.size());
+    // The orphan pairs' stage not yet measured: all its pairs (a refresh tests every block) at
+    // this frame's cost per kernel test, or the last cut-off frame's when none was made yet
+    // (traversal included: an overestimate). Unpriced only before any test was ever made.
+    if (stage == 0 && cost == 0) {
+      const double per_test = frame.vf_tests + frame.ee_tests > 0 ? per_test_ms() : s.per_test_ms;
+      cost = per_test * static_cast<double>(s.orphans.vf.size() + s.orphans.ee.size());
+      stats_.set("orphan_estimate_ms", cost);
     }
     return cut->fits(cost);
   };
@@ -353,7 +364,10 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // traversal cut short every frame would never reach them, and the contacts they find are
   // tracked from then on. (Every frame would spend most of a small budget on them.)
   constexpr int kOrphanPeriod = 4;
-  const bool orphans_first = cut != nullptr && params_.track && s.orphans_waited >= kOrphanPeriod;
+  // Only once the orphan pairs' stage can be priced (measured, or a kernel test's cost known):
+  // first, it would run whatever it costs.
+  const bool orphans_first = cut != nullptr && params_.track && s.orphans_waited >= kOrphanPeriod &&
+                             (s.stage_cost[0].ms() > 0 || s.per_test_ms > 0);
   if (cut == nullptr && stream) {
     const StreamedPairs streamed = stream_self_pairs(
         *broad_phase_, s.candidates, stats_, [&frame](std::span<const FacePair> chunk) { exact::narrow_candidate_chunk(frame, chunk); });
@@ -372,6 +386,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
         },
         1, params_.track, [cut] { return cut->spent(); });
     stopped = streamed.stopped || cut->tested() < streamed.candidates;
+    if (frame.vf_tests + frame.ee_tests > 0) s.per_test_ms = per_test_ms();
     stats_.set("candidates", static_cast<double>(streamed.candidates));
     stats_.set("pairs_tested", static_cast<double>(cut->tested()));
   }
