@@ -40,14 +40,13 @@ struct ExactDetector::State {
   /// the moment the budget stopped the candidates, or when it did not the start of the gather,
   /// to the end of the call: the rest of the traversal's task, the gather, the merge of the
   /// tracked contacts), and of each orphan stage when it ran. A frame reserves the former from
-  /// its budget and starts a stage only when its cost fits in what is left (a stage not yet
-  /// measured runs when the budget is not spent, and is measured).
+  /// its budget and starts a stage only when its cost fits in what is left (`priced`).
   StageCost tail_cost;
   double gather_start_ms = 0;  ///< this frame's, on the budget's clock
   std::array<StageCost, 3> stage_cost;
-  /// The cost of a kernel test in the last cut-off frame that made some (traversal included:
-  /// an overestimate), to price the orphan pairs' stage before it has run (`narrow_phase`).
-  double per_test_ms = 0;
+  /// The orphan stages have run whole and been measured since the topology (or the scale) was
+  /// set: the first frame, which builds the tree and keeps no budget, runs them whole.
+  bool priced = false;
 };
 
 namespace {
@@ -161,6 +160,7 @@ const BoundingHierarchy* ExactDetector::hierarchy() const {
 
 void ExactDetector::on_rescale() {
   state_->sleep = {};
+  state_->priced = false;
   broad_phase_->build(topology());
 }
 
@@ -175,7 +175,7 @@ void ExactDetector::on_topology() {
   s.orphans_waited = 0;
   s.tail_cost = {};
   s.stage_cost = {};
-  s.per_test_ms = 0;
+  s.priced = false;
   s.sleep = {};
   s.face_owns = own.face_owns();
   s.edge_rank = exact::edge_ranks(topo);
@@ -304,24 +304,14 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // leaves its sleep state as it was: the next frame wakes from the last refresh). Cut off, a
   // stage starts only when its cost (`StageCost`, or an estimate) fits in what is left.
   const auto clock_ms = [&] { return cut == nullptr ? 0.0 : cut->deadline().now_ms(); };
-  const double narrow_clock = clock_ms();
-  // The cost of a kernel test so far this frame (0 before any).
-  const auto per_test_ms = [&] {
-    const std::size_t tests = frame.vf_tests + frame.ee_tests;
-    return tests == 0 ? 0.0 : (clock_ms() - narrow_clock) / static_cast<double>(tests);
-  };
+  // Under a time budget not yet priced (the first frame of a topology or scale, which builds
+  // the tree and keeps no budget), every stage runs whole and is measured: an unpriced stage would run whatever it
+  // costs on a later frame (a refresh of every orphan block: 0.35 ms on the 24x24 sheet, under
+  // a budget of 0.06).
+  const bool pricing = cut != nullptr && cut->deadline().active() && !s.priced;
   const auto go_on = [&](std::size_t stage) {
-    if (cut == nullptr) return true;
-    double cost = s.stage_cost[stage].ms();
-    // The orphan pairs' stage not yet measured: all its pairs (a refresh tests every block) at
-    // this frame's cost per kernel test, or the last cut-off frame's when none was made yet
-    // (traversal included: an overestimate). Unpriced only before any test was ever made.
-    if (stage == 0 && cost == 0) {
-      const double per_test = frame.vf_tests + frame.ee_tests > 0 ? per_test_ms() : s.per_test_ms;
-      cost = per_test * static_cast<double>(s.orphans.vf.size() + s.orphans.ee.size());
-      stats_.set("orphan_estimate_ms", cost);
-    }
-    return cut->fits(cost);
+    if (cut == nullptr || pricing) return true;
+    return cut->fits(s.stage_cost[stage].ms());
   };
   std::size_t tested_blocks = 0, star_pairs = 0;
   int skipped = 0;
@@ -364,10 +354,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // traversal cut short every frame would never reach them, and the contacts they find are
   // tracked from then on. (Every frame would spend most of a small budget on them.)
   constexpr int kOrphanPeriod = 4;
-  // Only once the orphan pairs' stage can be priced (measured, or a kernel test's cost known):
-  // first, it would run whatever it costs.
-  const bool orphans_first = cut != nullptr && params_.track && s.orphans_waited >= kOrphanPeriod &&
-                             (s.stage_cost[0].ms() > 0 || s.per_test_ms > 0);
+  const bool orphans_first = cut != nullptr && params_.track && s.orphans_waited >= kOrphanPeriod;
   if (cut == nullptr && stream) {
     const StreamedPairs streamed = stream_self_pairs(
         *broad_phase_, s.candidates, stats_, [&frame](std::span<const FacePair> chunk) { exact::narrow_candidate_chunk(frame, chunk); });
@@ -386,11 +373,11 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
         },
         1, params_.track, [cut] { return cut->spent(); });
     stopped = streamed.stopped || cut->tested() < streamed.candidates;
-    if (frame.vf_tests + frame.ee_tests > 0) s.per_test_ms = per_test_ms();
     stats_.set("candidates", static_cast<double>(streamed.candidates));
     stats_.set("pairs_tested", static_cast<double>(cut->tested()));
   }
   if (!orphans_first) orphan_stages();
+  if (pricing) s.priced = true;
   s.orphans_waited = skipped == 0 ? 0 : s.orphans_waited + 1;
 
   if (cut != nullptr) {
