@@ -47,6 +47,9 @@ struct ExactDetector::State {
   /// The orphan stages have run whole and been measured since the topology (or the scale) was
   /// set: the first frame, which builds the tree and keeps no budget, runs them whole.
   bool priced = false;
+  /// This frame: the time the orphan stages ran after the budget was spent (only when pricing
+  /// them), which is not part of the work after the cut-off point (`tail_cost`).
+  double stages_after_spent_ms = 0;
 };
 
 namespace {
@@ -253,7 +256,8 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
     cap_contacts(out);
     keep_seeds(out);
     const double spent_at = cut.spent_at_ms();
-    s.tail_cost.measured(deadline.now_ms() - (spent_at >= 0 ? spent_at : s.gather_start_ms));
+    s.tail_cost.measured(deadline.now_ms() - (spent_at >= 0 ? spent_at : s.gather_start_ms) -
+                         s.stages_after_spent_ms);
     return;
   }
   // Triangle intersections alone: each candidate may be a contact, and is as large as one, so
@@ -316,9 +320,12 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   std::size_t tested_blocks = 0, star_pairs = 0;
   int skipped = 0;
   double orphan_ms = 0;
+  s.stages_after_spent_ms = 0;
   const auto orphan_stages = [&] {
     const auto orphans_start = std::chrono::steady_clock::now();
     double t = clock_ms();
+    const double stages_start = t;
+    const bool after_spent = cut != nullptr && cut->spent_at_ms() >= 0;
     const auto measured = [&](std::size_t stage) {
       const double now = clock_ms();
       s.stage_cost[stage].measured(now - t);
@@ -349,6 +356,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
       ++skipped;
     }
     orphan_ms = ms_since(orphans_start);
+    if (after_spent) s.stages_after_spent_ms = clock_ms() - stages_start;
   };
   // Tracking, the orphan stages come first when they have not run for kOrphanPeriod frames: a
   // traversal cut short every frame would never reach them, and the contacts they find are
