@@ -48,6 +48,16 @@ class FrameDeadline {
     }
   }
   bool active() const { return active_; }
+  /// The same deadline, `ms` earlier (same start and clock): for work that must leave `ms` of
+  /// the budget to what follows it (`passed(r)` on the copy is `passed(r + ms)` here). A budget
+  /// that `ms` uses up is passed at the first look.
+  FrameDeadline shortened(double ms) const {
+    FrameDeadline d = *this;
+    if (!active_ || !(ms > 0)) return d;
+    d.wall_ -= to_duration(ms);
+    d.end_ms_ -= ms;
+    return d;
+  }
   /// True once less than `reserve_ms` of the budget is left (reserve 0: once it is spent). The
   /// processor clock (a system call, microseconds) is read only when the wall clock has
   /// advanced by what was left of the budget at the last reading, less the reserve: a thread

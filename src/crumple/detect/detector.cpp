@@ -61,6 +61,16 @@ const Topology& Detector::topology() const {
 void Detector::update(PositionsView positions, ContactSet& out) { update({}, positions, out); }
 
 void Detector::update(PositionsView previous, PositionsView positions, ContactSet& out) {
+  start_deadline();
+  run_update(previous, positions, out);
+}
+
+void Detector::start_deadline() {
+  const double budget_ms = frame_budget(spec_budget_ms());
+  deadline_ = FrameDeadline(budget_ms, budget_clock());
+}
+
+void Detector::run_update(PositionsView previous, PositionsView positions, ContactSet& out) {
   const Topology& topo = topology();
   CRUMPLE_CHECK(positions.size() == static_cast<std::size_t>(topo.num_vertices()),
                 "update: positions has " + std::to_string(positions.size()) +
@@ -98,6 +108,7 @@ void Detector::update(PositionsView previous, PositionsView positions, ContactSe
 void Detector::update(const VertexView& positions, ContactSet& out) { update(VertexView(), positions, out); }
 
 void Detector::update(const VertexView& previous, const VertexView& positions, ContactSet& out) {
+  start_deadline();
   const auto doubles = [](const VertexView& view, Positions& buffer) {
     if (view.is_native()) return view.native();
     view.convert(buffer);
@@ -105,7 +116,7 @@ void Detector::update(const VertexView& previous, const VertexView& positions, C
   };
   const PositionsView x = doubles(positions, converted_);
   const PositionsView x0 = capabilities().uses_motion ? doubles(previous, converted_previous_) : PositionsView();
-  update(x0, x, out);
+  run_update(x0, x, out);
 }
 
 void Detector::set_budget(double ms) {

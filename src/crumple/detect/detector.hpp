@@ -10,6 +10,7 @@
 ///  - EE: edges sharing no vertex with dist < h;
 ///  - TT: faces sharing no vertex that intersect (closed triangles; touching counts).
 
+#include <crumple/core/frame_deadline.hpp>
 #include <crumple/core/types.hpp>
 #include <crumple/core/vertex_view.hpp>
 #include <crumple/detect/contact.hpp>
@@ -125,6 +126,14 @@ class Detector {
   /// This frame's time budget in ms: the last `set_budget`, or `spec_ms` (the method's `budget`
   /// key) when it was never called.
   double frame_budget(double spec_ms) const { return budget_set_ ? budget_ms_ : spec_ms; }
+  /// The method's `budget` and `clock` keys (0 = none), for `frame_deadline`.
+  virtual double spec_budget_ms() const { return 0; }
+  virtual BudgetClock budget_clock() const { return BudgetClock::wall; }
+  /// This frame's deadline, `frame_budget(spec_budget_ms())` on `budget_clock()`, started at
+  /// the entry of `update`: the budget covers the whole call (the pass over the positions for
+  /// their magnitude, a conversion of a `VertexView`, the scaling included). None (never
+  /// passed) without a budget.
+  const FrameDeadline& frame_deadline() const { return deadline_; }
   /// Called by `set_budget` with a budget in [0, 1e6]; throws `InputError` when this detector
   /// cannot keep it.
   virtual void check_budget(double /*ms*/) const {}
@@ -148,6 +157,12 @@ class Detector {
   bool budget_set_ = false;             // set_budget was called: budget_ms_ replaces the spec's
   double budget_ms_ = 0;
   Positions scaled_, scaled_previous_;  // the positions times 2^exponent_, when it is not 0
+  FrameDeadline deadline_;
+
+  /// Starts this frame's deadline (`frame_deadline`).
+  void start_deadline();
+  /// `update` once the deadline is started.
+  void run_update(PositionsView previous, PositionsView positions, ContactSet& out);
 };
 
 /// Creates the detector for a method spec (the one factory, make_detector.cpp). Throws

@@ -40,11 +40,16 @@ struct ExactDetector::State {
   /// the moment the budget stopped the candidates, or when it did not the start of the gather,
   /// to the end of the call: the rest of the traversal's task, the gather, the merge of the
   /// tracked contacts), and of each orphan stage when it ran. A frame reserves the former from
-  /// its budget and starts a stage only when its cost fits in what is left (a stage not yet
-  /// measured runs when the budget is not spent, and is measured).
+  /// its budget and starts a stage only when its cost fits in what is left (`priced`).
   StageCost tail_cost;
   double gather_start_ms = 0;  ///< this frame's, on the budget's clock
   std::array<StageCost, 3> stage_cost;
+  /// The orphan stages have run whole and been measured since the topology (or the scale) was
+  /// set: the first frame, which builds the tree and keeps no budget, runs them whole.
+  bool priced = false;
+  /// This frame: the time the orphan stages ran after the budget was spent (only when pricing
+  /// them), which is not part of the work after the cut-off point (`tail_cost`).
+  double stages_after_spent_ms = 0;
 };
 
 namespace {
@@ -158,6 +163,7 @@ const BoundingHierarchy* ExactDetector::hierarchy() const {
 
 void ExactDetector::on_rescale() {
   state_->sleep = {};
+  state_->priced = false;
   broad_phase_->build(topology());
 }
 
@@ -172,6 +178,7 @@ void ExactDetector::on_topology() {
   s.orphans_waited = 0;
   s.tail_cost = {};
   s.stage_cost = {};
+  s.priced = false;
   s.sleep = {};
   s.face_owns = own.face_owns();
   s.edge_rank = exact::edge_ranks(topo);
@@ -223,10 +230,11 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
 
   // Broad phase, with each face inflated by half the padded thickness (file comment).
   const auto t0 = std::chrono::steady_clock::now();
-  // A budget counts from the start of the frame: refit and gather included (the measured cost
-  // of the work after the cut-off point is reserved: the candidates stop that much earlier).
+  // A budget counts from the entry of `update` (`frame_deadline`): refit and gather included
+  // (the measured cost of the work after the cut-off point is reserved: the candidates stop
+  // that much earlier).
   const double budget_ms = frame_budget(params_.budget_ms);
-  const FrameDeadline deadline(budget_ms, params_.clock);
+  const FrameDeadline& deadline = frame_deadline();
   const Scalar magnitude = prepare_frame(previous, x);
   const bool proximity = kinds.vf || kinds.ee;
   const Scalar h = thickness();
@@ -248,7 +256,8 @@ void ExactDetector::detect(PositionsView previous, PositionsView x, ContactSet& 
     cap_contacts(out);
     keep_seeds(out);
     const double spent_at = cut.spent_at_ms();
-    s.tail_cost.measured(deadline.now_ms() - (spent_at >= 0 ? spent_at : s.gather_start_ms));
+    s.tail_cost.measured(deadline.now_ms() - (spent_at >= 0 ? spent_at : s.gather_start_ms) -
+                         s.stages_after_spent_ms);
     return;
   }
   // Triangle intersections alone: each candidate may be a contact, and is as large as one, so
@@ -299,24 +308,24 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
   // leaves its sleep state as it was: the next frame wakes from the last refresh). Cut off, a
   // stage starts only when its cost (`StageCost`, or an estimate) fits in what is left.
   const auto clock_ms = [&] { return cut == nullptr ? 0.0 : cut->deadline().now_ms(); };
-  const double narrow_clock = clock_ms();
+  // Under a time budget not yet priced (the first frame of a topology or scale, which builds
+  // the tree and keeps no budget), every stage runs whole and is measured: an unpriced stage would run whatever it
+  // costs on a later frame (a refresh of every orphan block: 0.35 ms on the 24x24 sheet, under
+  // a budget of 0.06).
+  const bool pricing = cut != nullptr && cut->deadline().active() && !s.priced;
   const auto go_on = [&](std::size_t stage) {
-    if (cut == nullptr) return true;
-    double cost = s.stage_cost[stage].ms();
-    // The orphan pairs' stage not yet measured: its pairs at this frame's cost per candidate
-    // (traversal included: an overestimate), when candidates were tested.
-    if (stage == 0 && cost == 0 && cut->tested() > 0) {
-      const double per_pair = (clock_ms() - narrow_clock) / static_cast<double>(cut->tested());
-      cost = per_pair * static_cast<double>(s.orphans.vf.size() + s.orphans.ee.size());
-    }
-    return cut->fits(cost);
+    if (cut == nullptr || pricing) return true;
+    return cut->fits(s.stage_cost[stage].ms());
   };
   std::size_t tested_blocks = 0, star_pairs = 0;
   int skipped = 0;
   double orphan_ms = 0;
+  s.stages_after_spent_ms = 0;
   const auto orphan_stages = [&] {
     const auto orphans_start = std::chrono::steady_clock::now();
     double t = clock_ms();
+    const double stages_start = t;
+    const bool after_spent = cut != nullptr && cut->spent_at_ms() >= 0;
     const auto measured = [&](std::size_t stage) {
       const double now = clock_ms();
       s.stage_cost[stage].measured(now - t);
@@ -347,6 +356,7 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
       ++skipped;
     }
     orphan_ms = ms_since(orphans_start);
+    if (after_spent) s.stages_after_spent_ms = clock_ms() - stages_start;
   };
   // Tracking, the orphan stages come first when they have not run for kOrphanPeriod frames: a
   // traversal cut short every frame would never reach them, and the contacts they find are
@@ -369,12 +379,13 @@ void ExactDetector::narrow_phase(PositionsView x, Scalar pad, Scalar magnitude, 
         [&](std::span<const FacePair> chunk) {
           if (!exact::narrow_candidates(frame, chunk, *cut)) s.candidates.stop();
         },
-        1, params_.track);
+        1, params_.track, [cut] { return cut->spent(); });
     stopped = streamed.stopped || cut->tested() < streamed.candidates;
     stats_.set("candidates", static_cast<double>(streamed.candidates));
     stats_.set("pairs_tested", static_cast<double>(cut->tested()));
   }
   if (!orphans_first) orphan_stages();
+  if (pricing) s.priced = true;
   s.orphans_waited = skipped == 0 ? 0 : s.orphans_waited + 1;
 
   if (cut != nullptr) {

@@ -99,6 +99,8 @@ class ExactDetector final : public Detector {
   bool sorted_output() const override { return true; }
   /// `clock=cpu` counts one thread: a time budget then needs `threads` = 1.
   void check_budget(double ms) const override;
+  double spec_budget_ms() const override { return params_.budget_ms; }
+  BudgetClock budget_clock() const override { return params_.clock; }
 
  private:
   struct State;  // exact_detector.cpp

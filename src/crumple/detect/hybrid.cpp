@@ -205,14 +205,12 @@ void HybridDetector::detect(PositionsView previous, PositionsView x, ContactSet&
   const Scalar h = thickness();
   const ContactKinds& kinds = options().kinds;
   const bool has_previous = !previous.empty();
-  // The budget covers the whole call. The search stops early enough for the work after it (kept
-  // pairs, risk report, the sort of the contacts) at that work's cost on the last frame.
-  const double budget_ms = frame_budget(params_.budget_ms);
-  const FrameDeadline frame_clock(budget_ms, params_.clock);
-  const double reserve_ms = budget_ms > 0 ? m.post_cost.ms() : 0;
-  constexpr double kSpent = 1e-9;  // a budget the reserve used up: spent at the first look
-  const FrameDeadline deadline =
-      budget_ms > 0 ? FrameDeadline(std::max(budget_ms - reserve_ms, kSpent), params_.clock) : FrameDeadline();
+  // The budget covers the whole call (`frame_deadline`, from the entry of `update`). The search
+  // stops early enough for the work after it (kept pairs, risk report, the sort of the
+  // contacts) at that work's cost on the last frame: its deadline is the frame's, shortened.
+  const FrameDeadline& frame_clock = frame_deadline();
+  const double reserve_ms = frame_clock.active() ? m.post_cost.ms() : 0;
+  const FrameDeadline deadline = frame_clock.shortened(reserve_ms);
   const auto ms_since = [](Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
   };

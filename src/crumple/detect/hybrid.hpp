@@ -127,6 +127,8 @@ class HybridDetector final : public Detector {
  protected:
   void on_topology() override;
   void detect(PositionsView previous, PositionsView positions, ContactSet& out) override;
+  double spec_budget_ms() const override { return params_.budget_ms; }
+  BudgetClock budget_clock() const override { return params_.clock; }
   /// `detect` sorts its contacts itself, inside the budget.
   bool sorted_output() const override { return true; }
 

@@ -416,7 +416,7 @@ void StochasticDetector::load_state(std::string_view text) {
 
 void StochasticDetector::detect(PositionsView /*previous*/, PositionsView x, ContactSet& out) {
   out.clear();
-  const FrameDeadline deadline(frame_budget(params_.budget_ms), params_.clock);  // from the start of the frame
+  const FrameDeadline& deadline = frame_deadline();  // from the entry of `update`
   const Topology& topo = topology();
   const Scalar h = thickness();
   const Scalar near = params_.near * h;  // near_distance() in the scaled coordinates

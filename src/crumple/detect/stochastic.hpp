@@ -159,6 +159,8 @@ class StochasticDetector final : public Detector {
  protected:
   void on_topology() override;
   void detect(PositionsView previous, PositionsView positions, ContactSet& out) override;
+  double spec_budget_ms() const override { return params_.budget_ms; }
+  BudgetClock budget_clock() const override { return params_.clock; }
 
  private:
   struct Impl;

@@ -148,14 +148,26 @@ class CandidateBuffer {
   /// Clears a `stop`. With `resume`, an emitter that was stopped last frame may begin this one
   /// where it stopped (`KdopTree`: at the first task it left out), so that frames cut short
   /// cover the whole mesh in turn.
-  void set_consumer(Consumer consumer, std::size_t chunk = kStreamChunk, bool resume = false) {
+  /// `poll`, when given, is asked now and then by emitters that stream finely (chunk 1) whether
+  /// to stop, between chunks too (`poll`): the work between two candidates is unbounded.
+  void set_consumer(Consumer consumer, std::size_t chunk = kStreamChunk, bool resume = false,
+                    std::function<bool()> poll = {}) {
     consumer_ = std::move(consumer);
+    poll_ = std::move(poll);
     stream_chunk_ = chunk;
     resume_ = resume;
     stop_.store(false, std::memory_order_relaxed);
   }
+  /// Asks the consumer's `poll` whether to stop (stopping the stream when it says so); returns
+  /// `stopped()`. Thread-safe when `poll` is.
+  bool poll() {
+    if (!stopped() && poll_ && poll_()) stop();
+    return stopped();
+  }
   bool resuming() const { return resume_; }
   bool streaming() const { return static_cast<bool>(consumer_); }
+  /// The chunk size `set_consumer` was given (meaningful while streaming).
+  std::size_t stream_chunk() const { return stream_chunk_; }
   /// Asks the emitters to add nothing more this frame (thread-safe; a consumer calls it).
   void stop() { stop_.store(true, std::memory_order_relaxed); }
   bool stopped() const { return stop_.load(std::memory_order_relaxed); }
@@ -181,6 +193,7 @@ class CandidateBuffer {
   std::vector<std::vector<FacePair>> chunks_;
   Spares<std::vector<FacePair>> spares_;
   Consumer consumer_;
+  std::function<bool()> poll_;
   std::size_t stream_chunk_ = kStreamChunk;
   bool resume_ = false;
   std::atomic<bool> stop_{false};
@@ -278,9 +291,10 @@ struct StreamedPairs {
 /// throws.
 inline StreamedPairs stream_self_pairs(BroadPhase& broad, CandidateBuffer& out, DetectorStats& stats,
                                        CandidateBuffer::Consumer consumer,
-                                       std::size_t chunk = CandidateBuffer::kStreamChunk, bool resume = false) {
+                                       std::size_t chunk = CandidateBuffer::kStreamChunk, bool resume = false,
+                                       std::function<bool()> poll = {}) {
   out.clear();
-  out.set_consumer(std::move(consumer), chunk, resume);
+  out.set_consumer(std::move(consumer), chunk, resume, std::move(poll));
   try {
     broad.self_pairs(out, stats);
   } catch (...) {

@@ -218,6 +218,7 @@ __attribute__((always_inline)) inline void DopTree<K>::each_descent(Index a, Ind
 template <int K>
 template <bool kUnits>
 inline void DopTree<K>::self(Index n, Walk& w) const {
+  if (halted(w)) return;
   if constexpr (kUnits) {
     if (small_[static_cast<std::size_t>(n)]) return unit(n, n, w);
   }
@@ -234,6 +235,7 @@ inline void DopTree<K>::self(Index n, Walk& w) const {
                                       ~leaf_adjacent_[static_cast<std::size_t>(a)] & ~idle_with(n, a), later));
     }
     emit_hits(hits, node.first, [&](Index a, Index b) { return !(swept_ && now_apart(a, b)); }, w.out);
+    hand_over(w);
     return;
   }
   for (Index c = node.first; c < node.first + node.count; ++c) self<kUnits>(c, w);
@@ -244,6 +246,7 @@ inline void DopTree<K>::self(Index n, Walk& w) const {
 template <int K>
 template <bool kUnits>
 inline void DopTree<K>::pair(Index a, Index b, Walk& w) const {
+  if (halted(w)) return;
   if constexpr (kUnits) {
     if (small_[static_cast<std::size_t>(a)] && small_[static_cast<std::size_t>(b)]) return unit(a, b, w);
   }
@@ -251,6 +254,7 @@ inline void DopTree<K>::pair(Index a, Index b, Walk& w) const {
   const Node& nb = nodes_[static_cast<std::size_t>(b)];
   if (na.leaf && nb.leaf) {
     emit_leaf_pair(a, b, w.out);
+    hand_over(w);
   } else {
     each_descent(a, b, [&](Index c, Index d) { pair<kUnits>(c, d, w); });
   }
@@ -271,21 +275,55 @@ inline void DopTree<K>::unit(Index a, Index b, Walk& w) const {
     if (it != units_.end() && it->key == key) {
       w.out.insert(w.out.end(), unit_pairs_.begin() + static_cast<std::ptrdiff_t>(it->begin),
                    unit_pairs_.begin() + static_cast<std::ptrdiff_t>(it->end));
+      hand_over(w);
     }
     ++w.reused;
     return;
   }
-  const std::size_t begin = w.out.size();
+  const bool record = mode_ == Mode::record;
+  const std::size_t pairs_begin = w.pairs.size();
+  if (record) w.unit_from = w.out.size();
   if (a == b) {
     self<false>(a, w);
   } else {
     pair<false>(a, b, w);
   }
   ++w.live;
-  if (mode_ == Mode::record && w.out.size() > begin) {
-    w.units.push_back({key, w.pairs.size(), w.pairs.size() + (w.out.size() - begin)});
-    w.pairs.insert(w.pairs.end(), w.out.begin() + static_cast<std::ptrdiff_t>(begin), w.out.end());
+  if (record) {
+    w.pairs.insert(w.pairs.end(), w.out.begin() + static_cast<std::ptrdiff_t>(w.unit_from), w.out.end());
+    w.unit_from = kNoUnit;
+    // A unit left unfinished by a stop is not recorded (the stop also leaves the cache invalid).
+    if (w.stopped) {
+      w.pairs.resize(pairs_begin);
+    } else if (w.pairs.size() > pairs_begin) {
+      w.units.push_back({key, pairs_begin, w.pairs.size()});
+    }
   }
+}
+
+/// Whether the walk is to stop: with fine streaming (`Walk::fine`), once the consumer stopped
+/// the buffer, looked at in `hand_over` and by a poll every kPollVisits calls (the first call
+/// included).
+template <int K>
+__attribute__((always_inline)) inline bool DopTree<K>::halted(Walk& w) const {
+  if (w.fine == nullptr) return false;
+  if (!w.stopped && w.visits++ % kPollVisits == 0 && w.fine->poll()) w.stopped = true;
+  return w.stopped;
+}
+
+/// Fine streaming (`Walk::fine`): hands the walk's candidates to the consumer once there are
+/// kFineChunk of them (those of a unit being recorded are copied to `pairs` first), and stops
+/// the walk when the consumer has stopped the buffer.
+template <int K>
+inline void DopTree<K>::hand_over(Walk& w) const {
+  if (w.fine == nullptr || w.out.size() < kFineChunk) return;
+  if (w.unit_from != kNoUnit) {
+    w.pairs.insert(w.pairs.end(), w.out.begin() + static_cast<std::ptrdiff_t>(w.unit_from), w.out.end());
+    w.unit_from = 0;
+  }
+  w.fine->add(std::move(w.out));
+  w.out = w.fine->take();
+  if (w.fine->stopped()) w.stopped = true;
 }
 
 /// Splits the self-traversal of the root into independent tasks (a == b: self(a), else
@@ -339,13 +377,18 @@ void DopTree<K>::traverse(int threads, CandidateBuffer& out, DetectorStats& stat
   std::vector<std::vector<Unit>> units;  // record frames: per chunk, into pairs[chunk]
   std::vector<std::vector<FacePair>> pairs;
   parallel_for_chunks(tasks.size(), threads, 1, [&](std::size_t begin, std::size_t end) {
-    Walk w{out.take(), {}, {}};
+    Walk w;
+    w.out = out.take();
+    if (out.streaming() && out.stream_chunk() < kFineChunk) w.fine = &out;
+    const auto left = [&](std::size_t i) {  // task i (in this frame's order) was not finished
+      cut.store(true, std::memory_order_relaxed);
+      std::size_t seen = left_out.load();
+      while (i < seen && !left_out.compare_exchange_weak(seen, i)) {
+      }
+    };
     for (std::size_t i = begin; i < end; ++i) {
       if (out.stopped()) {
-        cut.store(true, std::memory_order_relaxed);
-        std::size_t seen = left_out.load();
-        while (i < seen && !left_out.compare_exchange_weak(seen, i)) {
-        }
+        left(i);
         break;
       }
       const auto [a, b] = tasks[(i + first) % tasks.size()];
@@ -353,6 +396,10 @@ void DopTree<K>::traverse(int threads, CandidateBuffer& out, DetectorStats& stat
         coherent ? self<true>(a, w) : self<false>(a, w);
       } else {
         coherent ? pair<true>(a, b, w) : pair<false>(a, b, w);
+      }
+      if (w.stopped) {  // stopped inside the task: a resumed frame begins with it again
+        left(i);
+        break;
       }
       // Streaming only. A unit lies in one task, and a recording copies its pairs (w.pairs).
       out.flush_if_full(w.out);

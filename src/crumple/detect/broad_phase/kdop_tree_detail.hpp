@@ -101,7 +101,24 @@ class DopTree final : public KdopTree::Impl {
     std::vector<Unit> units;  ///< refresh frames: its units with candidates, into `pairs`
     std::vector<FacePair> pairs;
     std::size_t reused = 0, live = 0;
+    /// Fine streaming (a consumer that asks for chunk size below kFineChunk: a cut-off frame,
+    /// exact_detector.hpp): `out` is handed to it every kFineChunk candidates inside a task,
+    /// and the walk stops as soon as it has asked the buffer to stop, so that a budget is
+    /// looked at every few dozen candidates rather than once per task (a task may be a whole
+    /// coherence unit of kUnitFaces faces). Null otherwise.
+    CandidateBuffer* fine = nullptr;
+    bool stopped = false;  ///< fine streaming: the consumer stopped; the task is left unfinished
+    unsigned visits = 0;   ///< fine streaming: node visits, the buffer polled every kPollVisits
+    /// Recording a unit (refresh frames): its candidates start at out[unit_from]; those handed
+    /// over before are already in `pairs`. kNoUnit outside a recorded unit.
+    std::size_t unit_from = kNoUnit;
   };
+  static constexpr std::size_t kNoUnit = ~std::size_t{0};
+  /// Fine streaming: candidates per hand-over inside a task (the cut-off claims blocks of 64).
+  static constexpr std::size_t kFineChunk = 64;
+  /// Fine streaming: node visits between two polls of the buffer (`CandidateBuffer::poll`),
+  /// for the stretches of the traversal that find no candidate.
+  static constexpr unsigned kPollVisits = 16;
 
   /// Leaf: `first`/`count` index slots of `order_`; internal: child node ids.
   struct Node {
@@ -196,6 +213,8 @@ class DopTree final : public KdopTree::Impl {
   template <bool kUnits>
   CRUMPLE_SIMD_CLONES void pair(Index a, Index b, Walk& w) const;
   CRUMPLE_SIMD_CLONES void unit(Index a, Index b, Walk& w) const;
+  void hand_over(Walk& w) const;
+  bool halted(Walk& w) const;
   void traverse(int threads, CandidateBuffer& out, DetectorStats& stats);
 
   // ---- temporal coherence (kdop_cache.cpp) ----------------------------------------------------
