@@ -6,6 +6,7 @@
 /// machine; one thread).
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <ctime>
 #include <stdexcept>
@@ -66,7 +67,7 @@ class FrameDeadline {
   /// its deadline per item then costs nothing more past it).
   bool passed(double reserve_ms = 0) const {
     if (!active_) return false;
-    if (spent_) return true;
+    if (spent_.value.load(std::memory_order_relaxed)) return true;
     reserve_ms = std::max(reserve_ms, 0.0);
     bool out = false;
     double left = 0;
@@ -85,7 +86,7 @@ class FrameDeadline {
         if (!out) wall_ = now + to_duration(left);
       }
     }
-    if (out && left <= (test_clock_ != nullptr ? 0 : kResolutionMs)) spent_ = true;
+    if (out && left <= (test_clock_ != nullptr ? 0 : kResolutionMs)) spent_.value.store(true, std::memory_order_relaxed);
     return out;
   }
   /// The budget's clock in ms from construction: processor time with `BudgetClock::cpu`, wall
@@ -114,7 +115,19 @@ class FrameDeadline {
   TestClock test_clock_ = nullptr;
   Wall::time_point start_{};
   mutable Wall::time_point wall_{};  ///< no need to look before this
-  mutable bool spent_ = false;       ///< the budget itself is spent
+  /// Set once the budget itself is spent. Atomic: a wall-clock deadline is shared by the
+  /// threads of a cut-off frame (`wall_` is written only on the processor clock, which is
+  /// checked by one thread). A copy takes the value.
+  struct SpentFlag {
+    std::atomic<bool> value{false};
+    SpentFlag() = default;
+    SpentFlag(const SpentFlag& other) : value(other.value.load(std::memory_order_relaxed)) {}
+    SpentFlag& operator=(const SpentFlag& other) {
+      value.store(other.value.load(std::memory_order_relaxed), std::memory_order_relaxed);
+      return *this;
+    }
+  };
+  mutable SpentFlag spent_;
   double origin_ms_ = 0;              ///< cpu or test clock: its reading at construction
   double end_ms_ = 0;                 ///< cpu or test clock: its reading at which the budget ends
 };
