@@ -13,9 +13,7 @@
 
 // The lanes' vector type has a different ABI with and without AVX, which GCC warns about at
 // every function taking or returning one; all of those are inlined into the two kernels.
-#if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic ignored "-Wpsabi"
-#endif
 
 namespace crumple::geometry {
 
