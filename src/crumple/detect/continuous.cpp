@@ -290,25 +290,9 @@ struct Tester {
   /// The impact of a hit `r` of vertex v against face f.
   void record_vertex_face(Index v, Index f, const geometry::CcdPoints& s, const geometry::CcdPoints& e,
                           const geometry::CcdResult& r) {
-    VertexFaceImpact impact;
+    VertexFaceImpact impact = vertex_face_impact(s, e, r);
     impact.vertex = v;
     impact.face = f;
-    impact.toi = r.toi;
-    impact.outcome = r.outcome;
-    // Times `unit`: finite squares at any magnitude (unit_scale).
-    const Scalar unit = unit_scale(s, e);
-    const Vec3 p = at(s[0], e[0], r.toi) * unit, a = at(s[1], e[1], r.toi) * unit,
-               b = at(s[2], e[2], r.toi) * unit, c = at(s[3], e[3], r.toi) * unit;
-    const geometry::PointTriangleResult q = geometry::point_triangle(p, a, b, c);
-    impact.distance = std::sqrt(q.sqr_distance) / unit;
-    impact.barycentric = q.barycentric;
-    const Vec3 away = p - q.closest;
-    if (const Scalar len = away.norm(); len > 0) {
-      impact.normal = away / len;
-    } else {
-      const Vec3 n = (b - a).cross(c - a);
-      if (const Scalar n_len = n.norm(); n_len > 0) impact.normal = n / n_len;
-    }
     found.vf.push_back(impact);
   }
 
@@ -324,27 +308,11 @@ struct Tester {
   /// The impact of a hit `r` of edges a and b.
   void record_edge_edge(Index e0, Index e1, const Edge& a, const Edge& b, const geometry::CcdPoints& s,
                         const geometry::CcdPoints& e, const geometry::CcdResult& r) {
-    EdgeEdgeImpact impact;
+    EdgeEdgeImpact impact = edge_edge_impact(s, e, r);
     impact.edge0 = e0;
     impact.edge1 = e1;
     impact.a = a;
     impact.b = b;
-    impact.toi = r.toi;
-    impact.outcome = r.outcome;
-    const Scalar unit = unit_scale(s, e);
-    const Vec3 p0 = at(s[0], e[0], r.toi) * unit, p1 = at(s[1], e[1], r.toi) * unit,
-               q0 = at(s[2], e[2], r.toi) * unit, q1 = at(s[3], e[3], r.toi) * unit;
-    const geometry::SegmentSegmentResult q = geometry::segment_segment(p0, p1, q0, q1);
-    impact.distance = std::sqrt(q.sqr_distance) / unit;
-    impact.s = q.s;
-    impact.t = q.t;
-    const Vec3 across = q.closest1 - q.closest0;
-    if (const Scalar len = across.norm(); len > 0) {
-      impact.normal = across / len;
-    } else {
-      const Vec3 n = (p1 - p0).cross(q1 - q0);
-      if (const Scalar n_len = n.norm(); n_len > 0) impact.normal = n / n_len;
-    }
     found.ee.push_back(impact);
   }
 
@@ -548,6 +516,50 @@ OrphansOf index_orphans(const Topology& topo, const exact::Orphans& orphans) {
 }
 
 }  // namespace
+
+VertexFaceImpact vertex_face_impact(const geometry::CcdPoints& s, const geometry::CcdPoints& e,
+                                    const geometry::CcdResult& r) {
+  VertexFaceImpact impact;
+  impact.toi = r.toi;
+  impact.outcome = r.outcome;
+  // Times `unit`: finite squares at any magnitude (unit_scale).
+  const Scalar unit = unit_scale(s, e);
+  const Vec3 p = at(s[0], e[0], r.toi) * unit, a = at(s[1], e[1], r.toi) * unit, b = at(s[2], e[2], r.toi) * unit,
+             c = at(s[3], e[3], r.toi) * unit;
+  const geometry::PointTriangleResult q = geometry::point_triangle(p, a, b, c);
+  impact.distance = std::sqrt(q.sqr_distance) / unit;
+  impact.barycentric = q.barycentric;
+  const Vec3 away = p - q.closest;
+  if (const Scalar len = away.norm(); len > 0) {
+    impact.normal = away / len;
+  } else {
+    const Vec3 n = (b - a).cross(c - a);
+    if (const Scalar n_len = n.norm(); n_len > 0) impact.normal = n / n_len;
+  }
+  return impact;
+}
+
+EdgeEdgeImpact edge_edge_impact(const geometry::CcdPoints& s, const geometry::CcdPoints& e,
+                                const geometry::CcdResult& r) {
+  EdgeEdgeImpact impact;
+  impact.toi = r.toi;
+  impact.outcome = r.outcome;
+  const Scalar unit = unit_scale(s, e);
+  const Vec3 p0 = at(s[0], e[0], r.toi) * unit, p1 = at(s[1], e[1], r.toi) * unit,
+             q0 = at(s[2], e[2], r.toi) * unit, q1 = at(s[3], e[3], r.toi) * unit;
+  const geometry::SegmentSegmentResult q = geometry::segment_segment(p0, p1, q0, q1);
+  impact.distance = std::sqrt(q.sqr_distance) / unit;
+  impact.s = q.s;
+  impact.t = q.t;
+  const Vec3 across = q.closest1 - q.closest0;
+  if (const Scalar len = across.norm(); len > 0) {
+    impact.normal = across / len;
+  } else {
+    const Vec3 n = (p1 - p0).cross(q1 - q0);
+    if (const Scalar n_len = n.norm(); n_len > 0) impact.normal = n / n_len;
+  }
+  return impact;
+}
 
 struct ContinuousQuery::State {
   OrphansOf orphans_of;  ///< built at the first `query_moved`

@@ -87,6 +87,15 @@ struct ImpactSet {
   bool empty() const { return size() == 0; }
 };
 
+/// The impact of a narrow-phase hit `r` (`geometry::ccd`) of a vertex (start[0] → end[0])
+/// against a triangle (start[1..3] → end[1..3], corners in order): its time, outcome and
+/// geometry at x(toi), as every continuous query records them; `vertex` and `face` left at -1.
+VertexFaceImpact vertex_face_impact(const geometry::CcdPoints& start, const geometry::CcdPoints& end,
+                                    const geometry::CcdResult& r);
+/// Same for edges a (points 0, 1) and b (points 2, 3); ids and endpoints left at -1.
+EdgeEdgeImpact edge_edge_impact(const geometry::CcdPoints& start, const geometry::CcdPoints& end,
+                                const geometry::CcdResult& r);
+
 /// The largest step t ∈ [0, 1] this set allows: the earliest conservative TOI, or 1 when there
 /// is no impact. Nothing comes within δ before it (it is 0 when a pair is within δ at t = 0).
 Scalar collision_free_step(const ImpactSet& impacts);

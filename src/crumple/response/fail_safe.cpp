@@ -1,6 +1,5 @@
 #include <crumple/core/error.hpp>
 #include <crumple/geometry/ccd.hpp>
-#include <crumple/geometry/distance.hpp>
 #include <crumple/response/fail_safe.hpp>
 #include <crumple/response/union_find_detail.hpp>
 #include <crumple/response/untangle.hpp>
@@ -75,48 +74,43 @@ void rigidify(std::span<const Index> members, PositionsView start, std::span<con
 }  // namespace
 
 namespace {
-/// The pair of `s` re-tested alone over the motion from `start` to `positions`: false when it
-/// is no longer a live impact (no contact within δ, or within δ at the start only and certified
-/// never to touch, as in `CcdFailSafe::detect`); otherwise `s` becomes the pair's stencil at its
-/// new time of impact (weights and normal as the continuous query computes them).
-bool retest(Stencil& s, PositionsView start, std::span<const Vec3> positions, const geometry::CcdOptions& narrow) {
+/// The points of a stencil's four vertices at the frame's start and end.
+std::pair<geometry::CcdPoints, geometry::CcdPoints> points_of(const std::array<Index, 4>& v, PositionsView start,
+                                                              std::span<const Vec3> positions) {
   geometry::CcdPoints p0, p1;
   for (std::size_t k = 0; k < 4; ++k) {
-    p0[k] = start[at(s.vertex[k])];
-    p1[k] = positions[at(s.vertex[k])];
+    p0[k] = start[at(v[k])];
+    p1[k] = positions[at(v[k])];
   }
+  return {p0, p1};
+}
+
+/// Whether an impact found within δ is live: a pair within δ already at the frame's start
+/// (toi 0) is live only if the narrow phase cannot certify that it never touches (δ = 0).
+bool live_impact(geometry::CcdPair kind, const Stencil& s, Scalar toi, Scalar distance, Scalar delta,
+                 PositionsView start, std::span<const Vec3> positions, geometry::CcdOptions narrow) {
+  if (!(toi == 0 && distance <= delta)) return true;
+  narrow.min_separation = 0;
+  const auto [p0, p1] = points_of(s.vertex, start, positions);
+  return geometry::ccd(kind, p0, p1, narrow).hit;
+}
+
+/// The pair of `s` re-tested alone over the motion from `start` to `positions` with `narrow`
+/// (δ set): false when it is no longer a live impact; otherwise `s` becomes the pair's stencil
+/// at its new time of impact, made as `CcdFailSafe::detect` makes it from a query's impact.
+bool retest(Stencil& s, PositionsView start, std::span<const Vec3> positions, const geometry::CcdOptions& narrow) {
+  const auto [p0, p1] = points_of(s.vertex, start, positions);
   const geometry::CcdPair kind = s.edge_edge ? geometry::CcdPair::kEdgeEdge : geometry::CcdPair::kVertexFace;
   const geometry::CcdResult r = geometry::ccd(kind, p0, p1, narrow);
   if (!r.hit) return false;
-  std::array<Vec3, 4> q;
-  for (std::size_t k = 0; k < 4; ++k) q[k] = p0[k] + r.toi * (p1[k] - p0[k]);
-  Vec3 from, to, fallback;
-  Scalar distance = 0;
   if (s.edge_edge) {
-    const geometry::SegmentSegmentResult c = geometry::segment_segment(q[0], q[1], q[2], q[3]);
-    s.weight = {-(1 - c.s), -c.s, 1 - c.t, c.t};
-    from = c.closest0;
-    to = c.closest1;
-    distance = std::sqrt(c.sqr_distance);
-    fallback = (q[1] - q[0]).cross(q[3] - q[2]);
+    const EdgeEdgeImpact c = edge_edge_impact(p0, p1, r);
+    if (!live_impact(kind, s, c.toi, c.distance, narrow.min_separation, start, positions, narrow)) return false;
+    s = edge_edge_stencil({s.vertex[0], s.vertex[1]}, {s.vertex[2], s.vertex[3]}, c.s, c.t, c.normal);
   } else {
-    const geometry::PointTriangleResult c = geometry::point_triangle(q[0], q[1], q[2], q[3]);
-    s.weight = {1, -c.barycentric[0], -c.barycentric[1], -c.barycentric[2]};
-    from = c.closest;
-    to = q[0];
-    distance = std::sqrt(c.sqr_distance);
-    fallback = (q[2] - q[1]).cross(q[3] - q[1]);
-  }
-  const Vec3 d = to - from;
-  if (const Scalar len = d.norm(); len > 0) {
-    s.normal = d / len;
-  } else if (const Scalar len = fallback.norm(); len > 0) {
-    s.normal = fallback / len;
-  }  // else: the last normal stays
-  if (r.toi == 0 && distance <= narrow.min_separation) {
-    geometry::CcdOptions touching = narrow;
-    touching.min_separation = 0;
-    if (!geometry::ccd(kind, p0, p1, touching).hit) return false;
+    const VertexFaceImpact c = vertex_face_impact(p0, p1, r);
+    if (!live_impact(kind, s, c.toi, c.distance, narrow.min_separation, start, positions, narrow)) return false;
+    s = vertex_face_stencil(s.vertex[0], {s.vertex[1], s.vertex[2], s.vertex[3]}, c.barycentric, c.normal);
   }
   return true;
 }
@@ -162,27 +156,19 @@ std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> posit
   }
   live_.clear();
   const Scalar delta = options_.min_separation;
-  geometry::CcdOptions touching = options_.query.narrow;
-  touching.min_separation = 0;
-  // A pair within δ at the frame's start is live only if it may touch during the frame.
-  const auto touches = [&](geometry::CcdPair kind, const std::array<Index, 4>& v) {
-    geometry::CcdPoints p0, p1;
-    for (std::size_t k = 0; k < 4; ++k) {
-      p0[k] = start[at(v[k])];
-      p1[k] = positions[at(v[k])];
-    }
-    return geometry::ccd(kind, p0, p1, touching).hit;
+  const auto live = [&](geometry::CcdPair kind, const Stencil& s, Scalar toi, Scalar distance) {
+    return live_impact(kind, s, toi, distance, delta, start, positions, options_.query.narrow);
   };
   const auto faces = topology_->faces();
   for (const VertexFaceImpact& c : impacts_.vf) {
     Stencil s = vertex_face_stencil(c.vertex, faces[at(c.face)], c.barycentric, c.normal);
-    if (c.toi == 0 && c.distance <= delta && !touches(geometry::CcdPair::kVertexFace, s.vertex)) continue;
+    if (!live(geometry::CcdPair::kVertexFace, s, c.toi, c.distance)) continue;
     if (touches_tangle_on_both_sides(s, tangle_)) continue;
     live_.push_back(s);
   }
   for (const EdgeEdgeImpact& c : impacts_.ee) {
     Stencil s = edge_edge_stencil(c.a, c.b, c.s, c.t, c.normal);
-    if (c.toi == 0 && c.distance <= delta && !touches(geometry::CcdPair::kEdgeEdge, s.vertex)) continue;
+    if (!live(geometry::CcdPair::kEdgeEdge, s, c.toi, c.distance)) continue;
     if (touches_tangle_on_both_sides(s, tangle_)) continue;
     live_.push_back(s);
   }
