@@ -40,8 +40,18 @@ struct CcdArgs {
   bool stats = false;
 };
 
+/// The narrow phase's range for δ (`geometry::ccd`'s precondition), as an input error.
+void check_min_separation(double delta) {
+  if (!(delta >= 0 && delta <= 0x1p1000)) {
+    char text[64];
+    std::snprintf(text, sizeof text, "%.17g", delta);
+    throw InputError(std::string("ccd: the minimum separation must be in [0, 2^1000], got ") + text);
+  }
+}
+
 int run_queries(const CcdArgs& args) {
   if (args.min_separation_rel) throw InputError("ccd --queries: --min-separation-rel needs frames; give --min-separation");
+  check_min_separation(args.min_separation.value_or(0));
   const std::vector<io::CcdQuery> queries = io::read_ccd_queries(args.queries);
   geometry::CcdOptions options;
   options.min_separation = args.min_separation.value_or(0);
@@ -84,9 +94,7 @@ int run_frames(const CcdArgs& args) {
   } else if (args.min_separation_rel) {
     delta = *args.min_separation_rel * compute_bounds(mesh.positions()).diagonal();
   }
-  if (!(std::isfinite(delta) && delta >= 0)) {
-    throw InputError("ccd: the minimum separation must be finite and >= 0, got " + std::to_string(delta));
-  }
+  check_min_separation(delta);
   ContinuousOptions options;
   options.min_separation = delta;
   options.method = spec;

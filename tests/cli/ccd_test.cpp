@@ -166,6 +166,9 @@ TEST(CliCcd, MismatchedFramesAndBadOptionsAreErrors) {
       {f0 + " " + f0 + " --queries " + f0, "not both"},
       {f0 + " " + (dir / "missing.obj").string(), "missing.obj"},
       {f0 + " " + f0 + " --impacts " + dir.path().string(), "--impacts"},
+      {f0 + " " + f0 + " --min-separation 1e308", "must be in [0, 2^1000], got 1e+308"},
+      {f0 + " " + f0 + " --min-separation-rel 1e305", "must be in [0, 2^1000]"},
+      {"--queries " + write(dir, "q.txt", kQueries) + " --min-separation 1e308", "must be in [0, 2^1000]"},
   };
   for (const auto& c : cases) {
     const auto r = run_cli("ccd " + c.args);

@@ -789,7 +789,7 @@ CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end
 
 void check_options(const CcdOptions& options) {
   const Scalar delta = options.min_separation;
-  CRUMPLE_CHECK(delta >= 0 && delta <= kMaxMagnitude, "ccd: min_separation must be finite and >= 0");
+  CRUMPLE_CHECK(delta >= 0 && delta <= kMaxMagnitude, "ccd: min_separation must be in [0, 2^1000]");
   CRUMPLE_CHECK(options.max_boxes >= 1, "ccd: max_boxes must be >= 1");
   CRUMPLE_CHECK(options.max_advance_steps >= 0, "ccd: max_advance_steps must be >= 0");
   CRUMPLE_CHECK(options.max_time >= 0 && options.max_time <= 1, "ccd: max_time must be in [0, 1]");
