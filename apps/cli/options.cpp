@@ -133,9 +133,9 @@ void check_contact_budget(const Topology& topo, PositionsView x, const DetectorO
   const Scalar diagonal = compute_bounds(x).diagonal();
   if (diagonal > 0 && h > 0.05 * diagonal) {
     std::fprintf(stderr,
-                 "crumple: warning: the thickness %.6g is %.0f%% of the mesh's size (bounding-box "
+                 "crumple: warning: the thickness %.6g is %.3g times the mesh's size (bounding-box "
                  "diagonal %.6g): most pairs of the mesh will be contacts\n",
-                 h, 100 * h / diagonal, diagonal);
+                 h, h / diagonal, diagonal);
   }
   // Contacts per vertex stay bounded by the input while h is a few edge lengths at most.
   if (max_contacts == 0 || !(h > 4 * edge_length_stats(topo, x).mean)) return;
