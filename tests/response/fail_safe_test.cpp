@@ -3,11 +3,9 @@
 #include <crumple/core/error.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/geometry/ccd.hpp>
-#include <crumple/geometry/distance.hpp>
 #include <crumple/mesh/shapes.hpp>
 #include <crumple/response/fail_safe.hpp>
 
-#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
 #include <algorithm>
