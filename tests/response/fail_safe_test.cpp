@@ -452,6 +452,88 @@ TEST(FailSafe, QueriesCountOnlyQueriesThatRan) {
   EXPECT_EQ(stats[1].queries + stats[1].unchanged, stats[0].queries);
 }
 
+/// Two triangles around the edges (a0, a1) and (b0, b1) of `start` → `end` (points 0..3), each
+/// closed by a third corner 5 mm away from the other edge, moving with its edge's midpoint.
+struct EdgePair {
+  Positions start, end;
+  std::shared_ptr<const Topology> topology;
+  EdgePair(const std::array<Vec3, 4>& x0, const std::array<Vec3, 4>& x1) {
+    const auto third = [](const std::array<Vec3, 4>& x, int e) -> Vec3 {
+      const Vec3 mid = 0.5 * (x[2 * e] + x[2 * e + 1]);
+      const Vec3 other = 0.5 * (x[2 - 2 * e] + x[3 - 2 * e]);
+      const Vec3 along = (x[2 * e + 1] - x[2 * e]).normalized();
+      Vec3 away = mid - other;
+      away -= away.dot(along) * along;
+      return mid + 0.005 * away.normalized();
+    };
+    start = {x0[0], x0[1], third(x0, 0), x0[2], x0[3], third(x0, 1)};
+    end = {x1[0], x1[1], third(x1, 0), x1[2], x1[3], third(x1, 1)};
+    topology = TriMesh::create(start, {Face{0, 1, 2}, Face{3, 4, 5}}).topology_ptr();
+  }
+};
+
+// Two sides of a border quad of `crumple:n=100` squeezed by the wall (frame 43, δ = 0.1 h_c),
+// after a round of CCD impulses: the pair grazes at 1.009 δ, inside the band δ (1 + σ) where the
+// query reports a hit (`kHitTolerance`, distance above δ) that it cannot certify away, and the
+// impulses have no approach left to remove. It used to stay live through every impulse round,
+// the zones and the fallback (15 queries a frame, its vertices frozen). Certified never to come
+// within δ (1 − σ) it is not live. The same pair's proposed motion of frame 42, which the query
+// also reports above δ at its time of impact, passes the edges through each other: live.
+TEST(FailSafe, GrazingPairInsideTheQueryToleranceIsNotLive) {
+  const Scalar delta = 0.00034114704261972739;
+  const Scalar sigma = geometry::CcdOptions{}.separation_tolerance;
+  const EdgePair grazing({Vec3(0.95387240187976541, 0.013136551171045714, 0.55658827080085493),
+                          Vec3(0.95341425053995155, 0.020357946191875618, 0.56788390888035067),
+                          Vec3(0.95387240187976541, 0.02333935362881976, 0.56036027982171044),
+                          Vec3(0.95387240187976541, 0.01283154301157954, 0.57074527158727006)},
+                         {Vec3(0.95265398237278598, 0.014863974247776073, 0.55694056951921733),
+                          Vec3(0.95248568734665173, 0.020919373326510979, 0.56876992475191479),
+                          Vec3(0.9529316694397949, 0.024654198787389867, 0.56018727340903451),
+                          Vec3(0.95289409920716506, 0.013232649064506235, 0.56866950348844658)});
+  const EdgePair crossing({Vec3(0.95762510773554643, 0.01085891701185349, 0.5600385733860721),
+                           Vec3(0.95484001671300356, 0.014022799195538662, 0.56838850644864503),
+                           Vec3(0.95970573521309877, 0.019320100563474767, 0.56810672269290019),
+                           Vec3(0.95970573521309877, 0.0081942219820899248, 0.57531065347174448)},
+                          {Vec3(0.958539068546432, 0.013264377076390603, 0.55869694131640024),
+                           Vec3(0.958539068546432, 0.014252141034481148, 0.56970999765463126),
+                           Vec3(0.95832277766827645, 0.022457458626362392, 0.55833748608618405),
+                           Vec3(0.95367547795886731, 0.011766653562719137, 0.57007019673276649)});
+  const auto points = [](const Positions& x) { return geometry::CcdPoints{x[0], x[1], x[3], x[4]}; };
+  geometry::CcdOptions narrow;
+  narrow.min_separation = delta;
+  for (const EdgePair* pair : {&grazing, &crossing}) {
+    const geometry::CcdResult r = geometry::ccd(geometry::CcdPair::kEdgeEdge, points(pair->start), points(pair->end), narrow);
+    ASSERT_TRUE(r.hit);
+    EXPECT_EQ(r.outcome, geometry::CcdOutcome::kHitTolerance);
+    const EdgeEdgeImpact impact = edge_edge_impact(points(pair->start), points(pair->end), r);
+    EXPECT_GT(impact.distance, delta) << "reported above δ, inside the tolerance band";
+    EXPECT_LT(impact.distance, delta * (1 + sigma));
+  }
+  geometry::CcdOptions below = narrow;
+  below.min_separation = delta * (1 - sigma);
+  EXPECT_FALSE(geometry::ccd(geometry::CcdPair::kEdgeEdge, points(grazing.start), points(grazing.end), below).hit);
+  EXPECT_GT(touching_pairs(crossing.topology, crossing.start, crossing.end), 0u) << "the edges pass through";
+
+  FailSafeOptions o = options(20, 8);
+  o.min_separation = delta;
+  const std::vector<Scalar> inv_mass(6, 1);
+  {
+    Positions x = grazing.end, v(6, Vec3::Zero());
+    CcdFailSafe safe(grazing.topology, o);
+    const FailSafeStats stats = safe.apply(grazing.start, inv_mass, 1.0 / 60, x, v);
+    EXPECT_EQ(stats.impacts, 0u);
+    EXPECT_EQ(stats.queries, 1);
+    EXPECT_EQ(x, grazing.end) << "the proposed motion stands";
+  }
+  {
+    Positions x = crossing.end, v(6, Vec3::Zero());
+    CcdFailSafe safe(crossing.topology, o);
+    const FailSafeStats stats = safe.apply(crossing.start, inv_mass, 1.0 / 60, x, v);
+    EXPECT_GT(stats.impacts, 0u);
+    EXPECT_EQ(touching_pairs(crossing.topology, crossing.start, x), 0u);
+  }
+}
+
 TEST(FailSafe, RejectsBadOptions) {
   Crossing c;
   FailSafeOptions o = options(3, 8);

@@ -1,7 +1,12 @@
-// Detection once per frame (ResponseModel::Proximity) and the end-of-frame fail-safe hook.
+// Detection once per frame (ResponseModel::Proximity), its motion search and the end-of-frame
+// fail-safe hook.
+#include <crumple/detect/continuous.hpp>
+#include <crumple/geometry/distance.hpp>
 #include <crumple/sim/scene.hpp>
 
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 namespace crumple::sim {
 namespace {
@@ -51,6 +56,99 @@ TEST(PerFrame, FailSafeSeesEachFrameStartOnce) {
   }
   EXPECT_EQ(calls, 5);
   EXPECT_TRUE(starts_match);
+}
+
+/// Two triangles, no gravity, no springs, thickness h = 1 cm: A (z = 0) at rest, B a smaller one
+/// above A's interior at z = 3.5 h moving by `fall` (× h) along −z in the frame of 1/60 s, and
+/// both moving by `drift` along x. The detection radius is 2 h, so at the frame's start the
+/// detection sees nothing.
+struct TwoTriangles {
+  static constexpr Scalar h = 0.01;
+  Model model = Model::create({0.01, 0.01, 0.01, 0.01, 0.01, 0.01}, {}, {{0, 1, 2}, {3, 4, 5}});
+  State state;
+  Settings settings;
+  TwoTriangles(Scalar fall, Scalar drift, bool motion_search) {
+    state.x = {Vec3(0, 0, 0), Vec3(0.1, 0, 0), Vec3(0, 0.1, 0),
+               Vec3(0.02, 0.02, 3.5 * h), Vec3(0.05, 0.02, 3.5 * h), Vec3(0.02, 0.05, 3.5 * h)};
+    state.v.assign(6, Vec3(drift * h * 60, 0, 0));
+    for (std::size_t i = 3; i < 6; ++i) state.v[i].z() = -fall * h * 60;
+    settings.dt = 1.0 / 240;
+    settings.substeps = 4;
+    settings.integrator = IntegratorKind::SymplecticEuler;
+    settings.detector.thickness = h;
+    settings.detector.threads = 1;
+    settings.response = true;
+    settings.response_model = ResponseModel::Proximity;
+    settings.untangle = false;
+    settings.motion_search = motion_search;
+  }
+  Simulation make(bool built_in_fail_safe = true) const {
+    Settings s = settings;
+    s.fail_safe = built_in_fail_safe;
+    ForceField field;
+    field.gravity = Vec3::Zero();
+    return Simulation(model, state, field, {}, {}, s);
+  }
+};
+
+/// The impacts (within δ = 0.1 h) of the frame's proposed motion, the fail-safe's input, counted
+/// by the exact continuous query on a twin run whose fail-safe hook only records that motion.
+std::size_t exact_impacts(const TwoTriangles& scene) {
+  Simulation twin = scene.make(false);
+  ImpactSet impacts;
+  twin.set_fail_safe([&](PositionsView start, State& state) {
+    ContinuousOptions options;
+    options.min_separation = 0.1 * TwoTriangles::h;
+    options.threads = 1;
+    impacts = continuous_impacts(twin.model().topology_ptr(), start, state.x, options);
+  });
+  twin.advance_frame();
+  for (const auto& i : impacts.vf) EXPECT_GT(i.toi, 0) << "apart at the start: every impact is live";
+  for (const auto& i : impacts.ee) EXPECT_GT(i.toi, 0) << "apart at the start: every impact is live";
+  return impacts.size();
+}
+
+// B falls 8 h through A within one frame. Without the motion search the detection (radius 2 h)
+// misses the pair, the steps carry B through A and the fail-safe finds B's three corners
+// against A; with it, the predicted motion puts the three pairs among the frame's contacts, the
+// proximity impulses stop B at h above A and the fail-safe finds nothing.
+TEST(PerFrame, MotionSearchCatchesAFastPairInTheProximityStage) {
+  for (const bool search : {false, true}) {
+    SCOPED_TRACE(search ? "motion search on" : "motion search off");
+    const TwoTriangles scene(8, 0, search);
+    const std::size_t exact = exact_impacts(scene);
+    Simulation sim = scene.make();
+    const FrameStats st = sim.advance_frame();
+    EXPECT_EQ(st.ccd_impacts, exact) << "the fail-safe's live impacts are the exact count";
+    EXPECT_EQ(exact, search ? 0u : 3u);
+    EXPECT_EQ(st.motion_pairs, search ? 3u : 0u) << "B's corners against A";
+    EXPECT_EQ(st.motion_vertices, search ? 6u : 0u);
+    EXPECT_EQ(st.ccd_frozen, 0u);
+    const Positions& x = sim.state().x;
+    const Vec3 up = (x[1] - x[0]).cross(x[2] - x[0]).normalized();
+    for (std::size_t i = 3; i < 6; ++i) {
+      EXPECT_GT((x[i] - x[0]).dot(up), 0) << "B stays above A, vertex " << i;
+      if (search) {
+        const Scalar d = std::sqrt(geometry::point_triangle(x[i], x[0], x[1], x[2]).sqr_distance);
+        EXPECT_GT(d, 0.99 * TwoTriangles::h) << "the impulses hold B at h from A, vertex " << i;
+      }
+    }
+  }
+}
+
+// The same pair moving together (no relative motion) or closing in slowly has no fast vertex:
+// the detection's radius covers it, and the search queries nothing.
+TEST(PerFrame, MotionSearchSkipsMotionTheRadiusCovers) {
+  const TwoTriangles drifting(0, 8, true);
+  Simulation sim = drifting.make();
+  FrameStats st = sim.advance_frame();
+  EXPECT_EQ(st.motion_vertices, 0u) << "a uniform motion is no relative motion";
+  EXPECT_EQ(st.motion_pairs, 0u);
+  const TwoTriangles slow(0.5, 0, true);  // 0.25 h each way from the mean: below (2h - h) / 2
+  Simulation slow_sim = slow.make();
+  st = slow_sim.advance_frame();
+  EXPECT_EQ(st.motion_vertices, 0u);
+  EXPECT_EQ(st.ccd_impacts, 0u);
 }
 
 }  // namespace

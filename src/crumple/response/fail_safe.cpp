@@ -85,12 +85,23 @@ std::pair<geometry::CcdPoints, geometry::CcdPoints> points_of(const std::array<I
   return {p0, p1};
 }
 
-/// Whether an impact found within δ is live: a pair within δ already at the frame's start
-/// (toi 0) is live only if the narrow phase cannot certify that it never touches (δ = 0).
-bool live_impact(geometry::CcdPair kind, const Stencil& s, Scalar toi, Scalar distance, Scalar delta,
-                 PositionsView start, std::span<const Vec3> positions, geometry::CcdOptions narrow) {
-  if (!(toi == 0 && distance <= delta)) return true;
-  narrow.min_separation = 0;
+/// Whether an impact found within δ is live. Not live, each by a narrow-phase certificate that
+/// the pair never touches:
+///  - a pair within δ already at the frame's start (toi 0) that never touches (δ = 0): the
+///    proximity response's;
+///  - a hit inside the narrow phase's tolerance band, reported above δ (`kHitTolerance` may
+///    report a pair that comes within δ (1 + σ) only) and certified never to come within
+///    δ (1 − σ): a pair that grazes δ, which an impulse (it removes only an approach) cannot
+///    move out of the band.
+bool live_impact(geometry::CcdPair kind, const Stencil& s, Scalar toi, Scalar distance, geometry::CcdOutcome outcome,
+                 Scalar delta, PositionsView start, std::span<const Vec3> positions, geometry::CcdOptions narrow) {
+  if (toi == 0 && distance <= delta) {
+    narrow.min_separation = 0;
+  } else if (distance > delta && outcome == geometry::CcdOutcome::kHitTolerance && narrow.separation_tolerance > 0) {
+    narrow.min_separation = delta * (1 - std::min<Scalar>(narrow.separation_tolerance, 1));
+  } else {
+    return true;
+  }
   const auto [p0, p1] = points_of(s.vertex, start, positions);
   return geometry::ccd(kind, p0, p1, narrow).hit;
 }
@@ -105,11 +116,15 @@ bool retest(Stencil& s, PositionsView start, std::span<const Vec3> positions, co
   if (!r.hit) return false;
   if (s.edge_edge) {
     const EdgeEdgeImpact c = edge_edge_impact(p0, p1, r);
-    if (!live_impact(kind, s, c.toi, c.distance, narrow.min_separation, start, positions, narrow)) return false;
+    if (!live_impact(kind, s, c.toi, c.distance, c.outcome, narrow.min_separation, start, positions, narrow)) {
+      return false;
+    }
     s = edge_edge_stencil({s.vertex[0], s.vertex[1]}, {s.vertex[2], s.vertex[3]}, c.s, c.t, c.normal);
   } else {
     const VertexFaceImpact c = vertex_face_impact(p0, p1, r);
-    if (!live_impact(kind, s, c.toi, c.distance, narrow.min_separation, start, positions, narrow)) return false;
+    if (!live_impact(kind, s, c.toi, c.distance, c.outcome, narrow.min_separation, start, positions, narrow)) {
+      return false;
+    }
     s = vertex_face_stencil(s.vertex[0], {s.vertex[1], s.vertex[2], s.vertex[3]}, c.barycentric, c.normal);
   }
   return true;
@@ -156,19 +171,20 @@ std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> posit
   }
   live_.clear();
   const Scalar delta = options_.min_separation;
-  const auto live = [&](geometry::CcdPair kind, const Stencil& s, Scalar toi, Scalar distance) {
-    return live_impact(kind, s, toi, distance, delta, start, positions, options_.query.narrow);
+  const auto live = [&](geometry::CcdPair kind, const Stencil& s, const auto& impact) {
+    return live_impact(kind, s, impact.toi, impact.distance, impact.outcome, delta, start, positions,
+                       options_.query.narrow);
   };
   const auto faces = topology_->faces();
   for (const VertexFaceImpact& c : impacts_.vf) {
     Stencil s = vertex_face_stencil(c.vertex, faces[at(c.face)], c.barycentric, c.normal);
-    if (!live(geometry::CcdPair::kVertexFace, s, c.toi, c.distance)) continue;
+    if (!live(geometry::CcdPair::kVertexFace, s, c)) continue;
     if (touches_tangle_on_both_sides(s, tangle_)) continue;
     live_.push_back(s);
   }
   for (const EdgeEdgeImpact& c : impacts_.ee) {
     Stencil s = edge_edge_stencil(c.a, c.b, c.s, c.t, c.normal);
-    if (!live(geometry::CcdPair::kEdgeEdge, s, c.toi, c.distance)) continue;
+    if (!live(geometry::CcdPair::kEdgeEdge, s, c)) continue;
     if (touches_tangle_on_both_sides(s, tangle_)) continue;
     live_.push_back(s);
   }

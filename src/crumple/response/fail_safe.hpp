@@ -96,7 +96,10 @@ class CcdFailSafe {
   /// comment); `inv_mass`, `start`, `positions`, `velocities` have #V entries, `duration` > 0
   /// is the frame's length H (s). Impacts are *live* unless the pair is within δ already at
   /// the frame's start and never touches during the frame (certified by the narrow phase with
-  /// δ = 0): those pairs the proximity response handles, and freezing them would glue them.
+  /// δ = 0): those pairs the proximity response handles, and freezing them would glue them;
+  /// nor is a pair reported above δ inside the narrow phase's tolerance band (`kHitTolerance`,
+  /// within δ (1 + σ)) that the narrow phase with δ (1 − σ) certifies never comes that close:
+  /// it grazes δ, and no impulse (they remove an approach only) moves it out of the band.
   FailSafeStats apply(PositionsView start, std::span<const Scalar> inv_mass, Scalar duration,
                       std::span<Vec3> positions, std::span<Vec3> velocities);
 

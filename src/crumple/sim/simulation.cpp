@@ -2,6 +2,7 @@
 #include <crumple/sim/simulation.hpp>
 
 #include <crumple/core/timing.hpp>
+#include <crumple/geometry/distance.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -77,6 +78,12 @@ Simulation::Simulation(Model model, State state, ForceField field,
   if (per_frame()) detection.thickness *= settings_.search_factor;  // see `ResponseModel`
   detector_ = make_detector(settings_.method, detection);
   detector_->set_topology(model_.topology_ptr());
+  if (per_frame() && settings_.motion_search) {
+    ContinuousOptions options;
+    options.min_separation = settings_.detector.thickness;
+    options.threads = settings_.detector.threads;
+    motion_query_ = std::make_unique<ContinuousQuery>(model_.topology_ptr(), options);
+  }
   CRUMPLE_CHECK(settings_.fail_safe_separation >= 0 && std::isfinite(settings_.fail_safe_separation),
                 "fail_safe_separation must be finite and >= 0");
   if (settings_.response && settings_.fail_safe) {
@@ -179,12 +186,98 @@ void Simulation::filter_contacts() {
   }
 }
 
+void Simulation::motion_search() {
+  if (!motion_query_) return;
+  const auto start = Clock::now();
+  // The predicted motion: x + H v, projected out of the obstacles, which stop what they would
+  // stop (a layer landing on the floor is predicted to stay there, so a layer falling onto it is
+  // predicted to close in). A pair whose vertices' predicted displacements uᵢ all lie within
+  // s/2 of a common ū (s = R − h_c, the detection radius R's slack) changes its distance by at
+  // most s over that motion (the relative motion of two of its points is a convex combination
+  // of differences uᵢ − uⱼ), so if it comes within h_c it was within R at the start: the
+  // detection has it. Only the pairs with a vertex farther than s/2 from ū (the mass-weighted
+  // mean, which a cloth moving as one leaves alone) can be missed.
+  const Scalar duration = settings_.dt * settings_.substeps;
+  const Scalar h = settings_.detector.thickness;
+  const Scalar radius = settings_.search_factor * h;
+  const auto inv_mass = model_.inv_mass();
+  const std::size_t n = state_.x.size();
+  predicted_.resize(n);
+  for (std::size_t i = 0; i < n; ++i) predicted_[i] = state_.x[i] + duration * state_.v[i];
+  if (!obstacles_.empty()) {
+    predicted_velocity_.assign(state_.v.begin(), state_.v.end());
+    for (const auto& o : obstacles_) {
+      response::resolve_obstacle(o, state_.time + duration, inv_mass, predicted_, predicted_velocity_);
+    }
+  }
+  Vec3 mean = Vec3::Zero();
+  Scalar mass = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(inv_mass[i] > 0)) continue;
+    mean += (predicted_[i] - state_.x[i]) / inv_mass[i];
+    mass += 1 / inv_mass[i];
+  }
+  if (mass > 0) mean /= mass;
+  const Scalar far = 0.5 * (radius - h);
+  fast_.assign(n, 0);
+  std::size_t count = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if ((predicted_[i] - state_.x[i] - mean).squaredNorm() > far * far) {
+      fast_[i] = 1;
+      ++count;
+    }
+  }
+  motion_vertices_ += count;
+  if (count == 0) {
+    detect_ms_ += ms_since(start);
+    return;
+  }
+  // The pairs with a fast vertex that come within h_c over the predicted motion. When most
+  // vertices are fast the whole-mesh query (its swept k-DOP tree) is cheaper than the one-sided
+  // one; the pairs it adds with no fast vertex were within R at the start (above) and are
+  // dropped below with the detection's own.
+  if (4 * count > n) {
+    motion_query_->query(state_.x, predicted_, motion_impacts_);
+  } else {
+    motion_query_->query_moved(state_.x, predicted_, fast_, motion_impacts_);
+  }
+  // A pair within R at the start is the detection's already. The others get the stencil of
+  // their predicted time of impact, whose normal points from the side they come from (the
+  // proximity response refreshes weights and normal at every step, keeping that side).
+  const auto faces = model_.topology().faces();
+  const auto& x = state_.x;
+  const Scalar radius2 = radius * radius;
+  const std::size_t before = stencils_.size();
+  for (const VertexFaceImpact& c : motion_impacts_.vf) {
+    const Face& f = faces[static_cast<std::size_t>(c.face)];
+    const auto at = [&](Index v) { return x[static_cast<std::size_t>(v)]; };
+    if (!(c.normal.squaredNorm() > 0) ||
+        geometry::point_triangle(at(c.vertex), at(f[0]), at(f[1]), at(f[2])).sqr_distance < radius2) {
+      continue;
+    }
+    stencils_.push_back(response::vertex_face_stencil(c.vertex, f, c.barycentric, c.normal));
+  }
+  for (const EdgeEdgeImpact& c : motion_impacts_.ee) {
+    const auto at = [&](Index v) { return x[static_cast<std::size_t>(v)]; };
+    if (!(c.normal.squaredNorm() > 0) ||
+        geometry::segment_segment(at(c.a[0]), at(c.a[1]), at(c.b[0]), at(c.b[1])).sqr_distance < radius2) {
+      continue;
+    }
+    stencils_.push_back(response::edge_edge_stencil(c.a, c.b, c.s, c.t, c.normal));
+  }
+  motion_pairs_ += stencils_.size() - before;
+  detect_ms_ += ms_since(start);
+}
+
 void Simulation::proximity_frame() {
   if (!contacts_valid_) detect_now();
   untangle_check();
   const Positions frame_start = state_.x;
   auto start = Clock::now();
   stencils_ = response::make_stencils(contacts_, model_.topology().faces());
+  response_ms_ += ms_since(start);
+  motion_search();
+  start = Clock::now();
   drop_tangled(stencils_, untangler_.get());
   response_ms_ += ms_since(start);
   response::ProximityOptions options;
@@ -298,6 +391,8 @@ FrameStats Simulation::frame_stats() {
   s.ccd_queries = ccd_stats_.queries;
   s.ccd_zone_vertices = ccd_stats_.zone_vertices;
   s.ccd_frozen = ccd_stats_.frozen;
+  s.motion_pairs = motion_pairs_;
+  s.motion_vertices = motion_vertices_;
   const ContactSet& seen = per_frame() ? close_ : contacts_;
   s.vf = seen.vf.size();
   s.ee = seen.ee.size();
@@ -323,6 +418,7 @@ FrameStats Simulation::frame_stats() {
   if (!state_.x.empty()) s.bounds = compute_bounds(state_.x);
   integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = untangle_ms_ = 0;
   ccd_stats_ = {};
+  motion_pairs_ = motion_vertices_ = 0;
   cg_iterations_ = 0;
   detections_ = 0;
   corrections_ = 0;
@@ -353,6 +449,7 @@ FrameStats Simulation::advance_frame() {
     contacts_valid_ = false;
     integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = untangle_ms_ = 0;
     ccd_stats_ = {};
+    motion_pairs_ = motion_vertices_ = 0;
     cg_iterations_ = 0;
     corrections_ = 0;
     untangle_pulls_ = 0;

@@ -29,6 +29,7 @@
 /// instead of producing frames of huge or NaN coordinates.
 
 #include <crumple/core/error.hpp>
+#include <crumple/detect/continuous.hpp>
 #include <crumple/detect/detector.hpp>
 #include <crumple/response/contact_response.hpp>
 #include <crumple/response/fail_safe.hpp>
@@ -76,8 +77,10 @@ class DivergenceError : public Error {
 ///    frame: after each, the pairs whose gap fell below h_c get proximity impulses with
 ///    friction (`response::resolve_proximity`). A pair that was farther than 2 h_c at the
 ///    frame's start and closes in within the frame is not seen: the continuous (CCD) fail-safe
-///    (`Settings::fail_safe`) is what catches it. Frame statistics count the contacts
-///    closer than h_c at the frame's end (the same detection serves the next frame).
+///    (`Settings::fail_safe`) is what catches it, unless the frame's predicted motion
+///    brought it into the frame's contacts (`Settings::motion_search`). Frame statistics
+///    count the contacts closer than h_c at the frame's end (the same detection serves the
+///    next frame).
 enum class ResponseModel { AnnexB, Proximity };
 
 /// Called at the end of every frame with the positions at the frame's start and the state at
@@ -100,6 +103,15 @@ struct Settings {
   /// Proximity model: the frame's detection radius as a multiple of the thickness (> 1); the
   /// slack beyond h_c is the relative motion a frame may bring without being missed.
   Scalar search_factor = 2;
+  /// Proximity model: the frame's contacts also hold the pairs that the frame's predicted
+  /// motion (x + H v, H the frame's length, then projected out of the obstacles) brings within
+  /// h_c although they are farther than the detection radius at the start, found by a
+  /// continuous query over the pairs with a vertex whose predicted displacement differs from
+  /// the mass-weighted mean one by more than half the radius' slack — the only pairs the fixed
+  /// radius can miss under that motion (see `ResponseModel`). The proximity impulses then keep
+  /// those fast pairs apart instead of leaving them to the fail-safe. Off by default: the query
+  /// costs more than the fail-safe work it saves (docs/simulation.md, "Motion search").
+  bool motion_search = false;
   /// Largest spread of the particles, as a multiple of the initial one, before the run counts
   /// as diverged (see `DivergenceError`). A cloth's springs keep it near its own size.
   Scalar max_spread_growth = 10;
@@ -133,6 +145,10 @@ struct FrameStats {
   int ccd_queries = 0;          ///< continuous queries run by the fail-safe
   std::size_t ccd_zone_vertices = 0;  ///< vertices the fail-safe put in impact zones
   std::size_t ccd_frozen = 0;   ///< vertices the fail-safe's fallback kept at their start
+  /// Contacts added to the frame's proximity contacts by `Settings::motion_search`, and the
+  /// vertices whose predicted motion was fast enough to be searched.
+  std::size_t motion_pairs = 0;
+  std::size_t motion_vertices = 0;
   std::size_t vf = 0, ee = 0, tt = 0;  ///< contacts at the frame's end positions
   Scalar collision_share = 0;          ///< see `collision_share`
   /// Smallest VF/EE distance at the frame's end (infinity when there is no contact).
@@ -205,6 +221,9 @@ class Simulation {
   void proximity_frame();
   /// The contacts closer than h_c among the (wider) detected ones.
   void filter_contacts();
+  /// `Settings::motion_search`: appends to `stencils_` the pairs that the frame's predicted
+  /// motion brings within the detection radius and that were farther at the frame's start.
+  void motion_search();
   void obstacles_pass();
   /// The custom or built-in fail-safe from `frame_start` to the current state.
   void run_fail_safe(PositionsView frame_start);
@@ -240,6 +259,13 @@ class Simulation {
   std::size_t untangle_pulls_ = 0;
   double untangle_ms_ = 0;
   std::vector<response::Stencil> stencils_;
+  /// `Settings::motion_search` (Proximity model with response on): its query over the
+  /// predicted motion, its scratch, and its counts of the current frame.
+  std::unique_ptr<ContinuousQuery> motion_query_;
+  Positions predicted_, predicted_velocity_;
+  std::vector<char> fast_;
+  ImpactSet motion_impacts_;
+  std::size_t motion_pairs_ = 0, motion_vertices_ = 0;
   // Accumulated over the current frame.
   double integrate_ms_ = 0, detect_ms_ = 0, response_ms_ = 0, ccd_ms_ = 0;
   int cg_iterations_ = 0;
