@@ -458,22 +458,19 @@ class Projective final : public Integrator {
       const auto i = static_cast<std::size_t>(field.drag->vertex);
       base_[static_cast<std::size_t>(row_[i])] += field.drag->stiffness * field.drag->target + (field.drag->damping / h) * s.x[i];
     }
-    for (const Spring& sp : springs) {
-      const Eigen::Index ra = row_[static_cast<std::size_t>(sp.a)], rb = row_[static_cast<std::size_t>(sp.b)];
-      if (ra >= 0 && rb < 0) base_[static_cast<std::size_t>(ra)] += sp.stiffness * next_[static_cast<std::size_t>(sp.b)];
-      if (rb >= 0 && ra < 0) base_[static_cast<std::size_t>(rb)] += sp.stiffness * next_[static_cast<std::size_t>(sp.a)];
-    }
-    for (const Hinge& hg : hinges) {
+    for (const Boundary& e : boundary_) base_[static_cast<std::size_t>(e.row)] += e.stiffness * next_[static_cast<std::size_t>(e.pinned)];
+    for (std::size_t k = 0; k < hinges.size(); ++k) {
+      const Hinge& hg = hinges[k];
+      const std::array<int, 4>& rows = hinge_rows_[k];
       Vec3 rest = Vec3::Zero(), fixed = Vec3::Zero();
-      for (std::size_t k = 0; k < 4; ++k) {
-        const auto v = static_cast<std::size_t>(hg.vertex[k]);
-        rest += hg.weight[k] * s.x[v];
-        if (row_[v] < 0) fixed += hg.weight[k] * next_[v];
+      for (std::size_t c = 0; c < 4; ++c) {
+        const auto v = static_cast<std::size_t>(hg.vertex[c]);
+        rest += hg.weight[c] * s.x[v];
+        if (rows[c] < 0) fixed += hg.weight[c] * next_[v];
       }
       const Vec3 g = (hg.damping / h) * rest - (hg.stiffness + hg.damping / h) * fixed;
-      for (std::size_t k = 0; k < 4; ++k) {
-        const Eigen::Index r = row_[static_cast<std::size_t>(hg.vertex[k])];
-        if (r >= 0) base_[static_cast<std::size_t>(r)] += hg.weight[k] * g;
+      for (std::size_t c = 0; c < 4; ++c) {
+        if (rows[c] >= 0) base_[static_cast<std::size_t>(rows[c])] += hg.weight[c] * g;
       }
     }
     const auto& p = solver_.permutationP().indices();
@@ -598,6 +595,19 @@ class Projective final : public Integrator {
       }
     }
     const auto springs = model.springs();
+    // The springs with one pinned end, in order, and each hinge's free rows: what every step
+    // adds to the right-hand side's constant part, without looking rows up again.
+    boundary_.clear();
+    for (const Spring& sp : springs) {
+      const Eigen::Index ra = row_[static_cast<std::size_t>(sp.a)], rb = row_[static_cast<std::size_t>(sp.b)];
+      if (ra >= 0 && rb < 0) boundary_.push_back({static_cast<int>(ra), sp.b, sp.stiffness});
+      if (rb >= 0 && ra < 0) boundary_.push_back({static_cast<int>(rb), sp.a, sp.stiffness});
+    }
+    const auto hinges = model.hinges();
+    hinge_rows_.resize(hinges.size());
+    for (std::size_t k = 0; k < hinges.size(); ++k) {
+      for (std::size_t c = 0; c < 4; ++c) hinge_rows_[k][c] = static_cast<int>(row_[static_cast<std::size_t>(hinges[k].vertex[c])]);
+    }
     incident_start_.assign(free_.size() + 1, 0);
     for (const Spring& sp : springs) {
       for (const Index end : {sp.a, sp.b}) {
@@ -718,6 +728,14 @@ class Projective final : public Integrator {
   std::vector<std::size_t> free_;  // particle of each free row
   Eigen::SimplicialLDLT<Sparse, Eigen::Lower, NestedDissection> solver_;
   detail::SupernodalSolve supernodal_;  // the factor's triangular solves
+  /// A spring with one pinned end: its free end's row, the pinned particle, its stiffness.
+  struct Boundary {
+    int row;
+    Index pinned;
+    Scalar stiffness;
+  };
+  std::vector<Boundary> boundary_;                 // in the springs' order
+  std::vector<std::array<int, 4>> hinge_rows_;     // per hinge: its vertices' free rows, -1 pinned
   std::vector<int> incident_start_, incident_;  // per free row: its springs, ~k where it is end b
   Rows a_rows_;                // A by free rows, each entry at its column's particle
   std::vector<Vec3> origin_;    // per free row: the inertial prediction y the solves start from

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <iterator>
 
 namespace crumple::sim::detail {
 
@@ -332,6 +333,11 @@ CRUMPLE_SWEEP_CLONES void SupernodalSolve::backward(std::size_t group, std::vect
     const Supernode& s = node_[static_cast<std::size_t>(*it)];
     const auto chunks = static_cast<std::size_t>(s.chunks), lead = static_cast<std::size_t>(s.lead);
     const int* row = row_.data() + s.row_start;
+    // The next supernode's row list, which this sweep reads in descending order too.
+    if (std::next(it) != group_[group].rend()) {
+      const Supernode& next = node_[static_cast<std::size_t>(*std::next(it))];
+      for (std::size_t k = 0; k < static_cast<std::size_t>(next.rows); k += 16) __builtin_prefetch(row_.data() + next.row_start + k);
+    }
     // R's rows, four at a time into whole vectors (a vector load of four scalar stores would
     // wait for them to leave the store buffer), zeros in the padding.
     const auto rows = static_cast<std::size_t>(s.rows);
