@@ -358,9 +358,9 @@ CRUMPLE_SWEEP_CLONES void SupernodalSolve::backward(std::size_t group, std::vect
       // The next block this sweep reads lies just before this one in value_ (the block before
       // in this supernode, or the previous supernode's last): fetch as many bytes of it as this
       // block holds, since the hardware's prefetch follows ascending streams only.
-      for (const char* line = reinterpret_cast<const char*>(block) - 64 * ((below + 1) * static_cast<std::size_t>(q) / 4 + 1);
-           line < reinterpret_cast<const char*>(block); line += 64) {
-        __builtin_prefetch(line);
+      const std::size_t at = s.values + block_offset(b, chunks);
+      for (std::size_t f = at - std::min(at, 4 * static_cast<std::size_t>(q) * (below + 1) + 16); f < at; f += 16) {
+        __builtin_prefetch(value_.data() + f);
       }
       std::array<Vec3, 4> sum;
       switch (q) {
