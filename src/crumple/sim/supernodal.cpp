@@ -26,7 +26,7 @@ using F4 = float __attribute__((vector_size(16)));
 #define CRUMPLE_SWEEP_INLINE inline __attribute__((always_inline))
 // The helpers below are always inlined: no call passes a vector, so GCC's note on the AVX
 // calling convention (-Wpsabi) does not apply.
-#if defined(__GNUC__) && !defined(__clang__)
+#if defined(__GNUC__)
 #pragma GCC diagnostic ignored "-Wpsabi"
 #endif
 
