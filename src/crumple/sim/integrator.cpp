@@ -313,15 +313,19 @@ void spring_pulls_scalar(std::span<const Spring> springs, const std::vector<Vec3
     const Spring& sp = springs[k];
     const Vec3 d = x[static_cast<std::size_t>(sp.a)] - x[static_cast<std::size_t>(sp.b)];
     const Scalar l = std::sqrt((d.x() * d.x() + d.y() * d.y()) + d.z() * d.z());
-    const Scalar s = sp.rest_length / l;
-    pull[k] = l > 0 ? Vec3(sp.stiffness * (s * d.x()), sp.stiffness * (s * d.y()), sp.stiffness * (s * d.z()))
-                    : Vec3::Zero();
+    if (l > 0) {
+      const Scalar s = sp.rest_length / l;
+      pull[k] = Vec3(sp.stiffness * (s * d.x()), sp.stiffness * (s * d.y()), sp.stiffness * (s * d.z()));
+    } else {
+      pull[k] = Vec3::Zero();
+    }
   }
 }
 
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(CRUMPLE_SANITIZED)
 /// `spring_pulls_scalar`, four springs at a time in AVX: the same operations in the same order,
-/// each correctly rounded, so the same bits.
+/// each correctly rounded, so the same bits (a zero length's quotient, infinite or NaN, is
+/// masked to zero).
 __attribute__((target("avx2"))) void spring_pulls_avx2(std::span<const Spring> springs, const std::vector<Vec3>& x,
                                                        std::vector<Vec3>& pull, std::size_t begin, std::size_t end) {
   std::size_t k = begin;
