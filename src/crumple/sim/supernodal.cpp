@@ -357,7 +357,8 @@ CRUMPLE_SWEEP_CLONES void SupernodalSolve::backward(std::size_t group, std::vect
       const float* p = block + 4 * q;
       // The next block this sweep reads lies just before this one in value_ (the block before
       // in this supernode, or the previous supernode's last): fetch as many bytes of it as this
-      // block holds, since the hardware's prefetch follows ascending streams only.
+      // block holds. Each block is read upwards but the blocks downwards, a pattern the
+      // hardware's prefetch does not follow.
       const std::size_t at = s.values + block_offset(b, chunks);
       for (std::size_t f = at - std::min(at, 4 * static_cast<std::size_t>(q) * (below + 1) + 16); f < at; f += 16) {
         __builtin_prefetch(value_.data() + f);

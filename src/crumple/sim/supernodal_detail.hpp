@@ -1,6 +1,6 @@
 #pragma once
 // The triangular solves of a prefactored L D Lᵀ (projective dynamics' global step), with L stored
-// as dense supernodal panels in single precision: internal to sim (integrator.cpp), tested
+// as dense supernodal blocks in single precision: internal to sim (integrator.cpp), tested
 // against a plain sweep over the same factor in tests/sim/supernodal_test.cpp.
 
 #include <crumple/core/types.hpp>
