@@ -1,10 +1,15 @@
 #include <crumple/core/error.hpp>
 #include <crumple/core/parallel.hpp>
 #include <crumple/sim/integrator.hpp>
+#include <crumple/sim/supernodal_detail.hpp>
 
 #include <Eigen/IterativeLinearSolvers>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
 #include <algorithm>
 #include <array>
@@ -300,6 +305,69 @@ class ImplicitEuler final : public Integrator {
   Eigen::ConjugateGradient<Sparse, Eigen::Lower | Eigen::Upper> cg_;
 };
 
+/// pull[k] = k_s (L_s / l) d for the springs [begin, end): d = x_a − x_b, l = √((d_x² + d_y²) + d_z²)
+/// (zero where l = 0), the spring's rest-length projection times its stiffness.
+void spring_pulls_scalar(std::span<const Spring> springs, const std::vector<Vec3>& x, std::vector<Vec3>& pull,
+                         std::size_t begin, std::size_t end) {
+  for (std::size_t k = begin; k < end; ++k) {
+    const Spring& sp = springs[k];
+    const Vec3 d = x[static_cast<std::size_t>(sp.a)] - x[static_cast<std::size_t>(sp.b)];
+    const Scalar l = std::sqrt((d.x() * d.x() + d.y() * d.y()) + d.z() * d.z());
+    if (l > 0) {
+      const Scalar s = sp.rest_length / l;
+      pull[k] = Vec3(sp.stiffness * (s * d.x()), sp.stiffness * (s * d.y()), sp.stiffness * (s * d.z()));
+    } else {
+      pull[k] = Vec3::Zero();
+    }
+  }
+}
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(CRUMPLE_SANITIZED)
+/// `spring_pulls_scalar`, four springs at a time in AVX: the same operations in the same order,
+/// each correctly rounded, so the same bits (a zero length's quotient, infinite or NaN, is
+/// masked to zero).
+__attribute__((target("avx2"))) void spring_pulls_avx2(std::span<const Spring> springs, const std::vector<Vec3>& x,
+                                                       std::vector<Vec3>& pull, std::size_t begin, std::size_t end) {
+  std::size_t k = begin;
+  for (; k + 4 <= end; k += 4) {
+    alignas(32) std::array<Scalar, 4> dx, dy, dz, stiffness, rest;
+    for (std::size_t j = 0; j < 4; ++j) {
+      const Spring& sp = springs[k + j];
+      const Vec3 d = x[static_cast<std::size_t>(sp.a)] - x[static_cast<std::size_t>(sp.b)];
+      dx[j] = d.x();
+      dy[j] = d.y();
+      dz[j] = d.z();
+      stiffness[j] = sp.stiffness;
+      rest[j] = sp.rest_length;
+    }
+    const __m256d vx = _mm256_load_pd(dx.data()), vy = _mm256_load_pd(dy.data()), vz = _mm256_load_pd(dz.data());
+    const __m256d l = _mm256_sqrt_pd(
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(vx, vx), _mm256_mul_pd(vy, vy)), _mm256_mul_pd(vz, vz)));
+    const __m256d s = _mm256_div_pd(_mm256_load_pd(rest.data()), l);
+    const __m256d kk = _mm256_load_pd(stiffness.data());
+    const __m256d live = _mm256_cmp_pd(l, _mm256_setzero_pd(), _CMP_GT_OQ);
+    _mm256_store_pd(dx.data(), _mm256_and_pd(live, _mm256_mul_pd(kk, _mm256_mul_pd(s, vx))));
+    _mm256_store_pd(dy.data(), _mm256_and_pd(live, _mm256_mul_pd(kk, _mm256_mul_pd(s, vy))));
+    _mm256_store_pd(dz.data(), _mm256_and_pd(live, _mm256_mul_pd(kk, _mm256_mul_pd(s, vz))));
+    for (std::size_t j = 0; j < 4; ++j) pull[k + j] = Vec3(dx[j], dy[j], dz[j]);
+  }
+  spring_pulls_scalar(springs, x, pull, k, end);
+}
+#endif
+
+/// `spring_pulls_scalar` (in AVX where the CPU has it: the same bits).
+void spring_pulls(std::span<const Spring> springs, const std::vector<Vec3>& x, std::vector<Vec3>& pull,
+                  std::size_t begin, std::size_t end) {
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(CRUMPLE_SANITIZED)
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  if (avx2) {
+    spring_pulls_avx2(springs, x, pull, begin, end);
+    return;
+  }
+#endif
+  spring_pulls_scalar(springs, x, pull, begin, end);
+}
+
 /// Nested dissection (George, *Nested dissection of a regular finite element mesh*, SIAM J.
 /// Numer. Anal. 1973) as a fill-reducing ordering for Eigen's simplicial Cholesky, from the
 /// matrix pattern only: in each connected part, a breadth-first level structure from a
@@ -457,22 +525,19 @@ class Projective final : public Integrator {
       const auto i = static_cast<std::size_t>(field.drag->vertex);
       base_[static_cast<std::size_t>(row_[i])] += field.drag->stiffness * field.drag->target + (field.drag->damping / h) * s.x[i];
     }
-    for (const Spring& sp : springs) {
-      const Eigen::Index ra = row_[static_cast<std::size_t>(sp.a)], rb = row_[static_cast<std::size_t>(sp.b)];
-      if (ra >= 0 && rb < 0) base_[static_cast<std::size_t>(ra)] += sp.stiffness * next_[static_cast<std::size_t>(sp.b)];
-      if (rb >= 0 && ra < 0) base_[static_cast<std::size_t>(rb)] += sp.stiffness * next_[static_cast<std::size_t>(sp.a)];
-    }
-    for (const Hinge& hg : hinges) {
+    for (const Boundary& e : boundary_) base_[static_cast<std::size_t>(e.row)] += e.stiffness * next_[static_cast<std::size_t>(e.pinned)];
+    for (std::size_t k = 0; k < hinges.size(); ++k) {
+      const Hinge& hg = hinges[k];
+      const std::array<int, 4>& rows = hinge_rows_[k];
       Vec3 rest = Vec3::Zero(), fixed = Vec3::Zero();
-      for (std::size_t k = 0; k < 4; ++k) {
-        const auto v = static_cast<std::size_t>(hg.vertex[k]);
-        rest += hg.weight[k] * s.x[v];
-        if (row_[v] < 0) fixed += hg.weight[k] * next_[v];
+      for (std::size_t c = 0; c < 4; ++c) {
+        const auto v = static_cast<std::size_t>(hg.vertex[c]);
+        rest += hg.weight[c] * s.x[v];
+        if (rows[c] < 0) fixed += hg.weight[c] * next_[v];
       }
       const Vec3 g = (hg.damping / h) * rest - (hg.stiffness + hg.damping / h) * fixed;
-      for (std::size_t k = 0; k < 4; ++k) {
-        const Eigen::Index r = row_[static_cast<std::size_t>(hg.vertex[k])];
-        if (r >= 0) base_[static_cast<std::size_t>(r)] += hg.weight[k] * g;
+      for (std::size_t c = 0; c < 4; ++c) {
+        if (rows[c] >= 0) base_[static_cast<std::size_t>(rows[c])] += hg.weight[c] * g;
       }
     }
     const auto& p = solver_.permutationP().indices();
@@ -500,12 +565,7 @@ class Projective final : public Integrator {
       // projection); then each free row's right-hand side (less A y), gathered over its springs
       // in a fixed order and placed at its permuted row for the solve.
       parallel_for_chunks(springs.size(), threads_, spring_grain, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t k = begin; k < end; ++k) {
-          const Spring& sp = springs[k];
-          const Vec3 d = next_[static_cast<std::size_t>(sp.a)] - next_[static_cast<std::size_t>(sp.b)];
-          const Scalar l = d.norm();
-          pull_[k] = l > 0 ? Vec3(sp.stiffness * Vec3(sp.rest_length / l * d)) : Vec3::Zero();
-        }
+        spring_pulls(springs, next_, pull_, begin, end);
       });
       parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
         for (std::size_t r = begin; r < end; ++r) {
@@ -521,7 +581,9 @@ class Projective final : public Integrator {
           tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(r)])] = b;
         }
       });
-      solve();
+      // tmp_ = P A⁻¹ b (A = Pᵀ L D Lᵀ P), L's entries rounded to single precision, so to a
+      // relative 1e-7 or so: the global step solves for corrections.
+      supernodal_.solve(tmp_, threads_);
       // Chebyshev semi-iterative acceleration (Wang, *A Chebyshev semi-iterative approach for
       // accelerating projective and position-based dynamics*, SIGGRAPH Asia 2015):
       // x⁽ᵏ⁺¹⁾ = ω (x̂ − x⁽ᵏ⁻¹⁾) + x⁽ᵏ⁻¹⁾ with ω from the spectral radius estimate ρ.
@@ -595,6 +657,19 @@ class Projective final : public Integrator {
       }
     }
     const auto springs = model.springs();
+    // The springs with one pinned end, in order, and each hinge's free rows: what every step
+    // adds to the right-hand side's constant part, without looking rows up again.
+    boundary_.clear();
+    for (const Spring& sp : springs) {
+      const Eigen::Index ra = row_[static_cast<std::size_t>(sp.a)], rb = row_[static_cast<std::size_t>(sp.b)];
+      if (ra >= 0 && rb < 0) boundary_.push_back({static_cast<int>(ra), sp.b, sp.stiffness});
+      if (rb >= 0 && ra < 0) boundary_.push_back({static_cast<int>(rb), sp.a, sp.stiffness});
+    }
+    const auto hinges = model.hinges();
+    hinge_rows_.resize(hinges.size());
+    for (std::size_t k = 0; k < hinges.size(); ++k) {
+      for (std::size_t c = 0; c < 4; ++c) hinge_rows_[k][c] = static_cast<int>(row_[static_cast<std::size_t>(hinges[k].vertex[c])]);
+    }
     incident_start_.assign(free_.size() + 1, 0);
     for (const Spring& sp : springs) {
       for (const Index end : {sp.a, sp.b}) {
@@ -657,169 +732,21 @@ class Projective final : public Integrator {
     CRUMPLE_CHECK(solver_.info() == Eigen::Success, "projective dynamics: the system matrix is not positive definite");
     ++factorizations_;
     factored_ = true;
-    plan_solve();
+    supernodal_.plan(solver_.matrixL().nestedExpression(), solver_.vectorD());
   }
 
-  /// Splits the elimination tree into two disjoint forests and the rest, `top_` (the
-  /// separators above them), and stores L by rows for the forward solve. Row i of L refers
-  /// only to i's descendants, column j only to j's ancestors, so the forward solve runs each
-  /// forest on its own thread, with the top rows' sums over that forest's columns
-  /// (`cross_`), then the top; the backward solve the top, then the forests. The split
-  /// depends on the factor only, never on the thread count: the same bits on any number.
-  void plan_solve() {
-    const auto& l = solver_.matrixL().nestedExpression();
-    const auto m = static_cast<std::size_t>(l.cols());
-    const int* outer = l.outerIndexPtr();
-    const int* inner = l.innerIndexPtr();
-    // Elimination tree: the parent of j is the first row below the diagonal in column j (Eigen
-    // keeps each column's rows increasing). Work of a node: its row and its column; of a
-    // subtree, the sum over it (parents come after their children).
-    std::vector<int> parent(m, -1);
-    std::vector<std::size_t> row_count(m, 0), work(m), subtree(m, 0);
-    for (std::size_t j = 0; j < m; ++j) {
-      for (int k = outer[j]; k < outer[j + 1]; ++k) ++row_count[static_cast<std::size_t>(inner[k])];
-    }
-    for (std::size_t j = 0; j < m; ++j) {
-      if (outer[j] < outer[j + 1]) parent[j] = inner[outer[j]];
-      work[j] = 1 + static_cast<std::size_t>(outer[j + 1] - outer[j]) + row_count[j];
-      subtree[j] += work[j];
-      if (parent[j] >= 0) subtree[static_cast<std::size_t>(parent[j])] += subtree[j];
-    }
-    std::vector<int> child_start(m + 1, 0), children(m), roots;
-    for (std::size_t j = 0; j < m; ++j) {
-      if (parent[j] >= 0) ++child_start[static_cast<std::size_t>(parent[j]) + 1];
-    }
-    for (std::size_t j = 0; j < m; ++j) child_start[j + 1] += child_start[j];
-    {
-      std::vector<int> at(child_start.begin(), child_start.end() - 1);
-      for (std::size_t j = 0; j < m; ++j) {
-        if (parent[j] >= 0) {
-          children[static_cast<std::size_t>(at[static_cast<std::size_t>(parent[j])]++)] = static_cast<int>(j);
-        } else {
-          roots.push_back(static_cast<int>(j));
-        }
-      }
-    }
-    std::size_t total = 0;
-    for (const int r : roots) total += subtree[static_cast<std::size_t>(r)];
-    // Greedy: pack the candidate subtrees into two bins (largest first, into the lighter one);
-    // while that is unbalanced, move the heaviest candidate's root to the top and its children
-    // into the candidates. Keep the packing of least cost (top + heavier bin).
-    std::vector<int> candidates = roots, best_roots;
-    std::vector<char> best_bin;
-    std::size_t top_work = 0, best_cost = total;
-    const auto heavier = [&](int x, int y) {
-      return subtree[static_cast<std::size_t>(x)] > subtree[static_cast<std::size_t>(y)];
-    };
-    for (int expansion = 0; expansion < 4096 && !candidates.empty(); ++expansion) {
-      std::sort(candidates.begin(), candidates.end(), heavier);
-      std::array<std::size_t, 2> load{0, 0};
-      std::vector<char> bin(candidates.size());
-      for (std::size_t c = 0; c < candidates.size(); ++c) {
-        const std::size_t into = load[0] <= load[1] ? 0 : 1;
-        bin[c] = static_cast<char>(into);
-        load[into] += subtree[static_cast<std::size_t>(candidates[c])];
-      }
-      if (const std::size_t cost = top_work + std::max(load[0], load[1]); cost < best_cost) {
-        best_cost = cost;
-        best_roots = candidates;
-        best_bin = bin;
-      }
-      const std::size_t heaviest = subtree[static_cast<std::size_t>(candidates[0])];
-      if (std::max(load[0], load[1]) - std::min(load[0], load[1]) < total / 64 || heaviest < total / 64) break;
-      const auto r = static_cast<std::size_t>(candidates[0]);
-      candidates.erase(candidates.begin());
-      top_work += work[r];
-      candidates.insert(candidates.end(), children.begin() + child_start[r], children.begin() + child_start[r + 1]);
-    }
-    // Forests only where they save a fifth of the work at least (else everything is top).
-    std::vector<char> label(m, 2);
-    if (5 * best_cost < 4 * total) {
-      std::vector<int> stack;
-      for (std::size_t c = 0; c < best_roots.size(); ++c) {
-        stack.push_back(best_roots[c]);
-        while (!stack.empty()) {
-          const auto j = static_cast<std::size_t>(stack.back());
-          stack.pop_back();
-          label[j] = best_bin[c];
-          stack.insert(stack.end(), children.begin() + child_start[j], children.begin() + child_start[j + 1]);
-        }
-      }
-    }
-    for (auto& list : forest_) list.clear();
-    top_.clear();
-    std::vector<int> top_slot(m, -1);
-    for (std::size_t j = 0; j < m; ++j) {
-      if (label[j] == 2) {
-        top_slot[j] = static_cast<int>(top_.size());
-        top_.push_back(static_cast<int>(j));
-      } else {
-        forest_[static_cast<std::size_t>(label[j])].push_back(static_cast<int>(j));
-      }
-    }
-    // L by rows (each row's columns increasing), then the sweeps in the order they run.
-    const Scalar* value = l.valuePtr();
-    std::vector<int> row_start(m + 1, 0), row_column(static_cast<std::size_t>(outer[m]));
-    std::vector<Scalar> row_value(row_column.size());
-    for (std::size_t i = 0; i < m; ++i) row_start[i + 1] = row_start[i] + static_cast<int>(row_count[i]);
-    {
-      std::vector<int> at(row_start.begin(), row_start.end() - 1);
-      for (std::size_t j = 0; j < m; ++j) {
-        for (int k = outer[j]; k < outer[j + 1]; ++k) {
-          const auto slot = static_cast<std::size_t>(at[static_cast<std::size_t>(inner[k])]++);
-          row_column[slot] = static_cast<int>(j);
-          row_value[slot] = value[k];
-        }
-      }
-    }
-    // A forest row's entries all lie in its forest; a top row's go to the top sweep (top
-    // columns) and to cross_[f] (forest f's columns).
-    const auto add_row = [&](Sweep<float>& sweep, std::size_t i, int only_label) {
-      sweep.node.push_back(static_cast<int>(i));
-      for (int k = row_start[i]; k < row_start[i + 1]; ++k) {
-        const auto c = static_cast<std::size_t>(k);
-        if (label[static_cast<std::size_t>(row_column[c])] == only_label) sweep.add(row_column[c], row_value[c]);
-      }
-      sweep.close();
-    };
-    const auto add_column = [&](Sweep<float>& sweep, std::size_t j) {
-      sweep.node.push_back(static_cast<int>(j));
-      for (int k = outer[j]; k < outer[j + 1]; ++k) sweep.add(inner[k], value[k]);
-      sweep.close();
-    };
-    top_forward_.clear();
-    top_backward_.clear();
-    for (std::size_t f = 0; f < 2; ++f) {
-      forward_[f].clear();
-      cross_[f].clear();
-      backward_[f].clear();
-      for (const int i : forest_[f]) add_row(forward_[f], static_cast<std::size_t>(i), static_cast<int>(f));
-      for (const int i : top_) add_row(cross_[f], static_cast<std::size_t>(i), static_cast<int>(f));
-      for (auto it = forest_[f].rbegin(); it != forest_[f].rend(); ++it) add_column(backward_[f], static_cast<std::size_t>(*it));
-      partial_[f].resize(top_.size());
-    }
-    for (const int i : top_) add_row(top_forward_, static_cast<std::size_t>(i), 2);
-    for (auto it = top_.rbegin(); it != top_.rend(); ++it) add_column(top_backward_, static_cast<std::size_t>(*it));
-    const auto d = solver_.vectorD();
-    inverse_diagonal_.resize(static_cast<std::size_t>(d.size()));
-    for (std::size_t j = 0; j < inverse_diagonal_.size(); ++j) inverse_diagonal_[j] = 1 / d[static_cast<Eigen::Index>(j)];
-  }
-
-  /// Rows or columns of L (or rows of A) in the order a sweep visits them, stored in that
-  /// order: a sweep reads its entries front to back.
-  template <class Value>
-  struct Sweep {
-    std::vector<int> node, start{0}, index;
-    std::vector<Value> value;
+  /// Rows of A, each stored in the order its sum visits its entries.
+  struct Rows {
+    std::vector<int> start{0}, index;
+    std::vector<Scalar> value;
     void clear() {
-      node.clear();
       start.assign(1, 0);
       index.clear();
       value.clear();
     }
     void add(int i, Scalar v) {
       index.push_back(i);
-      value.push_back(static_cast<Value>(v));
+      value.push_back(v);
     }
     void close() { start.push_back(static_cast<int>(index.size())); }
     /// y − Σ value · x[index] over line `t`: four partial sums over the entries k ≡ 0, 1, 2, 3
@@ -828,7 +755,7 @@ class Projective final : public Integrator {
     /// let the additions overlap.
     Vec3 reduce(std::size_t t, const Vec3& y, const std::vector<Vec3>& x) const {
       const int* i = index.data();
-      const Value* v = value.data();
+      const Scalar* v = value.data();
       static_assert(sizeof(Vec3) == 3 * sizeof(Scalar), "Vec3 is three packed Scalars");
       const Scalar* p = x.data()->data();
       int k = start[t];
@@ -855,49 +782,6 @@ class Projective final : public Integrator {
     }
   };
 
-  /// L y = b over forest `f` (unit diagonal, in place in tmp_), then the top rows' sums over
-  /// its columns into partial_[f].
-  void forward_forest(std::size_t f) {
-    const Sweep<float>& rows = forward_[f];
-    for (std::size_t t = 0; t < rows.node.size(); ++t) {
-      const auto i = static_cast<std::size_t>(rows.node[t]);
-      tmp_[i] = rows.reduce(t, tmp_[i], tmp_);
-    }
-    for (std::size_t t = 0; t < top_.size(); ++t) partial_[f][t] = -cross_[f].reduce(t, Vec3::Zero(), tmp_);
-  }
-
-  /// L y = b over the top rows, after both forests.
-  void forward_top() {
-    for (std::size_t t = 0; t < top_.size(); ++t) {
-      const auto i = static_cast<std::size_t>(top_[t]);
-      tmp_[i] = top_forward_.reduce(t, tmp_[i] - partial_[0][t] - partial_[1][t], tmp_);
-    }
-  }
-
-  /// Lᵀ z = D⁻¹ y over the columns of `columns`, in place in tmp_ (D⁻¹ y as a product with the
-  /// stored reciprocals).
-  void backward(const Sweep<float>& columns) {
-    for (std::size_t t = 0; t < columns.node.size(); ++t) {
-      const auto j = static_cast<std::size_t>(columns.node[t]);
-      tmp_[j] = columns.reduce(t, inverse_diagonal_[j] * tmp_[j], tmp_);
-    }
-  }
-
-  /// tmp_ = (L D Lᵀ)⁻¹ tmp_: with tmp_ = P b on entry, P A⁻¹ b on return (A = Pᵀ L D Lᵀ P; L's
-  /// entries rounded to single precision, so to a relative 1e-7 or so: the caller solves for
-  /// corrections), the three coordinates at once (one pass over L per triangle solve instead
-  /// of one per column), the two forests on two threads.
-  void solve() {
-    parallel_for_chunks(2, threads_, 1, [this](std::size_t begin, std::size_t end) {
-      for (std::size_t f = begin; f < end; ++f) forward_forest(f);
-    });
-    forward_top();
-    backward(top_backward_);
-    parallel_for_chunks(2, threads_, 1, [this](std::size_t begin, std::size_t end) {
-      for (std::size_t f = begin; f < end; ++f) backward(backward_[f]);
-    });
-  }
-
   IntegratorOptions options_;
   int threads_ = 1;
   Key key_;
@@ -905,15 +789,17 @@ class Projective final : public Integrator {
   std::vector<Eigen::Index> row_;  // free row of each particle, -1 when pinned
   std::vector<std::size_t> free_;  // particle of each free row
   Eigen::SimplicialLDLT<Sparse, Eigen::Lower, NestedDissection> solver_;
-  std::array<std::vector<int>, 2> forest_;  // nodes of each thread's forest, increasing
-  std::vector<int> top_;                    // the other nodes, increasing
-  // L rounded to single precision (the sweeps sum in double).
-  std::array<Sweep<float>, 2> forward_, cross_, backward_;  // per forest: its rows; top rows; its columns
-  Sweep<float> top_forward_, top_backward_;                 // the top's rows and columns
-  std::array<std::vector<Vec3>, 2> partial_;         // per top row: Σ over forest f's columns
-  std::vector<Scalar> inverse_diagonal_;             // D⁻¹
+  detail::SupernodalSolve supernodal_;  // the factor's triangular solves
+  /// A spring with one pinned end: its free end's row, the pinned particle, its stiffness.
+  struct Boundary {
+    int row;
+    Index pinned;
+    Scalar stiffness;
+  };
+  std::vector<Boundary> boundary_;                 // in the springs' order
+  std::vector<std::array<int, 4>> hinge_rows_;     // per hinge: its vertices' free rows, -1 pinned
   std::vector<int> incident_start_, incident_;  // per free row: its springs, ~k where it is end b
-  Sweep<Scalar> a_rows_;        // A by free rows, each entry at its column's particle
+  Rows a_rows_;                // A by free rows, each entry at its column's particle
   std::vector<Vec3> origin_;    // per free row: the inertial prediction y the solves start from
   std::vector<Vec3> next_, older_, tmp_, base_, pull_;
 };

@@ -25,8 +25,9 @@
 ///    M/h² + air M/h + Σ k GᵀG + Σ (s + c/h) w wᵀ (+ drag), one matrix for x, y and z, factored
 ///    once by sparse Cholesky (Eigen's SimplicialLDLT, nested-dissection ordering) and refactored
 ///    only when h, the model (`Model::revision`) or the field's linear terms change; the
-///    triangular solves run the two halves of the elimination tree on two threads, over the
-///    factor rounded to single precision, for x − y (y the inertial prediction, the right-hand
+///    triangular solves run over the factor rounded to single precision and stored as dense
+///    supernodal blocks (x, y and z together; the two halves of the elimination tree on two
+///    threads), for x − y (y the inertial prediction, the right-hand
 ///    side less A y in double: the rounding scales with the step's displacement, not with the
 ///    coordinates). Starts from
 ///    the inertial prediction x₀ + h v₀ (warm start: the last step's velocity), runs
