@@ -210,12 +210,13 @@ Vec3 evaluate(const Prepared& p, Scalar t, Scalar u, Scalar v) {
   return f;
 }
 
-/// Certified: (1 - t) s0 + t s1 > threshold, for the exact values of the doubles given
-/// (t ∈ [0, 1]). The evaluation errs by at most 3.01 u (|s0| + |s1|) (1 - t, two products and
-/// a sum, each rounded once) plus underflow; 4 u and round_up cover it.
-bool line_above(Scalar s0, Scalar s1, Scalar t, Scalar threshold) {
-  const Scalar value = (1 - t) * s0 + t * s1;
-  return value > round_up(threshold + 4 * kU * (std::abs(s0) + std::abs(s1)));
+/// The right-hand side of a certified line test: (1 - t) s0 + t s1 > line_limit(s0, s1,
+/// threshold), evaluated as written, proves (1 - t) s0 + t s1 > threshold for the exact values
+/// of the doubles given (t ∈ [0, 1]). The evaluation errs by at most 3.01 u (|s0| + |s1|) (1 - t,
+/// two products and a sum, each rounded once) plus underflow; 4 u and round_up cover it. It
+/// does not depend on t: the advancement computes it once per line and step.
+Scalar line_limit(Scalar s0, Scalar s1, Scalar threshold) {
+  return round_up(threshold + 4 * kU * (std::abs(s0) + std::abs(s1)));
 }
 
 /// Result of conservative advancement: no contact before `t` (certified); `kSeparated`: none at
@@ -303,9 +304,11 @@ Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, cons
     const Scalar nn = n.x() * n.x() + n.y() * n.y() + n.z() * n.z();
     const Scalar slack = std::abs(n.x()) * p.err.x() + std::abs(n.y()) * p.err.y() + std::abs(n.z()) * p.err.z();
     const Scalar threshold = (p.delta * std::sqrt(nn) + slack + 4 * kU * mag) * (1 + 16 * kU) + kUnderflowSlack;
+    std::array<Scalar, 4> limit{};
+    for (int i = 0; i < half; ++i) limit[i] = line_limit(s0[i], s1[i], threshold);
     const auto above_at = [&](Scalar time) {
       for (int i = 0; i < half; ++i) {
-        if (!line_above(s0[i], s1[i], time, threshold)) return false;
+        if (!((1 - time) * s0[i] + time * s1[i] > limit[i])) return false;
       }
       return true;
     };
