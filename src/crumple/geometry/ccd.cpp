@@ -236,8 +236,11 @@ struct Advance {
 /// [t_k, t_{k+1}]. n is the closest-point direction at t_k, for which the bound is tight; its
 /// own rounding does not matter (any n is valid). Stops after `max_steps` steps, or when a step
 /// gains less than 2^-30 or cannot be certified.
-Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Prepared& p, const Hull& hull,
-                Scalar reach2, std::int64_t max_steps, Scalar max_time) {
+/// Flattened: the closest-point kernels are inlined into the loop (their unused outputs, such
+/// as the squared distance, are then not computed; the values used are the same bits).
+__attribute__((flatten)) Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
+                                         const Prepared& p, const Hull& hull, Scalar reach2,
+                                         std::int64_t max_steps, Scalar max_time) {
   Advance r;
   const int half = hull.count / 2;  // the points at t = 0, then the same at t = 1
   Scalar t = 0, progress = 1;
