@@ -803,8 +803,10 @@ void check_options(const CcdOptions& options) {
                 "ccd: tolerances must be >= 0");
 }
 
-CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options,
-                      unsigned done) {
+// Flattened, as `advance`: the filters, the advancement and the bisection inlined (the same
+// operations, the same bits).
+__attribute__((flatten)) CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
+                                               const CcdOptions& options, unsigned done) {
   const Scalar delta = options.min_separation;
   CcdResult result;
   const Vec3 m = max_abs_coordinates(start, end);
