@@ -433,6 +433,22 @@ TEST(Continuous, ATunnellingVertexIsFoundByEveryBroadPhase) {
   }
 }
 
+TEST(Continuous, FacesApartOnDifferentAxesAtTheTwoEndsAreKept) {
+  // A small triangle 0.3 beyond a resting one on x at t = 0 and 0.2 beyond it on y at t = 1,
+  // passing through it at t = 1/2: apart at both ends, but not on one axis, so the pair must
+  // stay a candidate (a slab test that took any axis at each end would lose every impact).
+  const Vec3 c0(1.3, -0.7, 0.5), c1(-0.8, 1.2, -0.5);
+  const Vec3 d1(0.05, 0, 0.01), d2(0, 0.05, 0.02);
+  const auto topo =
+      TriMesh::create({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), c0, c0 + d1, c0 + d2}, {{0, 1, 2}, {3, 4, 5}})
+          .topology_ptr();
+  const Positions x0{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), c0, c0 + d1, c0 + d2};
+  const Positions x1{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), c1, c1 + d1, c1 + d2};
+  for (const Scalar delta : {0.0, 0.01}) {
+    EXPECT_GT(check_all("apart on x, then on y", topo, x0, x1, delta, kAllSpecs), 0u) << delta;
+  }
+}
+
 TEST(Continuous, BroadPhasesStreamTheSameCandidatesInBoundedChunks) {
   // 3,200 faces with boxes grown by 0.06 (edges 0.025): about 10 × kStreamChunk candidates.
   const TriMesh mesh = shapes::lattice(40, 40);

@@ -134,7 +134,7 @@ struct Step {
 };
 
 /// The slabs of a face record's three corners.
-geometry::CcdSlabs slabs_of(const FaceFrame& r) {
+__attribute__((always_inline)) inline geometry::CcdSlabs slabs_of(const FaceFrame& r) {
   geometry::CcdSlabs s;
   for (std::size_t tau = 0; tau < 2; ++tau) {
     s.lo[tau] = r.x[tau][0].cwiseMin(r.x[tau][1]).cwiseMin(r.x[tau][2]);
@@ -144,7 +144,7 @@ geometry::CcdSlabs slabs_of(const FaceFrame& r) {
 }
 
 /// The slabs of points `i` and `j` of a face record (an edge).
-geometry::CcdSlabs slabs_of(const FaceFrame& r, int i, int j) {
+__attribute__((always_inline)) inline geometry::CcdSlabs slabs_of(const FaceFrame& r, int i, int j) {
   const auto ui = static_cast<std::size_t>(i), uj = static_cast<std::size_t>(j);
   geometry::CcdSlabs s;
   for (std::size_t tau = 0; tau < 2; ++tau) {
@@ -155,7 +155,9 @@ geometry::CcdSlabs slabs_of(const FaceFrame& r, int i, int j) {
 }
 
 /// The slabs of a query's points `first` .. `first + count - 1`.
-geometry::CcdSlabs slabs_of(const geometry::CcdPoints& start, const geometry::CcdPoints& end, int first, int count) {
+__attribute__((always_inline)) inline geometry::CcdSlabs slabs_of(const geometry::CcdPoints& start,
+                                                                  const geometry::CcdPoints& end, int first,
+                                                                  int count) {
   geometry::CcdSlabs s;
   for (std::size_t tau = 0; tau < 2; ++tau) {
     const geometry::CcdPoints& x = tau == 0 ? start : end;
@@ -279,6 +281,14 @@ struct Tester {
     return false;
   }
 
+  /// Queues a sub-pair (the queue flushed first when full); the caller fills its points in the
+  /// returned slot (the narrow_* functions' order) before queueing another.
+  geometry::detail::CcdQuery& push(const Waiting& w) {
+    if (queue_size == kQueue) flush();
+    queued[queue_size] = w;
+    return queued_points[queue_size++];
+  }
+
   /// Queues vertex v (s[0], e[0]) against face f (s[1..3], e[1..3], corners in order) for the
   /// narrow phase, after the slab test.
   void narrow_vertex_face(Index v, Index f, const geometry::CcdPoints& s, const geometry::CcdPoints& e) {
@@ -397,8 +407,8 @@ struct Tester {
   }
 
   /// Corner k of face f (record rf) against face g (record rg, slabs gs).
-  void vertex_face(const OwnedFace& f, const FaceFrame& rf, int k, Index gi, const FaceFrame& rg,
-                   const geometry::CcdSlabs& gs) {
+  __attribute__((always_inline)) void vertex_face(const OwnedFace& f, const FaceFrame& rf, int k, Index gi,
+                                                  const FaceFrame& rg, const geometry::CcdSlabs& gs) {
     const auto uk = static_cast<std::size_t>(k);
     if (!step.wanted(f.v[uk], rg.own.v[0], rg.own.v[1], rg.own.v[2])) return;
     geometry::CcdSlabs vs;
@@ -408,9 +418,10 @@ struct Tester {
       return;
     }
     if (done()) return;
-    const geometry::CcdPoints start{rf.x[0][uk], rg.x[0][0], rg.x[0][1], rg.x[0][2]};
-    const geometry::CcdPoints end{rf.x[1][uk], rg.x[1][0], rg.x[1][1], rg.x[1][2]};
-    narrow_vertex_face(f.v[uk], gi, start, end);
+    geometry::detail::CcdQuery& q = push({true, f.v[uk], gi, {}, {}});
+    for (std::size_t tau = 0; tau < 2; ++tau) {
+      (tau == 0 ? q.start : q.end) = {rf.x[tau][uk], rg.x[tau][0], rg.x[tau][1], rg.x[tau][2]};
+    }
   }
 
   /// Side i of face f (corners ci, vertex ids increasing) against side j of face g.
@@ -428,12 +439,10 @@ struct Tester {
       std::swap(ra, rb);
       std::swap(ca, cb);
     }
-    geometry::CcdPoints start, end;
+    geometry::detail::CcdQuery& q = push({false, e0, e1, a, b});
     for (std::size_t tau = 0; tau < 2; ++tau) {
-      geometry::CcdPoints& x = tau == 0 ? start : end;
-      x = {ra->x[tau][ca[0]], ra->x[tau][ca[1]], rb->x[tau][cb[0]], rb->x[tau][cb[1]]};
+      (tau == 0 ? q.start : q.end) = {ra->x[tau][ca[0]], ra->x[tau][ca[1]], rb->x[tau][cb[0]], rb->x[tau][cb[1]]};
     }
-    narrow_edge_edge(e0, e1, a, b, start, end);
   }
 };
 

@@ -210,12 +210,13 @@ Vec3 evaluate(const Prepared& p, Scalar t, Scalar u, Scalar v) {
   return f;
 }
 
-/// Certified: (1 - t) s0 + t s1 > threshold, for the exact values of the doubles given
-/// (t ∈ [0, 1]). The evaluation errs by at most 3.01 u (|s0| + |s1|) (1 - t, two products and
-/// a sum, each rounded once) plus underflow; 4 u and round_up cover it.
-bool line_above(Scalar s0, Scalar s1, Scalar t, Scalar threshold) {
-  const Scalar value = (1 - t) * s0 + t * s1;
-  return value > round_up(threshold + 4 * kU * (std::abs(s0) + std::abs(s1)));
+/// The right-hand side of a certified line test: (1 - t) s0 + t s1 > line_limit(s0, s1,
+/// threshold), evaluated as written, proves (1 - t) s0 + t s1 > threshold for the exact values
+/// of the doubles given (t ∈ [0, 1]). The evaluation errs by at most 3.01 u (|s0| + |s1|) (1 - t,
+/// two products and a sum, each rounded once) plus underflow; 4 u and round_up cover it. It
+/// does not depend on t: the advancement computes it once per line and step.
+Scalar line_limit(Scalar s0, Scalar s1, Scalar threshold) {
+  return round_up(threshold + 4 * kU * (std::abs(s0) + std::abs(s1)));
 }
 
 /// Result of conservative advancement: no contact before `t` (certified); `kSeparated`: none at
@@ -235,8 +236,11 @@ struct Advance {
 /// [t_k, t_{k+1}]. n is the closest-point direction at t_k, for which the bound is tight; its
 /// own rounding does not matter (any n is valid). Stops after `max_steps` steps, or when a step
 /// gains less than 2^-30 or cannot be certified.
-Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const Prepared& p, const Hull& hull,
-                Scalar reach2, std::int64_t max_steps, Scalar max_time) {
+/// Flattened: the closest-point kernels are inlined into the loop (their unused outputs, such
+/// as the squared distance, are then not computed; the values used are the same bits).
+__attribute__((flatten)) Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
+                                         const Prepared& p, const Hull& hull, Scalar reach2,
+                                         std::int64_t max_steps, Scalar max_time) {
   Advance r;
   const int half = hull.count / 2;  // the points at t = 0, then the same at t = 1
   Scalar t = 0, progress = 1;
@@ -303,9 +307,11 @@ Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end, cons
     const Scalar nn = n.x() * n.x() + n.y() * n.y() + n.z() * n.z();
     const Scalar slack = std::abs(n.x()) * p.err.x() + std::abs(n.y()) * p.err.y() + std::abs(n.z()) * p.err.z();
     const Scalar threshold = (p.delta * std::sqrt(nn) + slack + 4 * kU * mag) * (1 + 16 * kU) + kUnderflowSlack;
+    std::array<Scalar, 4> limit{};
+    for (int i = 0; i < half; ++i) limit[i] = line_limit(s0[i], s1[i], threshold);
     const auto above_at = [&](Scalar time) {
       for (int i = 0; i < half; ++i) {
-        if (!line_above(s0[i], s1[i], time, threshold)) return false;
+        if (!((1 - time) * s0[i] + time * s1[i] > limit[i])) return false;
       }
       return true;
     };
@@ -797,8 +803,10 @@ void check_options(const CcdOptions& options) {
                 "ccd: tolerances must be >= 0");
 }
 
-CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options,
-                      unsigned done) {
+// Flattened, as `advance`: the filters, the advancement and the bisection inlined (the same
+// operations, the same bits).
+__attribute__((flatten)) CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
+                                               const CcdOptions& options, unsigned done) {
   const Scalar delta = options.min_separation;
   CcdResult result;
   const Vec3 m = max_abs_coordinates(start, end);
