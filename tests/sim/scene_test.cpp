@@ -72,6 +72,25 @@ TEST(Scene, ClothOnSphereSearchesAFixedRadius) {
   EXPECT_THROW(make_scene(SceneSpec::parse("cloth-on-sphere:n=4,search=inf"), 1), InputError);
 }
 
+// The pile keeps a radius in metres too (key `search`, 0.0068 m: the 2 thicknesses of n = 100):
+// at n = 200 (here its edges: 40 quads on 0.2 m) 2 thicknesses missed the falling folds and the
+// fail-safe's corrections heated the pile (docs/simulation.md, "Energy under contact").
+TEST(Scene, CrumpleSearchesAFixedRadius) {
+  const auto radius = [](const std::string& spec) {
+    const Scene s = make_scene(SceneSpec::parse(spec), 1);
+    EXPECT_GE(s.settings.search_factor, 2.0) << spec;
+    return std::pair{s.settings.search_factor, s.settings.search_factor * s.settings.detector.thickness};
+  };
+  EXPECT_EQ(radius("crumple:n=20").first, 2.0);
+  EXPECT_EQ(radius("crumple:n=40,size=0.4").first, 2.0);  // the edges of n = 100
+  const auto [factor, metres] = radius("crumple:n=40,size=0.2");
+  EXPECT_GT(factor, 3.9);
+  EXPECT_NEAR(metres, 0.0068, 1e-12);
+  EXPECT_EQ(radius("crumple:n=40,size=0.2,search=0").first, 2.0);
+  EXPECT_NEAR(radius("crumple:n=40,size=0.2,search=0.01").second, 0.01, 1e-12);
+  EXPECT_THROW(make_scene(SceneSpec::parse("crumple:n=4,search=-1"), 1), InputError);
+}
+
 TEST(Scene, FileScenesFromMeshAndModel) {
   const TriMesh mesh = TriMesh::create({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(1, 1, 0)},
                                        {{0, 1, 2}, {2, 1, 3}});
