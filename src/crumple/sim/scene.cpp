@@ -240,10 +240,6 @@ Scene finish(const SceneSpec& spec, Cloth cloth, Scalar jitter_rel, std::uint64_
   return s;
 }
 
-/// The fast default of the scenes with a per-area material: detection once per frame with
-/// proximity impulses and friction (`ResponseModel::Proximity`), projective dynamics, 4 steps of
-/// 1/240 s per frame of 1/60 s, 5 local/global iterations each, Chebyshev-accelerated with
-/// ρ = 0.8 (docs/simulation.md).
 /// The frame's proximity search radius from the scene key `search` (m), at least 2 thicknesses.
 void search_radius(Scene& s, const SceneSpec& spec) {
   const Scalar search = spec.get_double("search");
@@ -251,6 +247,10 @@ void search_radius(Scene& s, const SceneSpec& spec) {
   s.settings.search_factor = std::max<Scalar>(2, search / s.settings.detector.thickness);
 }
 
+/// The fast default of the scenes with a per-area material: detection once per frame with
+/// proximity impulses and friction (`ResponseModel::Proximity`), projective dynamics, 4 steps of
+/// 1/240 s per frame of 1/60 s, 5 local/global iterations each, Chebyshev-accelerated with
+/// ρ = 0.8 (docs/simulation.md).
 void fast_settings(Scene& s, const SceneSpec& spec) {
   s.settings.response_model = ResponseModel::Proximity;
   if (const auto& keys = scene_info(spec.name()).params;
@@ -405,7 +405,7 @@ Scene crumple_scene(const SceneSpec& spec, std::uint64_t seed) {
   // As on the sphere (above): at n = 200 a radius of 2 thicknesses (3.4 mm) left the folds that
   // fall onto the pile (1-2 m/s) to the fail-safe, and its corrections heated the pile from its
   // first impacts (frame 248: longest spring 7x, 52x at 279, 774 J and 1.1 million live impacts
-  // at 293). 6.8 mm is the radius of n = 100 (2 thicknesses), where the pile runs calm.
+  // at 293). 6.8 mm is the radius of n = 100 (2 thicknesses).
   search_radius(s, spec);
   return s;
 }
