@@ -52,22 +52,24 @@ TEST(Scene, EveryBuiltInSceneIsDeterministicAndSeeded) {
   }
 }
 
+// A scene's proximity search radius: as a multiple of its thickness (at least 2), and in metres.
+std::pair<Scalar, Scalar> search_radius(const std::string& spec) {
+  const Scene s = make_scene(SceneSpec::parse(spec), 1);
+  EXPECT_GE(s.settings.search_factor, 2.0) << spec;
+  return {s.settings.search_factor, s.settings.search_factor * s.settings.detector.thickness};
+}
+
 // The frame's proximity search keeps a radius in metres (key `search`, 0.01 m) and at least 2
 // thicknesses: the thesis-size lattices keep 2, a fine one (the edges of n = 200 on the 1.5 m
 // cloth, here 40 quads on 0.3 m) searches farther, as the landing skirt's motion needs.
 TEST(Scene, ClothOnSphereSearchesAFixedRadius) {
-  const auto radius = [](const std::string& spec) {
-    const Scene s = make_scene(SceneSpec::parse(spec), 1);
-    EXPECT_GE(s.settings.search_factor, 2.0) << spec;
-    return std::pair{s.settings.search_factor, s.settings.search_factor * s.settings.detector.thickness};
-  };
-  EXPECT_EQ(radius("cloth-on-sphere:n=16").first, 2.0);
-  EXPECT_EQ(radius("cloth-on-sphere:n=40").first, 2.0);
-  const auto [factor, metres] = radius("cloth-on-sphere:n=40,size=0.3");
+  EXPECT_EQ(search_radius("cloth-on-sphere:n=16").first, 2.0);
+  EXPECT_EQ(search_radius("cloth-on-sphere:n=40").first, 2.0);
+  const auto [factor, metres] = search_radius("cloth-on-sphere:n=40,size=0.3");
   EXPECT_GT(factor, 3.5);
   EXPECT_NEAR(metres, 0.01, 1e-12);
-  EXPECT_EQ(radius("cloth-on-sphere:n=40,size=0.3,search=0").first, 2.0);
-  EXPECT_NEAR(radius("cloth-on-sphere:n=40,size=0.3,sweep-speed=5,search=0.02").second, 0.02, 1e-12);
+  EXPECT_EQ(search_radius("cloth-on-sphere:n=40,size=0.3,search=0").first, 2.0);
+  EXPECT_NEAR(search_radius("cloth-on-sphere:n=40,size=0.3,sweep-speed=5,search=0.02").second, 0.02, 1e-12);
   EXPECT_THROW(make_scene(SceneSpec::parse("cloth-on-sphere:n=4,search=-1"), 1), InputError);
   EXPECT_THROW(make_scene(SceneSpec::parse("cloth-on-sphere:n=4,search=inf"), 1), InputError);
 }
@@ -76,18 +78,13 @@ TEST(Scene, ClothOnSphereSearchesAFixedRadius) {
 // at n = 200 (here its edges: 40 quads on 0.2 m) 2 thicknesses missed the falling folds and the
 // fail-safe's corrections heated the pile (docs/simulation.md, "Energy under contact").
 TEST(Scene, CrumpleSearchesAFixedRadius) {
-  const auto radius = [](const std::string& spec) {
-    const Scene s = make_scene(SceneSpec::parse(spec), 1);
-    EXPECT_GE(s.settings.search_factor, 2.0) << spec;
-    return std::pair{s.settings.search_factor, s.settings.search_factor * s.settings.detector.thickness};
-  };
-  EXPECT_EQ(radius("crumple:n=20").first, 2.0);
-  EXPECT_EQ(radius("crumple:n=40,size=0.4").first, 2.0);  // the edges of n = 100
-  const auto [factor, metres] = radius("crumple:n=40,size=0.2");
+  EXPECT_EQ(search_radius("crumple:n=20").first, 2.0);
+  EXPECT_EQ(search_radius("crumple:n=40,size=0.4").first, 2.0);  // the edges of n = 100
+  const auto [factor, metres] = search_radius("crumple:n=40,size=0.2");
   EXPECT_GT(factor, 3.9);
   EXPECT_NEAR(metres, 0.0068, 1e-12);
-  EXPECT_EQ(radius("crumple:n=40,size=0.2,search=0").first, 2.0);
-  EXPECT_NEAR(radius("crumple:n=40,size=0.2,search=0.01").second, 0.01, 1e-12);
+  EXPECT_EQ(search_radius("crumple:n=40,size=0.2,search=0").first, 2.0);
+  EXPECT_NEAR(search_radius("crumple:n=40,size=0.2,search=0.01").second, 0.01, 1e-12);
   EXPECT_THROW(make_scene(SceneSpec::parse("crumple:n=4,search=-1"), 1), InputError);
 }
 
