@@ -176,6 +176,11 @@ int bits(std::uint8_t mask) { return (mask & 1) + (mask >> 1 & 1) + (mask >> 2 &
 /// x(t) = p + t (q − p), as the narrow phase's motion.
 Vec3 at(const Vec3& p, const Vec3& q, Scalar t) { return p + t * (q - p); }
 
+/// The pair's four points at time t times `unit` (a power of two: exact).
+std::array<Vec3, 4> scaled_at(const geometry::CcdPoints& s, const geometry::CcdPoints& e, Scalar t, Scalar unit) {
+  return {at(s[0], e[0], t) * unit, at(s[1], e[1], t) * unit, at(s[2], e[2], t) * unit, at(s[3], e[3], t) * unit};
+}
+
 /// Lowers an atomic running minimum to `t`.
 void lower_to(std::atomic<Scalar>& bound, Scalar t) {
   Scalar current = bound.load(std::memory_order_relaxed);
@@ -533,8 +538,7 @@ VertexFaceImpact vertex_face_impact(const geometry::CcdPoints& s, const geometry
   impact.outcome = r.outcome;
   // Times `unit`: finite squares at any magnitude (unit_scale).
   const Scalar unit = unit_scale(s, e);
-  const Vec3 p = at(s[0], e[0], r.toi) * unit, a = at(s[1], e[1], r.toi) * unit, b = at(s[2], e[2], r.toi) * unit,
-             c = at(s[3], e[3], r.toi) * unit;
+  const auto [p, a, b, c] = scaled_at(s, e, r.toi, unit);
   const geometry::PointTriangleResult q = geometry::point_triangle(p, a, b, c);
   impact.distance = std::sqrt(q.sqr_distance) / unit;
   impact.barycentric = q.barycentric;
@@ -554,8 +558,7 @@ EdgeEdgeImpact edge_edge_impact(const geometry::CcdPoints& s, const geometry::Cc
   impact.toi = r.toi;
   impact.outcome = r.outcome;
   const Scalar unit = unit_scale(s, e);
-  const Vec3 p0 = at(s[0], e[0], r.toi) * unit, p1 = at(s[1], e[1], r.toi) * unit,
-             q0 = at(s[2], e[2], r.toi) * unit, q1 = at(s[3], e[3], r.toi) * unit;
+  const auto [p0, p1, q0, q1] = scaled_at(s, e, r.toi, unit);
   const geometry::SegmentSegmentResult q = geometry::segment_segment(p0, p1, q0, q1);
   impact.distance = std::sqrt(q.sqr_distance) / unit;
   impact.s = q.s;
