@@ -6,7 +6,8 @@
 // the cloth in contact), reporting ms per frame by part, contacts (VF + EE closer than the
 // thickness), the CCD fail-safe's ms, impacts and frozen vertices, intersecting triangle pairs
 // counted at every frame (exact: kdop with kinds tt; frames with any, the most, the mean) and
-// frames per second; `frame-no-fail-safe/...` the same without the fail-safe, at n <= 64
+// frames per second; `frame-no-fail-safe/...` the same without the fail-safe, at n <= 64;
+// `frame-late/...` the same after 300 frames (the cloth at rest; the crumple pile formed)
 // (docs/benchmarks/simulation.md):
 //   ./build/release/bench/sim_bench --benchmark_filter=frame/ --benchmark_out=sim.json
 //   ./build/release/bench/sim_bench --benchmark_format=json
@@ -108,7 +109,7 @@ std::unique_ptr<Detector> intersection_counter(const Simulation& sim, int thread
 
 /// Whole frames of a built-in scene with its default settings (`fail_safe` off: the baseline).
 /// Intersecting triangle pairs are counted at every frame, warm-up included, outside the timing.
-void BM_Frame(benchmark::State& bench, const std::string& spec, bool fail_safe) {
+void BM_Frame(benchmark::State& bench, const std::string& spec, bool fail_safe, int late_warm_up) {
   Scene s = make_scene(SceneSpec::parse(spec), 1);
   Settings settings = s.settings;
   settings.method = MethodSpec::parse("kdop");
@@ -131,7 +132,7 @@ void BM_Frame(benchmark::State& bench, const std::string& spec, bool fail_safe) 
   };
   sim.current_stats();
   // The sweeping sphere reaches the cloth at frame ~57: its rows time frames 46..65.
-  const int warm_up = spec.find("sweep-speed") == std::string::npos ? 30 : 45;
+  const int warm_up = late_warm_up > 0 ? late_warm_up : spec.find("sweep-speed") == std::string::npos ? 30 : 45;
   try {
     for (int f = 0; f < warm_up; ++f) {
       sim.advance_frame();
@@ -205,16 +206,27 @@ void register_all() {
     for (int n : {32, 64, 100}) {
       std::string spec = std::string(scene) + (std::string(scene).find(':') == std::string::npos ? ":" : ",") +
                          "n=" + std::to_string(n);
-      benchmark::RegisterBenchmark(("frame/" + spec).c_str(), BM_Frame, spec, true)
+      benchmark::RegisterBenchmark(("frame/" + spec).c_str(), BM_Frame, spec, true, 0)
           ->Unit(benchmark::kMillisecond)
           ->Iterations(20)
           ->UseRealTime();
       if (n <= 64) {
-        benchmark::RegisterBenchmark(("frame-no-fail-safe/" + spec).c_str(), BM_Frame, spec, false)
+        benchmark::RegisterBenchmark(("frame-no-fail-safe/" + spec).c_str(), BM_Frame, spec, false, 0)
             ->Unit(benchmark::kMillisecond)
             ->Iterations(20)
             ->UseRealTime();
       }
+    }
+  }
+  // Frames 301..320: the cloth at rest on the sphere; the crumple walls just stopped, the pile
+  // formed (its most expensive frames: thousands of contacts).
+  for (const char* scene : {"cloth-on-sphere", "crumple"}) {
+    for (int n : {64, 100}) {
+      const std::string spec = std::string(scene) + ":n=" + std::to_string(n);
+      benchmark::RegisterBenchmark(("frame-late/" + spec).c_str(), BM_Frame, spec, true, 300)
+          ->Unit(benchmark::kMillisecond)
+          ->Iterations(20)
+          ->UseRealTime();
     }
   }
   for (const char* scene : {"cloth-on-sphere", "crumple"}) {
