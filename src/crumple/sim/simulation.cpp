@@ -1,6 +1,7 @@
 #include <crumple/core/error.hpp>
 #include <crumple/sim/simulation.hpp>
 
+#include <crumple/core/parallel.hpp>
 #include <crumple/core/timing.hpp>
 #include <crumple/geometry/distance.hpp>
 
@@ -292,7 +293,12 @@ void Simulation::proximity_frame() {
     integrate_ms_ += ms_since(start);
     start = Clock::now();
     obstacles_pass();
-    for (response::Stencil& stencil : stencils_) response::refresh_stencil(stencil, state_.x);
+    // Each stencil's refresh reads positions only: the same bits on any number of threads.
+    parallel_for_chunks(stencils_.size(), settings_.detector.threads,
+                        balanced_grain(stencils_.size(), resolve_threads(settings_.detector.threads), 256, 4096),
+                        [&](std::size_t begin, std::size_t end) {
+                          for (std::size_t i = begin; i < end; ++i) response::refresh_stencil(stencils_[i], state_.x);
+                        });
     const response::ResponseStats stats =
         response::resolve_proximity(stencils_, model_.inv_mass(), state_.x, state_.v, options);
     corrections_ += stats.corrections;
