@@ -225,8 +225,9 @@ class Simulation {
   /// motion brings within the detection radius and that were farther at the frame's start.
   void motion_search();
   void obstacles_pass();
-  /// The custom or built-in fail-safe from `frame_start` to the current state.
-  void run_fail_safe(PositionsView frame_start);
+  /// The custom or built-in fail-safe from `frame_start` to the current state (`proximity`:
+  /// the frame's start detection, for the built-in one's first query).
+  void run_fail_safe(PositionsView frame_start, const response::StartProximity* proximity = nullptr);
   /// Analyses the intersections at the current positions once (see `Settings::untangle`).
   void untangle_check();
   /// Pushes of the untangler after a step (no-op when clean or off).
@@ -248,6 +249,9 @@ class Simulation {
   ContactSet contacts_;
   ContactSet close_;  ///< Proximity model: the detected contacts closer than h_c
   bool contacts_valid_ = false;
+  /// The detector reports every VF and EE pair within its radius (Proximity model): the frame's
+  /// start detection then restricts the fail-safe's first query (`response::StartProximity`).
+  bool complete_detection_ = false;
   FailSafe fail_safe_;
   std::unique_ptr<response::CcdFailSafe> ccd_;  ///< built-in fail-safe (response and fail_safe on)
   response::FailSafeStats ccd_stats_;           ///< summed over the current frame
