@@ -18,6 +18,8 @@
 /// continuous fail-safe (`response::CcdFailSafe`) over the frame's motion, from its start
 /// positions to the proposed end: **a frame that starts intersection-free ends
 /// intersection-free** (no two triangles sharing no vertex intersect), whatever the speed.
+/// With the Proximity model and a detector that reports every pair (exact, uncut), the frame's
+/// start detection restricts the fail-safe's first query (`response::StartProximity`).
 ///
 /// With response on and `Settings::untangle` (the default), a frame that starts with
 /// intersecting triangles is untangled (`response/untangle.hpp`: Global Intersection Analysis,
