@@ -161,7 +161,10 @@ void Simulation::run_fail_safe(PositionsView frame_start, const response::StartP
       const response::FailSafeStats s =
           ccd_->apply(frame_start, model_.inv_mass(), duration, state_.x, state_.v, round == 0 ? proximity : nullptr);
       ccd_stats_.queries += s.queries;
-      if (round == 0) ccd_stats_.impacts += s.impacts;
+      if (round == 0) {
+        ccd_stats_.impacts += s.impacts;
+        ccd_stats_.first_restricted = s.first_restricted;
+      }
       ccd_stats_.zone_vertices += s.zone_vertices;
       ccd_stats_.frozen += s.frozen;
       if (s.impacts == 0 || obstacles_.empty() || round + 1 == kObstacleRounds) break;
@@ -407,6 +410,7 @@ FrameStats Simulation::frame_stats() {
   s.ccd_queries = ccd_stats_.queries;
   s.ccd_zone_vertices = ccd_stats_.zone_vertices;
   s.ccd_frozen = ccd_stats_.frozen;
+  s.ccd_first_restricted = ccd_stats_.first_restricted;
   s.motion_pairs = motion_pairs_;
   s.motion_vertices = motion_vertices_;
   const ContactSet& seen = per_frame() ? close_ : contacts_;

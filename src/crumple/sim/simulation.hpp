@@ -147,6 +147,9 @@ struct FrameStats {
   int ccd_queries = 0;          ///< continuous queries run by the fail-safe
   std::size_t ccd_zone_vertices = 0;  ///< vertices the fail-safe put in impact zones
   std::size_t ccd_frozen = 0;   ///< vertices the fail-safe's fallback kept at their start
+  /// The fail-safe's first query was restricted by the frame's start detection
+  /// (`response::StartProximity`) instead of sweeping the mesh.
+  bool ccd_first_restricted = false;
   /// Contacts added to the frame's proximity contacts by `Settings::motion_search`, and the
   /// vertices whose predicted motion was fast enough to be searched.
   std::size_t motion_pairs = 0;
