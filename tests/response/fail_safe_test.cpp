@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <random>
 
 #include "support/intersections.hpp"
@@ -202,6 +203,7 @@ TEST(FailSafe, RestrictedQueriesGiveTheSameCorrection) {
       for (const bool restrict : {false, true}) {
         FailSafeOptions o = options(impulses, zones);
         o.restrict_queries = restrict;
+        o.restricted_share = 1;  // every later query restricted, however many ends moved
         o.query.threads = restrict ? 3 : 1;
         CcdFailSafe safe(topology, o);
         end[restrict] = proposed;
@@ -541,6 +543,124 @@ TEST(FailSafe, RejectsBadOptions) {
   EXPECT_THROW(CcdFailSafe(c.topology, o), Error);
   o = options(-1, 8);
   EXPECT_THROW(CcdFailSafe(c.topology, o), Error);
+}
+
+/// Two 6 × 6 lattices in one mesh: the lower one in z = 0, the upper one shifted a little in x
+/// and y and raised to z = gap + slope x (so that only a band of it is near the lower one).
+struct Sheets {
+  std::shared_ptr<const Topology> topology;
+  Positions start;
+};
+Sheets two_sheets(Scalar gap, Scalar slope) {
+  const TriMesh lattice = shapes::lattice(6, 6);
+  Positions x = lattice.positions();
+  const std::size_t nv = x.size();
+  const auto lower = lattice.topology().faces();
+  std::vector<Face> faces(lower.begin(), lower.end());
+  for (std::size_t i = 0; i < nv; ++i) x.push_back(x[i] + Vec3(0.031, 0.017, gap + slope * x[i].x()));
+  for (const Face& f : lower) {
+    const auto up = [&](Index v) { return static_cast<Index>(static_cast<std::size_t>(v) + nv); };
+    faces.push_back({up(f[0]), up(f[1]), up(f[2])});
+  }
+  const TriMesh mesh = TriMesh::create(x, faces);
+  return {mesh.topology_ptr(), x};
+}
+
+// The first query restricted by the start's proximity (`StartProximity`: the pairs within R at
+// the start, here from the naive detector) has the full query's impacts, so the whole
+// correction is the same, bit for bit. The frames exercise both halves of the argument: a band
+// of the upper sheet within R of the lower one sinks through it too slowly for any vertex to be
+// flagged as fast (only the near pairs' own test flags them: without it the restricted query
+// finds nothing), a lone vertex of a sheet farther than R plunges through the other (only the
+// fast flag finds it), and random jitters of both sheets of every size around s/2.
+TEST(FailSafe, FirstQueryRestrictedByTheStartProximityGivesTheSameCorrection) {
+  const Scalar radius = 0.1;
+  struct Frame {
+    const char* what;
+    Scalar gap, slope;
+    std::function<void(std::size_t, Vec3&, std::mt19937_64&)> move;  // (vertex, end, rng)
+  };
+  const std::size_t nv = 49;  // per sheet
+  const std::vector<Frame> frames{
+      {"near band sinks slowly", 0.05, 0.3, [&](std::size_t i, Vec3& x, std::mt19937_64&) { if (i >= nv) x.z() -= 0.07; }},
+      {"far vertex plunges", 0.15, 0, [&](std::size_t i, Vec3& x, std::mt19937_64&) { if (i == nv + 24) x.z() -= 0.3; }},
+      {"jitter 0.02", 0.06, 0.1, [&](std::size_t, Vec3& x, std::mt19937_64& rng) {
+         std::uniform_real_distribution<Scalar> d(-0.02, 0.02);
+         x += Vec3(d(rng), d(rng), d(rng));
+       }},
+      {"jitter 0.05", 0.06, 0.1, [&](std::size_t, Vec3& x, std::mt19937_64& rng) {
+         std::uniform_real_distribution<Scalar> d(-0.05, 0.05);
+         x += Vec3(d(rng), d(rng), d(rng));
+       }},
+      {"jitter 0.1", 0.12, 0, [&](std::size_t, Vec3& x, std::mt19937_64& rng) {
+         std::uniform_real_distribution<Scalar> d(-0.1, 0.1);
+         x += Vec3(d(rng), d(rng), d(rng));
+       }},
+  };
+  int with_impacts = 0, partly_flagged = 0;
+  for (const Frame& frame : frames) {
+    for (std::uint64_t seed = 1; seed <= 4; ++seed) {
+      SCOPED_TRACE(::testing::Message() << frame.what << ", seed " << seed);
+      const Sheets sheets = two_sheets(frame.gap, frame.slope);
+      const Positions& start = sheets.start;
+      std::mt19937_64 rng(seed);
+      Positions proposed = start;
+      for (std::size_t i = 0; i < proposed.size(); ++i) frame.move(i, proposed[i], rng);
+      std::vector<Scalar> inv_mass(start.size(), 1);
+      auto detector = make_detector(MethodSpec::parse("naive"), {.thickness = radius, .threads = 1});
+      detector->set_topology(sheets.topology);
+      ContactSet near;
+      detector->update(start, near);
+      const StartProximity proximity{radius, &near};
+      FailSafeStats stats[2];
+      Positions end[2], velocity[2];
+      for (const bool seeded : {false, true}) {
+        FailSafeOptions o = options(3, 8);
+        o.min_separation = 0.01;
+        o.restricted_share = 1;  // restricted however many vertices it flags
+        CcdFailSafe safe(sheets.topology, o);
+        end[seeded] = proposed;
+        velocity[seeded] = Positions(start.size(), Vec3::Zero());
+        stats[seeded] = safe.apply(start, inv_mass, 1.0 / 60, end[seeded], velocity[seeded],
+                                   seeded ? &proximity : nullptr);
+        EXPECT_EQ(touching_pairs(sheets.topology, start, end[seeded]), 0u);
+      }
+      EXPECT_FALSE(stats[0].first_restricted);
+      EXPECT_TRUE(stats[1].first_restricted);
+      with_impacts += stats[0].impacts > 0 ? 1 : 0;
+      partly_flagged += stats[1].first_flagged < start.size() ? 1 : 0;
+      EXPECT_EQ(stats[1].impacts, stats[0].impacts);
+      EXPECT_EQ(stats[1].queries + stats[1].unchanged, stats[0].queries + stats[0].unchanged);
+      EXPECT_EQ(stats[1].zone_vertices, stats[0].zone_vertices);
+      EXPECT_EQ(stats[1].frozen, stats[0].frozen);
+      EXPECT_TRUE(end[1] == end[0]) << "the corrected ends differ";
+      EXPECT_TRUE(velocity[1] == velocity[0]) << "the corrected velocities differ";
+      if (frame.gap == 0.05 || frame.gap == 0.15) {
+        EXPECT_GT(stats[0].impacts, 0u) << "the frame must pass a sheet through the other";
+        EXPECT_LT(stats[1].first_flagged, start.size() / 2) << "the restriction must leave most vertices out";
+      }
+    }
+  }
+  EXPECT_GE(with_impacts, 14) << "most frames (of 20) must have impacts";
+  EXPECT_GE(partly_flagged, 12) << "most restricted queries must leave vertices out";
+}
+
+// A start proximity that cannot bound the motion (a radius at or below δ (1 + σ)) leaves the
+// first query a sweep of the mesh.
+TEST(FailSafe, StartProximityWithinTheSeparationIsNotUsed) {
+  const Sheets sheets = two_sheets(0.05, 0);
+  Positions end = sheets.start, velocity(end.size(), Vec3::Zero());
+  for (std::size_t i = 49; i < end.size(); ++i) end[i].z() -= 0.1;
+  ContactSet near;  // nothing within the radius claimed: would be wrong at any larger radius
+  const StartProximity proximity{0.01, &near};
+  FailSafeOptions o = options(3, 8);
+  o.min_separation = 0.01;
+  CcdFailSafe safe(sheets.topology, o);
+  const FailSafeStats stats =
+      safe.apply(sheets.start, std::vector<Scalar>(end.size(), 1), 1.0 / 60, end, velocity, &proximity);
+  EXPECT_FALSE(stats.first_restricted);
+  EXPECT_GT(stats.impacts, 0u);
+  EXPECT_EQ(touching_pairs(sheets.topology, sheets.start, end), 0u);
 }
 
 }  // namespace

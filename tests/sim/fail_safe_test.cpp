@@ -32,6 +32,7 @@ class TriangleTriangle {
 
 struct Outcome {
   int frames_with_intersections = 0;
+  int restricted_first = 0;  ///< frames whose first fail-safe query the start detection restricted
   std::size_t max_pairs = 0;
   std::size_t impacts = 0;
   std::size_t frozen = 0;
@@ -39,10 +40,12 @@ struct Outcome {
   Scalar max_speed = 0;  ///< largest particle speed over the frames (m/s)
 };
 
-/// `substeps` > 0 replaces the scene's steps per frame (and dt, keeping frames of 1/60 s).
-Outcome run(const std::string& spec, int frames, bool fail_safe, int substeps = 0) {
+/// `substeps` > 0 replaces the scene's steps per frame (and dt, keeping frames of 1/60 s);
+/// `method`, when given, the detection method.
+Outcome run(const std::string& spec, int frames, bool fail_safe, int substeps = 0, const std::string& method = "") {
   Scene s = make_scene(SceneSpec::parse(spec), 1);
   Settings settings = s.settings;
+  if (!method.empty()) settings.method = MethodSpec::parse(method);
   if (substeps > 0) {
     settings.dt = 1.0 / (60.0 * substeps);
     settings.substeps = substeps;
@@ -58,6 +61,7 @@ Outcome run(const std::string& spec, int frames, bool fail_safe, int substeps = 
     const FrameStats st = sim.advance_frame();
     r.impacts += st.ccd_impacts;
     r.frozen += st.ccd_frozen;
+    r.restricted_first += st.ccd_first_restricted ? 1 : 0;
     r.max_speed = std::max(r.max_speed, st.max_speed);
     const std::size_t pairs = tt.count(sim.state().x);
     if (pairs > 0) {
@@ -116,6 +120,28 @@ TEST(FailSafe, CrumpleOnAFlatFloorStaysIntersectionFree) {
   EXPECT_EQ(on.frames_with_intersections, 0) << "first at frame " << on.first_bad << ", up to " << on.max_pairs
                                              << " pairs";
   EXPECT_GT(on.impacts, 20u);
+}
+
+// The fail-safe's first query is restricted by the frame's start detection only when the
+// detector reports every pair within its radius (docs/simulation.md, "The first query restricted
+// by the start's proximity"): kdop does, and on the resting crumple cloth most frames use it;
+// the stochastic detector (it may miss pairs) and a kdop that truncates its contacts at
+// max_contacts or stops at a pair budget do not, and their frames sweep. Every run stays
+// intersection-free.
+TEST(FailSafe, FirstQueryIsRestrictedOnlyByACompleteDetection) {
+  const int frames = 40 / kScale;
+  for (const auto& [method, complete] :
+       {std::pair{"kdop", true}, std::pair{"stochastic", false},
+        std::pair{"kdop:max_contacts=1,overflow=truncate", false}, std::pair{"kdop:pairs=100", false}}) {
+    SCOPED_TRACE(method);
+    const Outcome r = run("crumple:n=16", frames, true, 0, method);
+    EXPECT_EQ(r.frames_with_intersections, 0);
+    if (complete) {
+      EXPECT_GT(2 * r.restricted_first, frames) << "most frames' first queries must be restricted";
+    } else {
+      EXPECT_EQ(r.restricted_first, 0);
+    }
+  }
 }
 
 }  // namespace

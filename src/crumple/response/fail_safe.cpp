@@ -135,6 +135,9 @@ namespace {
 /// `options` with the query's δ set to the fail-safe's (checked first).
 FailSafeOptions checked(FailSafeOptions options) {
   CRUMPLE_CHECK(options.impulse_rounds >= 0 && options.zone_rounds >= 0, "fail-safe rounds must be >= 0");
+  if (!(options.restricted_share >= 0 && options.restricted_share <= 1)) {
+    throw InputError("fail-safe restricted share must be in [0, 1]");
+  }
   if (!(options.min_separation >= 0) || !std::isfinite(options.min_separation)) {
     throw InputError("fail-safe minimum separation must be finite and >= 0");
   }
@@ -146,12 +149,93 @@ FailSafeOptions checked(FailSafeOptions options) {
 CcdFailSafe::CcdFailSafe(std::shared_ptr<const Topology> topology, FailSafeOptions options)
     : topology_(topology), options_(checked(std::move(options))), query_(topology, options_.query) {}
 
-std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> positions, FailSafeStats& stats) {
+std::size_t CcdFailSafe::flag_first_query(PositionsView start, std::span<const Vec3> positions,
+                                          const StartProximity& proximity) {
+  const std::size_t n = start.size();
+  if (proximity.pairs == nullptr || n == 0) return kUnrestricted;
+  // The margin m: a tenth of R − δ (1 + σ), and far above the rounding of the displacements
+  // and of the detector's distances (NaN anywhere: no restriction).
+  Scalar magnitude = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    magnitude = std::max({magnitude, start[i].cwiseAbs().maxCoeff(), positions[i].cwiseAbs().maxCoeff()});
+  }
+  const Scalar sigma = std::clamp<Scalar>(options_.query.narrow.separation_tolerance, 0, 1);
+  const Scalar reach = options_.min_separation * (1 + sigma);  // δ (1 + σ)
+  const Scalar margin = 0.1 * (proximity.radius - reach) + 1e-9 * magnitude;
+  const Scalar bound = proximity.radius - reach - margin;  // s
+  if (!(bound > 0)) return kUnrestricted;
+  const Scalar r2 = 0.25 * bound * bound;  // (s/2)²
+  const auto u = [&](Index v) { return positions[static_cast<std::size_t>(v)] - start[static_cast<std::size_t>(v)]; };
+  // The reference c: the displacements' mean or their per-axis median (of a cloth half resting
+  // and half falling, the mean lies in neither group), whichever flags fewer vertices.
+  Vec3 mean = Vec3::Zero(), median;
+  for (std::size_t i = 0; i < n; ++i) mean += positions[i] - start[i];
+  mean /= static_cast<Scalar>(n);
+  scratch_.resize(n);
+  for (Eigen::Index k = 0; k < 3; ++k) {
+    for (std::size_t i = 0; i < n; ++i) scratch_[i] = positions[i][k] - start[i][k];
+    const auto middle = scratch_.begin() + static_cast<std::ptrdiff_t>(n / 2);
+    std::nth_element(scratch_.begin(), middle, scratch_.end());
+    median[k] = *middle;
+  }
+  const auto fast = [&](const Vec3& c, bool write) {
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const bool far = !((positions[i] - start[i] - c).squaredNorm() <= r2);
+      if (write) moved_[i] = far;
+      count += static_cast<std::size_t>(far);
+    }
+    return count;
+  };
+  moved_.resize(n);
+  if (!restricted(fast(fast(median, false) <= fast(mean, false) ? median : mean, true), n)) return kUnrestricted;
+  // The pairs within R: flagged unless their own relative motion keeps them beyond δ (1 + σ) + m.
+  const auto check = [&](const std::array<Index, 4>& v, std::size_t first_b, Scalar distance) {
+    for (const Index i : v) {
+      if (moved_[static_cast<std::size_t>(i)]) return;  // tested anyway
+    }
+    Scalar most = 0;  // the largest |uᵢ − uⱼ|², i on one side, j on the other
+    for (std::size_t i = 0; i < first_b; ++i) {
+      for (std::size_t j = first_b; j < 4; ++j) most = std::max(most, (u(v[i]) - u(v[j])).squaredNorm());
+    }
+    if (distance - std::sqrt(most) >= reach + margin) return;  // NaN: flagged
+    for (const Index i : v) moved_[static_cast<std::size_t>(i)] = 1;
+  };
+  const auto faces = topology_->faces();
+  const auto vertex = [&](Index v) { return v >= 0 && static_cast<std::size_t>(v) < n; };
+  for (const VertexFaceContact& c : proximity.pairs->vf) {
+    CRUMPLE_CHECK(vertex(c.vertex) && c.face >= 0 && static_cast<std::size_t>(c.face) < faces.size(),
+                  "fail-safe: a start-proximity pair is out of range");
+    const Face& f = faces[static_cast<std::size_t>(c.face)];
+    check({c.vertex, f[0], f[1], f[2]}, 1, c.distance);
+  }
+  for (const EdgeEdgeContact& c : proximity.pairs->ee) {
+    CRUMPLE_CHECK(vertex(c.a[0]) && vertex(c.a[1]) && vertex(c.b[0]) && vertex(c.b[1]),
+                  "fail-safe: a start-proximity pair is out of range");
+    check({c.a[0], c.a[1], c.b[0], c.b[1]}, 2, c.distance);
+  }
+  const auto count = static_cast<std::size_t>(std::count(moved_.begin(), moved_.end(), 1));
+  return restricted(count, n) ? count : kUnrestricted;
+}
+
+std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> positions, FailSafeStats& stats,
+                                const StartProximity* proximity) {
   const PositionsView end(positions.data(), positions.size());
   const bool restrict = options_.restrict_queries && (stats.queries + stats.unchanged > 0 || same_start_);
   queried_valid_ = false;  // until the query has answered
   if (!restrict) {
-    query_.query(start, end, impacts_);
+    // The first query of a frame: restricted to the flagged vertices' pairs when the start's
+    // proximity is known and leaves most vertices unflagged (see `apply`), else the sweep.
+    const std::size_t flagged = options_.restrict_queries && proximity != nullptr
+                                    ? flag_first_query(start, positions, *proximity)
+                                    : kUnrestricted;
+    if (flagged != kUnrestricted) {
+      query_.query_moved(start, end, moved_, impacts_);
+      stats.first_restricted = true;
+      stats.first_flagged = flagged;
+    } else {
+      query_.query(start, end, impacts_);
+    }
   } else {
     // Only the pairs holding a vertex whose end moved since the last query can have changed
     // (compared bit for bit: the narrow phase sees bits, and -0 is not 0 to it).
@@ -161,7 +245,11 @@ std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> posit
       moved_[i] = std::memcmp(positions[i].data(), queried_[i].data(), sizeof(Vec3)) != 0;
       count += static_cast<std::size_t>(moved_[i]);
     }
-    if (count > 0) query_.update_moved(start, end, moved_, impacts_);
+    if (!restricted(count, positions.size())) {  // the sweep: the same impacts, bit for bit
+      query_.query(start, end, impacts_);
+    } else if (count > 0) {
+      query_.update_moved(start, end, moved_, impacts_);
+    }
     ++(count > 0 ? stats.queries : stats.unchanged);
   }
   if (!restrict) ++stats.queries;
@@ -192,7 +280,8 @@ std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> posit
 }
 
 FailSafeStats CcdFailSafe::apply(PositionsView start, std::span<const Scalar> inv_mass, Scalar duration,
-                                 std::span<Vec3> positions, std::span<Vec3> velocities) {
+                                 std::span<Vec3> positions, std::span<Vec3> velocities,
+                                 const StartProximity* proximity) {
   const std::size_t n = start.size();
   CRUMPLE_CHECK(n == at(topology_->num_vertices()) && positions.size() == n && velocities.size() == n &&
                     inv_mass.size() == n,
@@ -207,7 +296,7 @@ FailSafeStats CcdFailSafe::apply(PositionsView start, std::span<const Scalar> in
     queried_valid_ = false;
     start_.assign(start.begin(), start.end());
   }
-  if (detect(start, positions, stats) == 0) return stats;
+  if (detect(start, positions, stats, proximity) == 0) return stats;
   stats.impacts = live_.size();
 
   std::vector<Vec3> u(n), original(n);

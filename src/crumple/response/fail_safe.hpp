@@ -63,6 +63,21 @@ struct FailSafeOptions {
   /// for bit, at a cost that follows the corrected region. A later `apply` from the same start
   /// (bit for bit) continues likewise from the last query. Off: every query sweeps the mesh.
   bool restrict_queries = true;
+  /// A restricted query (a later one, or the first with a `StartProximity`) runs while it covers
+  /// at most this share of the vertices, else the sweep (the same impacts): the restricted query
+  /// queries a tree of the flagged faces with every face, several times the sweep's cost per
+  /// vertex it covers (an eighth: about even).
+  Scalar restricted_share = 0.125;
+};
+
+/// What the caller knows of the frame's start, to spare the first query the sweep of the whole
+/// mesh (`CcdFailSafe::apply`): `pairs` holds every VF and EE pair (a vertex and a face it is
+/// not a corner of; two edges sharing no vertex) closer than `radius` at the frame's start, with
+/// its distance there — a complete proximity detection at that radius, e.g. an exact detector's
+/// contacts. A pair missing from it voids the guarantee; extra pairs are harmless.
+struct StartProximity {
+  Scalar radius = 0;
+  const ContactSet* pairs = nullptr;
 };
 
 /// What one `apply` did.
@@ -76,6 +91,9 @@ struct FailSafeStats {
   /// each of them is a full query instead: `queries + unchanged` is the same either way.
   int unchanged = 0;
   std::size_t impacts = 0;     ///< live impacts of the proposed motion (first check)
+  /// Vertices the first query was restricted to (`StartProximity`; when `first_restricted`).
+  std::size_t first_flagged = 0;
+  bool first_restricted = false;  ///< the first query was so restricted
   int impulse_rounds = 0;      ///< impulse rounds run (including `retested_rounds`)
   /// Impulse rounds run on the last query's pairs alone, each re-tested by the narrow phase
   /// instead of queried (after a query returned the pairs of the one before; file comment).
@@ -100,8 +118,22 @@ class CcdFailSafe {
   /// nor is a pair reported above δ inside the narrow phase's tolerance band (`kHitTolerance`,
   /// within δ (1 + σ)) that the narrow phase with δ (1 − σ) certifies never comes that close:
   /// it grazes δ, and no impulse (they remove an approach only) moves it out of the band.
+  ///
+  /// With `proximity` (and `restrict_queries`), the first query of a frame is restricted to the
+  /// pairs holding a *flagged* vertex (`ContinuousQuery::query_moved`), with the full query's
+  /// impacts. With s = R − δ (1 + σ) − m (R = `radius`, σ the narrow phase's tolerance band, m a
+  /// tenth of R − δ (1 + σ) plus a rounding margin), a vertex is flagged when its displacement uᵢ
+  /// lies farther than s/2 from a common reference c, and so are the four vertices of a pair of
+  /// `proximity` whose start distance less the largest |uᵢ − uⱼ| across its two sides is below
+  /// δ (1 + σ) + m. Any two points of a pair move apart or together by at most the largest
+  /// |uᵢ − uⱼ| across its sides (convex combinations), so a pair with no flagged vertex stays
+  /// beyond δ (1 + σ) + m: if it was R or more apart, since that is at most s; if closer, it is
+  /// in `proximity` and passed its own test. The whole mesh is swept instead when more than
+  /// `FailSafeOptions::restricted_share` of the vertices are flagged (docs/simulation.md, "The CCD
+  /// fail-safe").
   FailSafeStats apply(PositionsView start, std::span<const Scalar> inv_mass, Scalar duration,
-                      std::span<Vec3> positions, std::span<Vec3> velocities);
+                      std::span<Vec3> positions, std::span<Vec3> velocities,
+                      const StartProximity* proximity = nullptr);
 
   /// Vertices of an existing intersection being untangled (#V flags; empty = none): an impact
   /// with a flagged vertex on each of its sides is not live, so the fail-safe lets the tangle
@@ -113,8 +145,20 @@ class CcdFailSafe {
   const ContinuousQuery& query() const { return query_; }
 
  private:
-  /// Runs the query from `start` to `positions` and fills `live_` with the live impacts.
-  std::size_t detect(PositionsView start, std::span<const Vec3> positions, FailSafeStats& stats);
+  /// Runs the query from `start` to `positions` and fills `live_` with the live impacts (the
+  /// first query of a frame restricted by `proximity` when given; see `apply`).
+  std::size_t detect(PositionsView start, std::span<const Vec3> positions, FailSafeStats& stats,
+                     const StartProximity* proximity = nullptr);
+  /// Whether a query covering `count` of `n` vertices runs restricted (`restricted_share`).
+  bool restricted(std::size_t count, std::size_t n) const {
+    return static_cast<Scalar>(count) <= options_.restricted_share * static_cast<Scalar>(n);
+  }
+  static constexpr std::size_t kUnrestricted = static_cast<std::size_t>(-1);
+  /// Flags in `moved_` the vertices the first query must cover (see `apply`); returns their
+  /// count, or `kUnrestricted` when `proximity` allows no restricted query (no bound, or more
+  /// than `restricted_share` of the vertices flagged).
+  std::size_t flag_first_query(PositionsView start, std::span<const Vec3> positions,
+                               const StartProximity& proximity);
 
   std::shared_ptr<const Topology> topology_;
   FailSafeOptions options_;
@@ -128,6 +172,7 @@ class CcdFailSafe {
   std::vector<Vec3> start_;  ///< the start of the last `apply` (`restrict_queries`)
   bool same_start_ = false;  ///< this `apply`'s start is the last one's, bit for bit
   std::vector<char> moved_;    ///< per vertex, whether its end moved since the last query
+  std::vector<Scalar> scratch_;                ///< `flag_first_query`'s
 };
 
 }  // namespace crumple::response

@@ -3,6 +3,7 @@
 
 #include <crumple/core/parallel.hpp>
 #include <crumple/core/timing.hpp>
+#include <crumple/detect/exact_detector.hpp>
 #include <crumple/geometry/distance.hpp>
 
 #include <algorithm>
@@ -25,6 +26,16 @@ void drop_tangled(std::vector<response::Stencil>& stencils, const response::Unta
   if (!untangler || !untangler->tangled()) return;
   const auto tangle = untangler->tangle();
   std::erase_if(stencils, [&](const response::Stencil& s) { return response::touches_tangle_on_both_sides(s, tangle); });
+}
+
+/// Whether a detector of `method` with `options` reports every VF and EE pair closer than its
+/// thickness at every update (the fail-safe's `StartProximity`): an exact method with both kinds
+/// on, neither cut off by a time or pair budget nor truncated at `max_contacts`.
+bool reports_every_pair(const MethodSpec& method, const DetectorOptions& options) {
+  if (!method_info(method.method()).capabilities.exact || !options.kinds.vf || !options.kinds.ee) return false;
+  if (method.method() == Method::Naive) return true;
+  const ExactParams p = ExactParams::from_spec(method);
+  return !p.cut_off() && (p.max_contacts == 0 || p.overflow_error);
 }
 
 std::string number(Scalar v) {
@@ -79,6 +90,7 @@ Simulation::Simulation(Model model, State state, ForceField field,
   if (per_frame()) detection.thickness *= settings_.search_factor;  // see `ResponseModel`
   detector_ = make_detector(settings_.method, detection);
   detector_->set_topology(model_.topology_ptr());
+  complete_detection_ = per_frame() && reports_every_pair(settings_.method, detection);
   if (per_frame() && settings_.motion_search) {
     ContinuousOptions options;
     options.min_separation = settings_.detector.thickness;
@@ -136,7 +148,7 @@ void Simulation::untangle_push() {
   untangle_ms_ += ms_since(start);
 }
 
-void Simulation::run_fail_safe(PositionsView frame_start) {
+void Simulation::run_fail_safe(PositionsView frame_start, const response::StartProximity* proximity) {
   const auto start = Clock::now();
   if (fail_safe_) {
     fail_safe_(frame_start, state_);
@@ -148,9 +160,12 @@ void Simulation::run_fail_safe(PositionsView frame_start) {
     constexpr int kObstacleRounds = 3;
     for (int round = 0; round < kObstacleRounds; ++round) {
       const response::FailSafeStats s =
-          ccd_->apply(frame_start, model_.inv_mass(), duration, state_.x, state_.v);
+          ccd_->apply(frame_start, model_.inv_mass(), duration, state_.x, state_.v, round == 0 ? proximity : nullptr);
       ccd_stats_.queries += s.queries;
-      if (round == 0) ccd_stats_.impacts += s.impacts;
+      if (round == 0) {
+        ccd_stats_.impacts += s.impacts;
+        ccd_stats_.first_restricted = s.first_restricted;
+      }
       ccd_stats_.zone_vertices += s.zone_vertices;
       ccd_stats_.frozen += s.frozen;
       if (s.impacts == 0 || obstacles_.empty() || round + 1 == kObstacleRounds) break;
@@ -307,7 +322,11 @@ void Simulation::proximity_frame() {
     untangle_push();
     check_state(k + 1);
   }
-  run_fail_safe(frame_start);
+  // The frame's detection, at its start, is the fail-safe's proximity when it is complete.
+  response::StartProximity proximity;
+  proximity.radius = detector_->options().thickness;
+  proximity.pairs = &contacts_;
+  run_fail_safe(frame_start, ccd_ && complete_detection_ ? &proximity : nullptr);
   contacts_valid_ = false;
   untangle_valid_ = false;
 }
@@ -397,6 +416,7 @@ FrameStats Simulation::frame_stats() {
   s.ccd_queries = ccd_stats_.queries;
   s.ccd_zone_vertices = ccd_stats_.zone_vertices;
   s.ccd_frozen = ccd_stats_.frozen;
+  s.ccd_first_restricted = ccd_stats_.first_restricted;
   s.motion_pairs = motion_pairs_;
   s.motion_vertices = motion_vertices_;
   const ContactSet& seen = per_frame() ? close_ : contacts_;

@@ -18,6 +18,8 @@
 /// continuous fail-safe (`response::CcdFailSafe`) over the frame's motion, from its start
 /// positions to the proposed end: **a frame that starts intersection-free ends
 /// intersection-free** (no two triangles sharing no vertex intersect), whatever the speed.
+/// With the Proximity model and a detector that reports every pair (exact, uncut), the frame's
+/// start detection restricts the fail-safe's first query (`response::StartProximity`).
 ///
 /// With response on and `Settings::untangle` (the default), a frame that starts with
 /// intersecting triangles is untangled (`response/untangle.hpp`: Global Intersection Analysis,
@@ -145,6 +147,9 @@ struct FrameStats {
   int ccd_queries = 0;          ///< continuous queries run by the fail-safe
   std::size_t ccd_zone_vertices = 0;  ///< vertices the fail-safe put in impact zones
   std::size_t ccd_frozen = 0;   ///< vertices the fail-safe's fallback kept at their start
+  /// The fail-safe's first query was restricted by the frame's start detection
+  /// (`response::StartProximity`) instead of sweeping the mesh.
+  bool ccd_first_restricted = false;
   /// Contacts added to the frame's proximity contacts by `Settings::motion_search`, and the
   /// vertices whose predicted motion was fast enough to be searched.
   std::size_t motion_pairs = 0;
@@ -225,8 +230,9 @@ class Simulation {
   /// motion brings within the detection radius and that were farther at the frame's start.
   void motion_search();
   void obstacles_pass();
-  /// The custom or built-in fail-safe from `frame_start` to the current state.
-  void run_fail_safe(PositionsView frame_start);
+  /// The custom or built-in fail-safe from `frame_start` to the current state (`proximity`:
+  /// the frame's start detection, for the built-in one's first query).
+  void run_fail_safe(PositionsView frame_start, const response::StartProximity* proximity = nullptr);
   /// Analyses the intersections at the current positions once (see `Settings::untangle`).
   void untangle_check();
   /// Pushes of the untangler after a step (no-op when clean or off).
@@ -248,6 +254,9 @@ class Simulation {
   ContactSet contacts_;
   ContactSet close_;  ///< Proximity model: the detected contacts closer than h_c
   bool contacts_valid_ = false;
+  /// The detector reports every VF and EE pair within its radius (Proximity model): the frame's
+  /// start detection then restricts the fail-safe's first query (`response::StartProximity`).
+  bool complete_detection_ = false;
   FailSafe fail_safe_;
   std::unique_ptr<response::CcdFailSafe> ccd_;  ///< built-in fail-safe (response and fail_safe on)
   response::FailSafeStats ccd_stats_;           ///< summed over the current frame
