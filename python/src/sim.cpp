@@ -136,6 +136,9 @@ py::dict stats_dict(const sim::FrameStats& s) {
   d["ccd_queries"] = s.ccd_queries;
   d["ccd_zone_vertices"] = s.ccd_zone_vertices;
   d["ccd_frozen"] = s.ccd_frozen;
+  d["ccd_first_restricted"] = s.ccd_first_restricted;
+  d["motion_pairs"] = s.motion_pairs;
+  d["motion_vertices"] = s.motion_vertices;
   d["vf"] = s.vf;
   d["ee"] = s.ee;
   d["tt"] = s.tt;
@@ -158,7 +161,7 @@ py::dict stats_dict(const sim::FrameStats& s) {
 /// bounds_min / bounds_max (frames, 3).
 py::dict stats_columns(const std::vector<sim::FrameStats>& frames) {
   py::dict out;
-  // Column dtypes follow the values' types (int or float).
+  // Column dtypes follow the values' types (bool, int or float).
   const py::dict first = stats_dict(frames.empty() ? sim::FrameStats{} : frames.front());
   std::vector<py::list> columns(first.size());
   for (const sim::FrameStats& f : frames) {
@@ -168,7 +171,10 @@ py::dict stats_columns(const std::vector<sim::FrameStats>& frames) {
   const py::object asarray = py::module_::import("numpy").attr("asarray");
   std::size_t k = 0;
   for (auto item : first) {
-    out[item.first] = asarray(columns[k++], py::isinstance<py::float_>(item.second) ? "float64" : "int64");
+    const char* dtype = py::isinstance<py::bool_>(item.second)    ? "bool"
+                        : py::isinstance<py::float_>(item.second) ? "float64"
+                                                                  : "int64";
+    out[item.first] = asarray(columns[k++], dtype);
   }
   py::array_t<double> lo({static_cast<py::ssize_t>(frames.size()), py::ssize_t{3}});
   py::array_t<double> hi({static_cast<py::ssize_t>(frames.size()), py::ssize_t{3}});
@@ -406,7 +412,9 @@ On divergence raises crumple.DivergenceError; the frames before it stay done.
             return stats_dict(s.sim().current_stats());
           },
           "Figures of the current frame: frame, time (s), integrate_ms, detect_ms, response_ms, "
-          "ccd_ms, ccd_impacts, ccd_queries, ccd_zone_vertices, ccd_frozen (the fail-safe), vf, ee, tt (contacts), collision_share (edges in contact, 0..1), min_distance, "
+          "ccd_ms, ccd_impacts, ccd_queries, ccd_zone_vertices, ccd_frozen, ccd_first_restricted (the fail-safe; "
+          "the last: its first query covered only the pairs the frame's start detection could not rule out), "
+          "motion_pairs, motion_vertices (motion search), vf, ee, tt (contacts), collision_share (edges in contact, 0..1), min_distance, "
           "obstacle_penetration (m), cg_iterations, corrections, energy (J), max_speed (m/s), "
           "intersecting_pairs (intersecting triangle pairs at the frame's end, -1 when not measured: "
           "response or untangle off), pinches (intersecting pairs sharing one vertex, likewise), "

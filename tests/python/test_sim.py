@@ -213,6 +213,16 @@ def test_fail_safe_setting_and_its_figures():
     assert (a["ccd_queries"] >= 1).all() and a["ccd_ms"].dtype == np.float64
     assert (b["ccd_queries"] == 0).all() and (b["ccd_frozen"] == 0).all()
     assert a["ccd_frozen"].dtype == np.int64
+    assert a["ccd_first_restricted"].dtype == np.bool_ and not b["ccd_first_restricted"].any()
+
+
+def test_fail_safe_first_query_restricted_by_an_exact_detection_only():
+    """A resting crumple pile's first fail-safe query is restricted by the start's exact
+    detection; a stochastic detection (which may miss pairs) never restricts it."""
+    exact = crumple.Simulation("crumple:n=12", threads=1, method="kdop").run(40)
+    stochastic = crumple.Simulation("crumple:n=12", threads=1, method="stochastic").run(40)
+    assert exact["ccd_first_restricted"].any()
+    assert not stochastic["ccd_first_restricted"].any()
 
 
 def read_stats_csv(path):
