@@ -1130,7 +1130,7 @@ __attribute__((target("avx2"), flatten)) void after_direction_lanes(std::span<co
                                                            const CcdOptions& options, CcdResult* out) {
   constexpr CcdPair pair = Face ? CcdPair::kVertexFace : CcdPair::kEdgeEdge;
   constexpr unsigned done = kCoplanarityDone | kDirectionDone;
-  AdvanceLanes lanes;
+  AdvanceLanes lanes{};  // zeroed once: a VF query leaves hull rows 6 and 7 unset
   std::array<Setup, 4> setups;
   std::array<std::size_t, 4> who{};
   std::size_t next_query = 0;
