@@ -27,6 +27,7 @@
 #include <string>
 #include <tuple>
 #include <utility>
+#include <vector>
 
 namespace crumple {
 
@@ -198,8 +199,11 @@ void lower_to(std::atomic<Scalar>& bound, Scalar t) {
 ///
 /// The sub-pairs that pass it wait in a small queue; the narrow phase's coplanarity filter
 /// (δ = 0) and separating-direction filter, where most of them end, run on the queue four at a
-/// time (geometry/ccd_detail.hpp), and the others go through the rest of the narrow phase
-/// (ccd_after_direction): together, exactly the narrow phase's results.
+/// time (geometry/ccd_detail.hpp); the others wait in a second queue per pair type for the rest
+/// of the narrow phase (ccd_after_direction, its advancement four sub-pairs in lockstep):
+/// together, exactly the narrow phase's results. With `earliest`, a batch of the second queue
+/// searches before the running minimum as it was when the batch started (any bound at or above
+/// the final minimum gives the same step).
 struct Tester {
   const Step& step;
   ImpactSet found;
@@ -222,9 +226,27 @@ struct Tester {
   std::array<Waiting, kQueue> queued;
   std::size_t queue_size = 0;
 
-  /// Runs the narrow phase on every queued sub-pair (called when the queue is full and before
-  /// the tester's results are taken).
+  /// The sub-pairs the batched filters kept, per pair type (0: VF, 1: EE), waiting for the rest
+  /// of the narrow phase, whose advancement runs four sub-pairs at a time
+  /// (geometry::detail::ccd_after_direction): the more wait, the less often the lanes drain.
+  static constexpr std::size_t kKept = 64;
+  struct Kept {
+    std::vector<geometry::detail::CcdQuery> points = std::vector<geometry::detail::CcdQuery>(kKept);
+    std::vector<Waiting> waiting = std::vector<Waiting>(kKept);
+    std::size_t size = 0;
+  };
+  std::array<Kept, 2> kept;
+
+  /// Runs the narrow phase on every queued and kept sub-pair (called before the tester's
+  /// results are taken).
   void flush() {
+    filter_queue();
+    finish_kept(kept[0]);
+    finish_kept(kept[1]);
+  }
+
+  /// Runs the batched filters on the queued sub-pairs and keeps those they do not reject.
+  void filter_queue() {
     const std::size_t n = queue_size;
     queue_size = 0;
     if (n == 0 || done()) return;
@@ -248,21 +270,35 @@ struct Tester {
     }
     for (std::size_t i = 0; i < n; ++i) {
       const Waiting& w = queued[i];
-      const geometry::detail::CcdQuery& q = queued_points[i];
       ++(w.face ? counts.vf_tests : counts.ee_tests);
       if (apart[i] != 0) {
         ++counts.outcomes[static_cast<std::size_t>(apart[i] == 1 ? geometry::CcdOutcome::kSeparatedCoplanarity
                                                                  : geometry::CcdOutcome::kSeparatedDirection)];
         continue;
       }
-      if (done()) return;
-      const geometry::CcdPair pair = w.face ? geometry::CcdPair::kVertexFace : geometry::CcdPair::kEdgeEdge;
-      const geometry::CcdResult r = geometry::detail::ccd_after_direction(pair, q.start, q.end, narrow_options());
-      if (!keep(r)) continue;
+      Kept& k = kept[w.face ? 0 : 1];
+      if (k.size == kKept) finish_kept(k);
+      k.points[k.size] = queued_points[i];
+      k.waiting[k.size++] = w;
+    }
+  }
+
+  /// The rest of the narrow phase (ccd_after_direction) on the kept sub-pairs of one type.
+  void finish_kept(Kept& k) {
+    const std::size_t n = k.size;
+    k.size = 0;
+    if (n == 0 || done()) return;
+    const geometry::CcdPair pair = k.waiting[0].face ? geometry::CcdPair::kVertexFace : geometry::CcdPair::kEdgeEdge;
+    std::array<geometry::CcdResult, kKept> results;
+    geometry::detail::ccd_after_direction(pair, {k.points.data(), n}, narrow_options(), results.data());
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!keep(results[i])) continue;
+      const Waiting& w = k.waiting[i];
+      const geometry::detail::CcdQuery& q = k.points[i];
       if (w.face) {
-        record_vertex_face(w.i0, w.i1, q.start, q.end, r);
+        record_vertex_face(w.i0, w.i1, q.start, q.end, results[i]);
       } else {
-        record_edge_edge(w.i0, w.i1, w.a, w.b, q.start, q.end, r);
+        record_edge_edge(w.i0, w.i1, w.a, w.b, q.start, q.end, results[i]);
       }
     }
   }
@@ -289,7 +325,7 @@ struct Tester {
   /// Queues a sub-pair (the queue flushed first when full); the caller fills its points in the
   /// returned slot (the narrow_* functions' order) before queueing another.
   geometry::detail::CcdQuery& push(const Waiting& w) {
-    if (queue_size == kQueue) flush();
+    if (queue_size == kQueue) filter_queue();
     queued[queue_size] = w;
     return queued_points[queue_size++];
   }
@@ -297,7 +333,7 @@ struct Tester {
   /// Queues vertex v (s[0], e[0]) against face f (s[1..3], e[1..3], corners in order) for the
   /// narrow phase, after the slab test.
   void narrow_vertex_face(Index v, Index f, const geometry::CcdPoints& s, const geometry::CcdPoints& e) {
-    if (queue_size == kQueue) flush();
+    if (queue_size == kQueue) filter_queue();
     queued_points[queue_size] = {s, e};
     queued[queue_size++] = {true, v, f, {}, {}};
   }
@@ -315,7 +351,7 @@ struct Tester {
   /// increasing, for the narrow phase, after the slab test.
   void narrow_edge_edge(Index e0, Index e1, const Edge& a, const Edge& b, const geometry::CcdPoints& s,
                         const geometry::CcdPoints& e) {
-    if (queue_size == kQueue) flush();
+    if (queue_size == kQueue) filter_queue();
     queued_points[queue_size] = {s, e};
     queued[queue_size++] = {false, e0, e1, a, b};
   }

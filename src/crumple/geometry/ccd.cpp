@@ -3,6 +3,9 @@
 #include <crumple/core/error.hpp>
 #include <crumple/geometry/ccd_detail.hpp>
 #include <crumple/geometry/distance.hpp>
+#include <crumple/geometry/kernel_batch.hpp>
+
+#include <immintrin.h>
 
 #include <algorithm>
 #include <cmath>
@@ -803,6 +806,80 @@ void check_options(const CcdOptions& options) {
                 "ccd: tolerances must be >= 0");
 }
 
+/// What the search of a query (advancement, bisection) needs, from ccd_filters.
+struct Setup {
+  Prepared p;
+  Hull hull;
+  Scalar reach2 = 0, tol_t = 0;
+  /// Whether the advancement runs: magnitude ≤ 2^300 (the closest-point kernels square
+  /// lengths) and max_advance_steps > 0.
+  bool advance = false;
+};
+
+/// ccd_checked after its scaling (`m`: the query's largest |coordinate| per axis): the range
+/// check, the filters not in `done`, and what the search needs, in `s`. True when `result` is
+/// the answer.
+bool ccd_filters(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options,
+                 unsigned done, const Vec3& m, CcdResult& result, Setup& s) {
+  const Scalar delta = options.min_separation;
+  s.hull.count = 0;  // `s` may be reused: what the code below does not always set
+  s.p.square = 1;
+  if (!in_range(start, end)) {
+    result.hit = true;
+    result.toi = 0;
+    result.outcome = CcdOutcome::kHitOutOfRange;
+    return true;
+  }
+  Prepared& p = s.p;
+  set_bounds(p, m, delta);
+  Scalar extent = 0;
+  Hull& hull = s.hull;
+  if (!hull_may_touch(pair, start, end, p.bound, extent, hull)) {
+    result.outcome = CcdOutcome::kSeparatedHull;
+    return true;
+  }
+  prepare(p, pair, start, end);
+  const Scalar magnitude = m.maxCoeff();
+  if (delta == 0 && magnitude <= kMaxSignFilterMagnitude && (done & kCoplanarityDone) == 0 &&
+      never_coplanar(start, end)) {
+    result.outcome = CcdOutcome::kSeparatedCoplanarity;
+    return true;
+  }
+  if ((done & kDirectionDone) == 0 && separated_by_a_direction(pair, start, end, hull, p.err, delta, p.square)) {
+    result.outcome = CcdOutcome::kSeparatedDirection;
+    return true;
+  }
+  const Scalar eps = std::max(options.distance_tolerance * extent, 4 * p.err.maxCoeff());
+  const Scalar tol_t = std::clamp(options.time_tolerance, kMinWidth, Scalar(1));
+  // Witnesses: computed ‖F‖ ≤ reach, so the exact point is within reach + ‖err‖.
+  const Scalar reach = delta * (1 + options.separation_tolerance) + eps + (p.err * p.square).norm() / p.square;
+  s.reach2 = (reach * p.square) * (reach * p.square);  // of lengths times p.square
+  s.tol_t = tol_t;
+  s.advance = magnitude <= kMaxSignFilterMagnitude && options.max_advance_steps > 0;
+  return false;
+}
+
+/// The result of a query whose filters left it open, from the advancement's `a` (an open
+/// advancement at t = 0 with no step where `s.advance` is false) and, when `a` leaves the
+/// question open, the bisection of [a.t, 1].
+CcdResult ccd_search(const Setup& s, const Advance& a, const CcdOptions& options) {
+  CcdResult result;
+  result.advance_steps = a.steps;
+  if (a.state == Advance::kSeparated) {
+    result.outcome = CcdOutcome::kSeparatedAdvancement;
+    return result;
+  }
+  if (a.state == Advance::kWitness) {
+    result.hit = true;
+    result.toi = a.t;
+    result.outcome = CcdOutcome::kHitTolerance;
+    return result;
+  }
+  result = bisect(s.p, s.reach2, s.tol_t, options.max_boxes, a.t, options.max_time);
+  result.advance_steps = a.steps;
+  return result;
+}
+
 // Flattened, as `advance`: the filters, the advancement and the bisection inlined (the same
 // operations, the same bits).
 __attribute__((flatten)) CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
@@ -840,60 +917,274 @@ __attribute__((flatten)) CcdResult ccd_checked(CcdPair pair, const CcdPoints& st
       return ccd_checked(pair, s, e, scaled, 0);
     }
   }
-  if (!in_range(start, end)) {
-    result.hit = true;
-    result.toi = 0;
-    result.outcome = CcdOutcome::kHitOutOfRange;
-    return result;
-  }
-  Prepared p;
-  set_bounds(p, m, delta);
-  Scalar extent = 0;
-  Hull hull;
-  if (!hull_may_touch(pair, start, end, p.bound, extent, hull)) {
-    result.outcome = CcdOutcome::kSeparatedHull;
-    return result;
-  }
-  prepare(p, pair, start, end);
-  const Scalar magnitude = m.maxCoeff();
-  if (delta == 0 && magnitude <= kMaxSignFilterMagnitude && (done & kCoplanarityDone) == 0 &&
-      never_coplanar(start, end)) {
-    result.outcome = CcdOutcome::kSeparatedCoplanarity;
-    return result;
-  }
-  if ((done & kDirectionDone) == 0 && separated_by_a_direction(pair, start, end, hull, p.err, delta, p.square)) {
-    result.outcome = CcdOutcome::kSeparatedDirection;
-    return result;
-  }
-  const Scalar eps = std::max(options.distance_tolerance * extent, 4 * p.err.maxCoeff());
-  const Scalar tol_t = std::clamp(options.time_tolerance, kMinWidth, Scalar(1));
-  // Witnesses: computed ‖F‖ ≤ reach, so the exact point is within reach + ‖err‖.
-  const Scalar reach = delta * (1 + options.separation_tolerance) + eps + (p.err * p.square).norm() / p.square;
-  const Scalar reach2 = (reach * p.square) * (reach * p.square);  // of lengths times p.square
-  Scalar t_begin = 0;
-  std::int64_t steps = 0;
-  if (magnitude <= kMaxSignFilterMagnitude && options.max_advance_steps > 0) {
+  Setup setup;
+  if (ccd_filters(pair, start, end, options, done, m, result, setup)) return result;
+  Advance a;
+  if (setup.advance) {
     // The closest-point kernels need squared lengths that do not overflow; they only choose
     // directions and witness candidates, so any finite result is safe.
-    const Advance a = advance(pair, start, end, p, hull, reach2, options.max_advance_steps, options.max_time);
-    steps = a.steps;
-    result.advance_steps = steps;
-    if (a.state == Advance::kSeparated) {
-      result.outcome = CcdOutcome::kSeparatedAdvancement;
-      return result;
-    }
-    if (a.state == Advance::kWitness) {
-      result.hit = true;
-      result.toi = a.t;
-      result.outcome = CcdOutcome::kHitTolerance;
-      return result;
-    }
-    t_begin = a.t;
+    a = advance(pair, start, end, setup.p, setup.hull, setup.reach2, options.max_advance_steps, options.max_time);
   }
-  result = bisect(p, reach2, tol_t, options.max_boxes, t_begin, options.max_time);
-  result.advance_steps = steps;
-  return result;
+  return ccd_search(setup, a, options);
 }
+
+// The advancement of four queries in lockstep, one per lane (AVX2 only: the closest points come
+// from segment_segment_x4 / point_triangle_x4). Every lane performs `advance`'s operations in its
+// order on IEEE doubles with contraction off, and those kernels give segment_segment's and
+// point_triangle's bits, so each lane computes bit for bit the sequence of steps that `advance`
+// computes for its query, and stops where it stops. The lanes apply only to queries that `ccd`
+// computes unscaled (largest |coordinate| in [2^-300, 2^300]), where Prepared::square is 1 and
+// the multiplications by it (exact) are left out.
+#define CRUMPLE_ADVANCE_LANES inline __attribute__((always_inline, target("avx2")))
+
+/// One query per lane: what `advance` reads, and its loop's state.
+struct AdvanceLanes {
+  Lanes x0[4][3], dx[4][3];  // the points at t = 0, and end − start
+  Lanes hull[8][3];          // Hull::points: `half` at t = 0, then the same at t = 1
+  Lanes a[2][3], b[2][3], c[2][3];  // Prepared's differences
+  Lanes err[3], delta, reach2;
+  Lanes t, progress, step;  // the loop's t, progress and step (= steps taken; exact in a double)
+};
+
+/// Lane l of `to` from lane `from` of the same lanes (a lane with no query keeps running on a
+/// copy of a live one: finite inputs, results not read).
+void copy_lane(AdvanceLanes& lanes, int from, int to) {
+  const auto copy = [&](Lanes& x) { x[to] = x[from]; };
+  const auto copy3 = [&](Lanes (&x)[3]) {
+    for (Lanes& y : x) copy(y);
+  };
+  for (int i = 0; i < 4; ++i) {
+    copy3(lanes.x0[i]);
+    copy3(lanes.dx[i]);
+  }
+  for (auto& point : lanes.hull) copy3(point);
+  for (int tau = 0; tau < 2; ++tau) {
+    copy3(lanes.a[tau]);
+    copy3(lanes.b[tau]);
+    copy3(lanes.c[tau]);
+  }
+  copy3(lanes.err);
+  for (Lanes* x : {&lanes.delta, &lanes.reach2, &lanes.t, &lanes.progress, &lanes.step}) copy(*x);
+}
+
+/// Lane l starts `advance` on query (start, end) prepared in `s`.
+void load_lane(AdvanceLanes& lanes, int l, const CcdPoints& start, const CcdPoints& end, const Setup& s) {
+  for (int i = 0; i < 4; ++i) {
+    const Vec3 d = end[i] - start[i];
+    for (int k = 0; k < 3; ++k) {
+      lanes.x0[i][k][l] = start[i][k];
+      lanes.dx[i][k][l] = d[k];
+    }
+  }
+  for (int i = 0; i < s.hull.count; ++i) {
+    for (int k = 0; k < 3; ++k) lanes.hull[i][k][l] = s.hull.points[i][k];
+  }
+  for (int tau = 0; tau < 2; ++tau) {
+    for (int k = 0; k < 3; ++k) {
+      lanes.a[tau][k][l] = s.p.a[tau][k];
+      lanes.b[tau][k][l] = s.p.b[tau][k];
+      lanes.c[tau][k][l] = s.p.c[tau][k];
+    }
+  }
+  for (int k = 0; k < 3; ++k) lanes.err[k][l] = s.p.err[k];
+  lanes.delta[l] = s.p.delta;
+  lanes.reach2[l] = s.reach2;
+  lanes.t[l] = 0;
+  lanes.progress[l] = 1;
+  lanes.step[l] = 0;
+}
+
+CRUMPLE_ADVANCE_LANES Lanes floor(Lanes x) {
+  return reinterpret_cast<Lanes>(_mm256_floor_pd(reinterpret_cast<__m256d>(x)));
+}
+CRUMPLE_ADVANCE_LANES Lanes sqrt(Lanes x) {
+  return reinterpret_cast<Lanes>(_mm256_sqrt_pd(reinterpret_cast<__m256d>(x)));
+}
+CRUMPLE_ADVANCE_LANES unsigned mask_bits(LaneMask m) {
+  return static_cast<unsigned>(_mm256_movemask_pd(reinterpret_cast<__m256d>(m)));
+}
+CRUMPLE_ADVANCE_LANES Lanes load(const std::array<Scalar, 4>& x) {
+  return reinterpret_cast<Lanes>(_mm256_loadu_pd(x.data()));
+}
+CRUMPLE_ADVANCE_LANES void store(std::array<Scalar, 4>& to, Lanes x) {
+  _mm256_storeu_pd(to.data(), reinterpret_cast<__m256d>(x));
+}
+
+/// std::clamp(x, 0, 1) (NaN stays NaN, and fails the witness' range test), floored to the
+/// 2^-40 grid.
+CRUMPLE_ADVANCE_LANES Lanes snap(Lanes x) {
+  x = x < splat(0) ? splat(0) : (splat(1) < x ? splat(1) : x);
+  return floor(x * splat(0x1p40)) * splat(0x1p-40);
+}
+
+/// `advance`'s above_at: every line (1 − time) s0 + time s1 certified above its limit.
+template <int Half>
+CRUMPLE_ADVANCE_LANES LaneMask above_at(Lanes time, const Lanes (&s0)[Half], const Lanes (&s1)[Half],
+                                        const Lanes (&limit)[Half]) {
+  LaneMask all = ~LaneMask{};
+  for (int i = 0; i < Half; ++i) all &= (splat(1) - time) * s0[i] + time * s1[i] > limit[i];
+  return all;
+}
+
+/// Lanes whose advancement stopped in a step, and how.
+struct Stopped {
+  unsigned stop = 0, separated = 0, witness = 0;
+};
+
+/// One iteration of `advance`'s loop on every lane (`Face`: VF, else EE). Lanes that stop keep
+/// the t at which `advance` returns; the others move to the next step.
+template <bool Face>
+CRUMPLE_ADVANCE_LANES Stopped advance_step(AdvanceLanes& L, FourPointBatch& batch, Scalar max_time, Scalar max_steps) {
+  constexpr int half = Face ? 3 : 4;
+  const Lanes zero = splat(0), one = splat(1);
+  const Lanes t = L.t;
+  LaneMask stop = t >= splat(max_time);  // no contact before t ≥ max_time
+  LaneMask separated = stop;
+  // Closest points at t (the query's points at t, as `advance` computes them).
+  for (int i = 0; i < 4; ++i) {
+    for (int k = 0; k < 3; ++k) store(batch.coords[static_cast<std::size_t>(3 * i + k)], L.x0[i][k] + t * L.dx[i][k]);
+  }
+  Lanes n[3], u, v, len;
+  if constexpr (Face) {
+    const PointTriangleBatchResult q = point_triangle_x4(batch);
+    u = load(q.barycentric[1]);
+    v = load(q.barycentric[2]);
+    len = load(q.away_norm);
+    for (int k = 0; k < 3; ++k) n[k] = load(q.normal[static_cast<std::size_t>(k)]);  // n / len
+  } else {
+    const SegmentBatchResult q = segment_segment_x4(batch);
+    u = load(q.s);
+    v = load(q.t);
+    len = load(q.gap_norm);  // closest1 − closest0 = −n, of the same norm
+    for (int k = 0; k < 3; ++k) n[k] = -load(q.normal[static_cast<std::size_t>(k)]);  // (−x) / y = −(x / y)
+  }
+  // The witness candidate on the 2^-40 grid.
+  u = snap(u);
+  v = snap(v);
+  const LaneMask inside = (u >= zero) & (u <= one) & (v >= zero) & (v <= one);
+  if constexpr (Face) v = (inside & (u + v > one)) ? one - u : v;
+  const Lanes w0 = one - t;
+  Lanes f[3];
+  for (int k = 0; k < 3; ++k) {
+    const Lanes g0 = (L.a[0][k] + u * L.b[0][k]) + v * L.c[0][k];
+    const Lanes g1 = (L.a[1][k] + u * L.b[1][k]) + v * L.c[1][k];
+    f[k] = w0 * g0 + t * g1;
+  }
+  const LaneMask witness = inside & ((f[0] * f[0] + f[1] * f[1]) + f[2] * f[2] <= L.reach2);
+  stop |= witness & (L.step > zero);
+  stop |= (L.step == splat(max_steps)) | (L.progress < splat(0x1p-30));
+  stop |= ~((len > zero) & (len <= splat(std::numeric_limits<Scalar>::max())));  // > 0 and finite
+  // The projections of the hull points on n and the certified threshold.
+  Lanes s0[half], s1[half];
+  Lanes mag = zero;
+  for (int i = 0; i < half; ++i) {
+    for (int tau = 0; tau < 2; ++tau) {
+      const Lanes (&d)[3] = L.hull[i + tau * half];
+      const Lanes x = d[0] * n[0], y = d[1] * n[1], z = d[2] * n[2];
+      (tau == 0 ? s0 : s1)[i] = (x + y) + z;
+      const Lanes m = abs(x) + abs(y) + abs(z);
+      mag = mag < m ? m : mag;  // std::max(mag, m)
+    }
+  }
+  const Lanes nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+  const Lanes slack = abs(n[0]) * L.err[0] + abs(n[1]) * L.err[1] + abs(n[2]) * L.err[2];
+  const Lanes threshold =
+      (L.delta * sqrt(nn) + slack + splat(4 * kU) * mag) * splat(1 + 16 * kU) + splat(kUnderflowSlack);
+  Lanes limit[half];
+  for (int i = 0; i < half; ++i) {
+    limit[i] = (threshold + splat(4 * kU) * (abs(s0[i]) + abs(s1[i]))) * splat(1 + 0x1p-50) + splat(kUnderflowSlack);
+  }
+  stop |= ~above_at<half>(t, s0, s1, limit);
+  // The earliest time a line falls to the threshold plus a margin, then its verification.
+  Lanes next = one;
+  for (int i = 0; i < half; ++i) {
+    const Lanes margin = threshold + splat(16 * kU) * (abs(s0[i]) + abs(s1[i])) + splat(kUnderflowSlack);
+    const Lanes candidate = (s0[i] - margin) / (s0[i] - s1[i]);
+    next = ((s1[i] < s0[i]) & (candidate < next)) ? candidate : next;  // std::min(next, candidate)
+  }
+  next = next < t ? t : (one < next ? one : next);  // std::clamp(next, t, 1)
+  const LaneMask go = ~stop;
+  LaneMask verified = LaneMask{};
+  LaneMask trying = go & (next > t);
+  for (int attempt = 0; attempt < 3 && mask_bits(trying) != 0; ++attempt) {
+    const LaneMask ok = above_at<half>(next, s0, s1, limit);
+    verified |= trying & ok;
+    const LaneMask failed = trying & ~ok;
+    next = failed ? t + (next - t) / splat(2) : next;
+    trying = failed & (next > t);
+  }
+  L.step = go ? L.step + one : L.step;  // ++r.steps
+  stop |= go & ~verified;
+  const LaneMask moved = go & verified;
+  L.progress = moved ? next - t : L.progress;
+  L.t = moved ? next : t;
+  const LaneMask reached_one = moved & (L.t == one);
+  stop |= reached_one;
+  separated |= reached_one;
+  return {mask_bits(stop), mask_bits(separated), mask_bits(witness)};
+}
+
+/// ccd_after_direction on each query of `queries` (all of type `Face`), the advancement in lanes.
+template <bool Face>
+__attribute__((target("avx2"), flatten)) void after_direction_lanes(std::span<const detail::CcdQuery> queries,
+                                                           const CcdOptions& options, CcdResult* out) {
+  constexpr CcdPair pair = Face ? CcdPair::kVertexFace : CcdPair::kEdgeEdge;
+  constexpr unsigned done = kCoplanarityDone | kDirectionDone;
+  AdvanceLanes lanes{};  // zeroed once: a VF query leaves hull rows 6 and 7 unset
+  std::array<Setup, 4> setups;
+  std::array<std::size_t, 4> who{};
+  std::size_t next_query = 0;
+  // Lane l takes the next query that reaches the advancement; the others are answered here.
+  const auto refill = [&](int l) {
+    while (next_query < queries.size()) {
+      const std::size_t i = next_query++;
+      const detail::CcdQuery& q = queries[i];
+      const Vec3 m = max_abs_coordinates(q.start, q.end);
+      if (!(m.maxCoeff() >= kMinUnscaledMagnitude && m.maxCoeff() <= kMaxSignFilterMagnitude)) {
+        out[i] = ccd_checked(pair, q.start, q.end, options, done);  // scaled, or out of range
+        continue;
+      }
+      Setup& s = setups[static_cast<std::size_t>(l)];
+      CcdResult decided;
+      if (ccd_filters(pair, q.start, q.end, options, done, m, decided, s)) {
+        out[i] = decided;
+        continue;
+      }
+      if (!s.advance) {
+        out[i] = ccd_search(s, Advance{}, options);
+        continue;
+      }
+      load_lane(lanes, l, q.start, q.end, s);
+      who[static_cast<std::size_t>(l)] = i;
+      return true;
+    }
+    return false;
+  };
+  unsigned live = 0;
+  for (int l = 0; l < 4; ++l) live |= (refill(l) ? 1u : 0u) << l;
+  if (live == 0) return;
+  const int first = __builtin_ctz(live);
+  for (int l = 0; l < 4; ++l) {
+    if ((live >> l & 1u) == 0) copy_lane(lanes, first, l);
+  }
+  const Scalar max_steps = static_cast<Scalar>(options.max_advance_steps);
+  FourPointBatch batch;  // filled at every step (not value-initialised there)
+  while (live != 0) {
+    const Stopped s = advance_step<Face>(lanes, batch, options.max_time, max_steps);
+    for (unsigned ended = s.stop & live; ended != 0; ended &= ended - 1) {
+      const int l = __builtin_ctz(ended);
+      const std::size_t li = static_cast<std::size_t>(l);
+      Advance a;
+      a.state = (s.separated >> l & 1u) ? Advance::kSeparated : (s.witness >> l & 1u) ? Advance::kWitness : Advance::kOpen;
+      a.t = lanes.t[l];
+      a.steps = static_cast<std::int64_t>(lanes.step[l]);
+      out[who[li]] = ccd_search(setups[li], a, options);
+      if (!refill(l)) live &= ~(1u << l);
+    }
+  }
+}
+
+#undef CRUMPLE_ADVANCE_LANES
 
 }  // namespace
 
@@ -947,6 +1238,23 @@ CcdResult ccd_after_coplanarity(CcdPair pair, const CcdPoints& start, const CcdP
 CcdResult ccd_after_direction(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {
   check_options(options);
   return ccd_checked(pair, start, end, options, kCoplanarityDone | kDirectionDone);
+}
+
+void ccd_after_direction(CcdPair pair, std::span<const CcdQuery> queries, const CcdOptions& options, CcdResult* out,
+                         bool lanes) {
+  check_options(options);
+  // The lanes count steps in doubles: exact far beyond any budget that can be spent.
+  if (lanes && ccd_has_avx2() && options.max_advance_steps <= (std::int64_t{1} << 40)) {
+    if (pair == CcdPair::kVertexFace) {
+      after_direction_lanes<true>(queries, options, out);
+    } else {
+      after_direction_lanes<false>(queries, options, out);
+    }
+    return;
+  }
+  for (std::size_t i = 0; i < queries.size(); ++i) {
+    out[i] = ccd_checked(pair, queries[i].start, queries[i].end, options, kCoplanarityDone | kDirectionDone);
+  }
 }
 
 }  // namespace detail

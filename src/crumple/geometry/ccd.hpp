@@ -132,8 +132,9 @@ Scalar ccd_hull_bound(Scalar magnitude, Scalar delta);
 /// fl(lo_a − hi_b) is the smallest of the rounded differences fl(a_i − b_j) that `ccd` tests:
 /// with `bound` = `ccd_hull_bound` of a magnitude ≥ every coordinate, a true answer means that
 /// `ccd` on the pair returns `kSeparatedHull` (certified: no contact), whatever the order of the
-/// features and points. Branch-free (its outcome is unpredictable in a candidate loop).
-inline bool ccd_slabs_apart(const CcdSlabs& a, const CcdSlabs& b, Scalar bound) {
+/// features and points. Branch-free (its outcome is unpredictable in a candidate loop), and
+/// always inlined (a candidate loop calls it for every sub-pair).
+__attribute__((always_inline)) inline bool ccd_slabs_apart(const CcdSlabs& a, const CcdSlabs& b, Scalar bound) {
   int apart = 0;
   for (int k = 0; k < 3; ++k) {
     apart |= int(a.lo[0][k] - b.hi[0][k] > bound) & int(a.lo[1][k] - b.hi[1][k] > bound);

@@ -55,4 +55,16 @@ CcdResult ccd_after_coplanarity(CcdPair pair, const CcdPoints& start, const CcdP
 /// gave 0 and, at δ = 0, `ccd_never_coplanar` too: neither filter is evaluated again.
 CcdResult ccd_after_direction(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options);
 
+/// `out[i]` = `ccd_after_direction(pair, queries[i].start, queries[i].end, options)` for every
+/// query (all of type `pair`), bit for bit. With `lanes` (where `ccd_has_avx2()`), the
+/// conservative advancement of four queries runs in lockstep in vector lanes, a lane refilled
+/// with the next query as its query ends; each lane performs the scalar advancement's
+/// operations in its order. Otherwise one query after another.
+void ccd_after_direction(CcdPair pair, std::span<const CcdQuery> queries, const CcdOptions& options, CcdResult* out,
+                         bool lanes);
+inline void ccd_after_direction(CcdPair pair, std::span<const CcdQuery> queries, const CcdOptions& options,
+                                CcdResult* out) {
+  ccd_after_direction(pair, queries, options, out, true);
+}
+
 }  // namespace crumple::geometry::detail
