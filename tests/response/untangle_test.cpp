@@ -212,6 +212,68 @@ TEST(Untangle, PullsTheFlapBackThrough) {
   EXPECT_LE(rounds, 100);
 }
 
+/// Sheet B (ids 0..120) at y = 0 over the unit square, as in `flap`; A (16 × 2 quads, ids from
+/// 121) a long fold over it along x: its crease (row j = 1, z = 0.52) at y = -0.02 for
+/// x in [0.3, 0.7] (9 vertices, just beyond B) and at y = 0.02 elsewhere, its two layers rising
+/// to y = 0.2 at z = 0.42 and 0.62. One closed curve, long (both layers cross B along the
+/// stretch), which cuts off only the crease stretch below B: a band.
+Sheets fold() {
+  Sheets s;
+  s.add(10, 10, [](Index i, Index j) { return Vec3(i * 0.1 - 0.013, 0, j * 0.1 - 0.017); });
+  s.add(16, 2, [](Index i, Index j) {
+    const Scalar x = 0.1 + i * 0.05;
+    if (j != 1) return Vec3(x, 0.2, j == 0 ? 0.42 : 0.62);
+    return Vec3(x, i >= 4 && i <= 12 ? -0.02 : 0.02, 0.52);
+  });
+  return s;
+}
+
+TEST(Untangle, LongFoldIsABandPulledBackWithTheSheetHeld) {
+  const Sheets s = fold();
+  const auto topology = s.topology();
+  const auto pairs = testing::intersecting_triangles(topology, s.x);
+  const IntersectionAnalysis a = analyse_intersections(*topology, s.x, pairs);
+  ASSERT_EQ(a.contours.size(), 1u);
+  const Contour& k = a.contours[0];
+  EXPECT_FALSE(k.open);
+  std::vector<Index> below;  // the crease's stretch below B
+  for (Index v = 121; v < static_cast<Index>(s.x.size()); ++v) {
+    if (s.x[static_cast<std::size_t>(v)].y() < 0) below.push_back(v);
+  }
+  ASSERT_EQ(below.size(), 9u);
+  EXPECT_EQ(k.inside, below);
+  EXPECT_GE(k.crossings.size(), 4 * below.size());
+  EXPECT_TRUE(k.band);
+  // The other handcrafted curves are no bands: what they cut off is not thin.
+  for (const Sheets& other : {bump(), flap()}) {
+    const auto t = other.topology();
+    const IntersectionAnalysis b = analyse_intersections(*t, other.x, testing::intersecting_triangles(t, other.x));
+    for (const Contour& c : b.contours) EXPECT_FALSE(c.band);
+  }
+
+  // The pushes alone: the crease goes back over B, and B (the sheet the fold went through) is
+  // held where it was.
+  UntangleOptions options;
+  options.thickness = 0.01;
+  options.max_step = 0.02;
+  Untangler untangler(topology, options);
+  Positions x = s.x;
+  std::vector<Scalar> inv_mass(x.size(), 1);
+  std::vector<Vec3> v(x.size(), Vec3::Zero());
+  int rounds = 0;
+  for (; rounds < 20; ++rounds) {
+    untangler.analyse(x, inv_mass);
+    if (!untangler.tangled()) break;
+    untangler.apply(inv_mass, x, v);
+  }
+  EXPECT_LT(rounds, 20) << "still tangled";
+  EXPECT_EQ(testing::intersecting_triangles(topology, x).size(), 0u);
+  for (Index i = 0; i <= 120; ++i) {
+    EXPECT_EQ(x[static_cast<std::size_t>(i)], s.x[static_cast<std::size_t>(i)]) << "B's vertex " << i << " moved";
+  }
+  for (Index i : below) EXPECT_GT(x[static_cast<std::size_t>(i)].y(), 0) << i;
+}
+
 TEST(Untangle, ContourMinimisationOpensTheSlit) {
   const Sheets s = slit();
   UntangleOptions options;

@@ -14,6 +14,11 @@ namespace crumple::response {
 namespace {
 inline std::size_t at(Index i) { return static_cast<std::size_t>(i); }
 
+/// A contour is a *band* (`Contour::band`) when it has at least this many crossings ...
+constexpr std::size_t kBandCrossings = 32;
+/// ... and at least this many crossings per inside vertex.
+constexpr std::size_t kBandRatio = 4;
+
 using detail::root;
 
 /// Barycentric coordinates (w.r.t. a, b, c) of the point where segment pq meets the triangle:
@@ -323,6 +328,8 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
         out.tangle[at(v)] = 1;
       }
     }
+    k.band = !k.inside.empty() && k.crossings.size() >= kBandCrossings &&
+             k.inside.size() * kBandRatio <= k.crossings.size();
   }
   // A closed curve between pinches is a stretch of a fold folded beyond flat, its two sides
   // through each other. Flipping it back moves its vertices through faces next to the
@@ -395,6 +402,7 @@ std::size_t Untangler::analyse(PositionsView x, std::span<const Scalar> inv_mass
   detector_->update(x, contacts_);
   analysis_ = analyse_intersections(*topology_, x, contacts_.tt, inv_mass);
   pulls_.clear();
+  held_face_.clear();
   shifts_.clear();
   const Topology& topo = *topology_;
   for (const Crossing& c : analysis_.crossings) {
@@ -414,6 +422,7 @@ std::size_t Untangler::analyse(PositionsView x, std::span<const Scalar> inv_mass
       const Scalar side = n.dot(x[at(outer)] - x[at(inner)]);
       if (side == 0) continue;
       pulls_.push_back(vertex_face_stencil(inner, t, c.barycentric, side > 0 ? n : Vec3(-n)));
+      held_face_.push_back(k.band ? 1 : 0);
       continue;
     }
     if (!k.inside.empty()) continue;
@@ -423,7 +432,10 @@ std::size_t Untangler::analyse(PositionsView x, std::span<const Scalar> inv_mass
       const Scalar d0 = n.dot(x[at(ed[0])] - x[at(t[0])]), d1 = n.dot(x[at(ed[1])] - x[at(t[0])]);
       const Index inner = std::abs(d0) < std::abs(d1) ? ed[0] : ed[1];
       const Scalar side = std::abs(d0) < std::abs(d1) ? d1 : d0;
-      if (side != 0) pulls_.push_back(vertex_face_stencil(inner, t, c.barycentric, side > 0 ? n : Vec3(-n)));
+      if (side != 0) {
+        pulls_.push_back(vertex_face_stencil(inner, t, c.barycentric, side > 0 ? n : Vec3(-n)));
+        held_face_.push_back(0);
+      }
       continue;
     }
     // No inside: shorten the curve (contour minimisation).
@@ -463,8 +475,12 @@ UntangleStats Untangler::apply(std::span<const Scalar> inv_mass, std::span<Vec3>
                                std::span<Vec3> v) const {
   UntangleStats stats;
   const Scalar h = options_.thickness;
-  for (const Stencil& s : pulls_) {
-    const Scalar gap = relative_normal(s, x);
+  for (std::size_t p = 0; p < pulls_.size(); ++p) {
+    const Scalar gap = relative_normal(pulls_[p], x);
+    // A pull of a band moves the inside end alone (its stencil cut to the vertex; the gap is
+    // still measured to the face), and removes that end's own velocity against the pull.
+    Stencil s = pulls_[p];
+    if (held_face_[p]) s.count = 1;
     const Scalar denom = inverse_effective_mass(s, inv_mass);
     if (!(denom > 0)) continue;
     if (gap < h) {

@@ -33,6 +33,11 @@
 ///     side of the curve: flipping it through moves the pinch along the fold to the cloth's end.
 ///     When that flap is not the smaller side (it holds a pin) the closure is dropped and the
 ///     curve has no inside.
+///  3b. **Bands**: a long curve that cuts off only a thin band of pockets (`Contour::band`: at
+///     least 32 crossings, at most one inside vertex per 4) is a long fold through a sheet, its
+///     crease just beyond the sheet. Pulling both sides there moves the sheet into the fold's
+///     next stretch, which the next frame finds through again (the pulls see-saw along the
+///     fold): a band's pulls move the inside end alone, the crossed face held.
 ///
 /// Pushes (`Untangler::apply`), built at the analysed positions, applied after each step:
 ///  - a crossing whose edge has one end inside (or at a pinch of its contour: the part of the
@@ -41,7 +46,8 @@
 ///    stencil form of `contact_response.hpp` along the face's normal turned towards the outside end — the
 ///    repulsion with its sign flipped for the pair, so the inside end passes back through the
 ///    face to a gap of the thickness h — at most `max_step` per call, and their approaching
-///    relative velocity along it is removed;
+///    relative velocity along it is removed; a band's pull (3b) moves the inside end alone (the
+///    face held, the end's own velocity against the pull removed);
 ///  - a crossing of a pinch alone (a contour with no `tt` pair): the end of the edge nearer the
 ///    face's plane is pulled back through it, as above;
 ///  - any other crossing of a contour with no inside: its edge's ends move by +σG, the face's
@@ -97,6 +103,10 @@ struct Contour {
   /// `inside` (see the file comment, 3); empty for any other curve, or when the flap it cut
   /// off held a pin.
   std::vector<Index> closure;
+  /// Long, and what it cuts off is thin: at least 32 crossings and at most one inside vertex per
+  /// 4 of them — a band of pockets along a long fold through a sheet (see the file comment, 3b).
+  /// Its pulls move the inside end alone, the crossed face held.
+  bool band = false;
 };
 
 /// A side of a face of a vertex's star passing through another face of that star sharing only
@@ -191,6 +201,7 @@ class Untangler {
   ContactSet contacts_;
   IntersectionAnalysis analysis_;
   std::vector<Stencil> pulls_;
+  std::vector<char> held_face_;  ///< per pull: 1 for a band's (the crossed face is held)
   std::vector<Shift> shifts_;
 };
 
