@@ -312,7 +312,8 @@ double number_option(const std::string& arg, std::size_t prefix) {
 /// turns `Settings::motion_search` on (contacts from the frame's predicted motion); `--rho`, `--iterations` and
 /// `--settle` the projective step's Chebyshev ρ, iterations and settling tolerance (a fraction of
 /// h_c, as the ribbon's `settle` key); `--substeps` the steps per frame (the frame's length kept);
-/// `--threads` the detector's and the integrator's threads (0: all).
+/// `--threads` the detector's and the integrator's threads (0: all); `--flat-rings` sets
+/// `Settings::flat_neighbour_rings` (0 keeps the flat neighbours' pairs).
 /// Prints every frame with intersections (`--verbose`: every frame), a progress line every 10 s
 /// (CRUMPLE_PROGRESS_SECONDS sets the period) and a summary line, also when the run stops early:
 /// on a divergence, or on SIGINT / SIGTERM (after the current frame). Output is line-buffered,
@@ -327,6 +328,7 @@ int check_frames(int argc, char** argv) {
   double rho = -1;           // < 0: the scene's
   double settle = -1;        // < 0: the scene's
   int iterations_option = 0, substeps = 0;  // 0: the scene's
+  int flat_rings = -1;                      // < 0: the default
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
@@ -361,6 +363,10 @@ int check_frames(int argc, char** argv) {
         const double v = number_option(a, 11);
         if (!(v >= 1) || v != std::floor(v) || v > 1000) throw InputError("--substeps expects an integer >= 1");
         substeps = static_cast<int>(v);
+      } else if (a.rfind("--flat-rings=", 0) == 0) {
+        const double v = number_option(a, 13);
+        if (!(v >= 0 && v <= 2) || v != std::floor(v)) throw InputError("--flat-rings expects 0, 1 or 2");
+        flat_rings = static_cast<int>(v);
       } else if (a.rfind("--threads=", 0) == 0) {
         const double v = number_option(a, 10);
         if (!(v >= 0) || v != std::floor(v) || v > 1024) throw InputError("--threads expects an integer >= 0");
@@ -387,6 +393,7 @@ int check_frames(int argc, char** argv) {
   settings.fail_safe = fail_safe;
   if (search_factor > 0) settings.search_factor = search_factor;
   settings.motion_search = motion_search;
+  if (flat_rings >= 0) settings.flat_neighbour_rings = flat_rings;
   if (rho >= 0) settings.integrator_options.projective_rho = rho;
   if (iterations_option > 0) settings.integrator_options.projective_iterations = iterations_option;
   if (settle >= 0) settings.integrator_options.projective_tolerance = settle * settings.detector.thickness;
@@ -433,6 +440,7 @@ int check_frames(int argc, char** argv) {
   std::size_t most = 0, impacts = 0, frozen = 0, most_impacts = 0, zone_vertices = 0;
   int most_impacts_frame = 0, zone_frames = 0;
   double iterations = 0;
+  double flat_pairs = 0;
   double ms = 0, ccd_ms = 0, queries = 0, motion_pairs = 0, integrate_ms = 0, detect_ms = 0, response_ms = 0, contacts = 0;
   double stretch = 0, most_stretch = 0, fastest = 0, most_energy = -std::numeric_limits<double>::infinity();
   double speed = 0, energy = 0;
@@ -473,6 +481,7 @@ int check_frames(int argc, char** argv) {
     zone_frames += st.ccd_zone_vertices > 0 ? 1 : 0;
     queries += st.ccd_queries;
     motion_pairs += static_cast<double>(st.motion_pairs);
+    flat_pairs += static_cast<double>(st.flat_pairs);
     if (st.ccd_impacts > most_impacts) {
       most_impacts = st.ccd_impacts;
       most_impacts_frame = f;
@@ -490,10 +499,11 @@ int check_frames(int argc, char** argv) {
     const std::size_t pairs = intersections.tt.size();
     if (verbose) {
       std::printf("frame %d: %.1f ms, CCD %.1f ms, %zu live impacts, %d queries, %zu zone vertices, %zu frozen, "
-                  "%zu contacts, fastest %.3g m/s, longest spring %.3gx rest, energy %.4g J, %zu intersecting "
-                  "pairs\n",
+                  "%zu contacts, %zu flat-neighbour pairs left out, fastest %.3g m/s, longest spring %.3gx rest, "
+                  "energy %.4g J, %zu intersecting pairs\n",
                   f, st.integrate_ms + st.detect_ms + st.response_ms + st.ccd_ms, st.ccd_ms, st.ccd_impacts,
-                  st.ccd_queries, st.ccd_zone_vertices, st.ccd_frozen, st.vf + st.ee, speed, stretch, energy, pairs);
+                  st.ccd_queries, st.ccd_zone_vertices, st.ccd_frozen, st.vf + st.ee, st.flat_pairs, speed, stretch,
+                  energy, pairs);
     }
     if (pairs > 0) {
       ++bad;
@@ -509,12 +519,12 @@ int check_frames(int argc, char** argv) {
   std::printf(
       "summary %s: %d frames run of %d, %d with intersections (most %zu); %.1f ms/frame (integrate %.1f, "
       "detect %.1f, response %.1f, CCD %.1f), %.2f frames/s of wall time; %.0f contacts/frame, %.1f live "
-      "impacts/frame (max %zu at frame %d), %.2f queries/frame, %.1f motion-search contacts/frame, %d frames with impact zones (%zu zone vertices "
+      "impacts/frame (max %zu at frame %d), %.2f queries/frame, %.1f motion-search contacts/frame, %.0f flat-neighbour pairs left out/frame, %d frames with impact zones (%zu zone vertices "
       "in all), %zu frozen in all; fastest %.3g m/s, longest spring %.3gx rest (frame %d), energy at most %.4g "
       "J; %.1f solver iterations/frame%s%s\n",
       spec.c_str(), run, frames, bad, most, ms / per, integrate_ms / per, detect_ms / per, response_ms / per,
       ccd_ms / per, run / std::max(elapsed(), 1e-9), contacts / per, static_cast<double>(impacts) / per,
-      most_impacts, most_impacts_frame, queries / per, motion_pairs / per, zone_frames, zone_vertices, frozen, fastest, most_stretch,
+      most_impacts, most_impacts_frame, queries / per, motion_pairs / per, flat_pairs / per, zone_frames, zone_vertices, frozen, fastest, most_stretch,
       most_stretch_frame, run > 0 ? most_energy : 0.0, iterations / per, stopped.empty() ? "" : "; STOPPED: ",
       stopped.c_str());
   if (bad > 0 || stopped.rfind("DIVERGED", 0) == 0) return 1;

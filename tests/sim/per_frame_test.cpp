@@ -151,5 +151,39 @@ TEST(PerFrame, MotionSearchSkipsMotionTheRadiusCovers) {
   EXPECT_EQ(st.ccd_impacts, 0u);
 }
 
+// The pile at n = 200's edge (5 mm: 16 quads on 8 cm) searches 4 thicknesses, 1.2 edges: the flat
+// cloth's own neighbours fall within it. Flat neighbours keep 2 h_c (`flat_neighbour_rings`): the
+// frame's proximity impulses serve the other pairs only (the cloth's crease over the ridge, a
+// sharp one at this edge, keeps its pairs), and the motion of the lying cloth is the same, bit
+// for bit, as with every pair served (none of the pairs left out comes within h_c).
+TEST(PerFrame, FlatNeighboursKeepTwoThicknesses) {
+  const auto run = [](const std::string& spec, int rings) {
+    Scene s = make_scene(SceneSpec::parse(spec), 1);
+    s.settings.detector.threads = 1;
+    s.settings.flat_neighbour_rings = rings;
+    Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
+                   s.settings);
+    std::vector<FrameStats> frames;
+    for (int f = 0; f < 4; ++f) frames.push_back(sim.advance_frame());
+    return std::make_pair(frames, sim.state().x);
+  };
+  for (const std::string fine : {"crumple:n=16,size=0.08", "crumple:n=16,size=0.08,ridge=0"}) {
+    ASSERT_GT(make_scene(SceneSpec::parse(fine), 1).settings.search_factor, 3.9);
+    const auto [left_out, x] = run(fine, 2);
+    const auto [all, x_all] = run(fine, 0);
+    const auto [two, x_two] = run(fine + ",search=0", 2);  // 2 h_c: nothing to leave out
+    EXPECT_EQ(x, x_all) << fine << ": the pairs left out never came within h_c";
+    EXPECT_EQ(x, x_two) << fine;
+    for (std::size_t f = 0; f < left_out.size(); ++f) {
+      EXPECT_EQ(all[f].flat_pairs, 0u);
+      EXPECT_EQ(two[f].flat_pairs, 0u);
+      EXPECT_EQ(left_out[f].flat_pairs + left_out[f].proximity_pairs, all[f].proximity_pairs);
+      EXPECT_LT(5 * left_out[f].proximity_pairs, all[f].proximity_pairs) << fine << ", frame " << f;
+      if (fine.ends_with("ridge=0")) {
+        EXPECT_LE(left_out[f].proximity_pairs, two[f].proximity_pairs) << "flat: as few as 2 h_c finds";
+      }
+    }
+  }
+}
 }  // namespace
 }  // namespace crumple::sim

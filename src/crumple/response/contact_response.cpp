@@ -1,8 +1,10 @@
 #include <crumple/core/error.hpp>
+#include <crumple/core/parallel.hpp>
 #include <crumple/geometry/distance.hpp>
 #include <crumple/response/contact_response.hpp>
 
 #include <algorithm>
+#include <cmath>
 
 namespace crumple::response {
 
@@ -67,6 +69,94 @@ void refresh_stencil(Stencil& s, std::span<const Vec3> x) {
   if (!(length > 0)) return;
   const Vec3 n = d / length;
   s.normal = n.dot(s.normal) >= 0 ? n : Vec3(-n);
+}
+
+namespace {
+/// Whether some vertex of `a` is within `rings` (1 or 2) one-rings of some vertex of `b`.
+bool within_rings(std::span<const Index> a, std::span<const Index> b, const Adjacency& ring, int rings) {
+  for (const Index u : a) {
+    for (const Index w : b) {
+      if (u == w) return true;
+      const auto ru = ring[u];
+      if (std::find(ru.begin(), ru.end(), w) != ru.end()) return true;
+      if (rings < 2) continue;
+      const auto rw = ring[w];
+      for (const Index k : ru) {
+        if (std::find(rw.begin(), rw.end(), k) != rw.end()) return true;
+      }
+    }
+  }
+  return false;
+}
+}  // namespace
+
+std::size_t drop_flat_neighbours(std::vector<Stencil>& stencils, const Topology& topology,
+                                 std::span<const Vec3> x, const FlatNeighbourOptions& options) {
+  CRUMPLE_CHECK(options.rings >= 1 && options.rings <= 2, "flat neighbour rings must be 1 or 2");
+  CRUMPLE_CHECK(x.size() == static_cast<std::size_t>(topology.num_vertices()),
+                "positions must have #V entries");
+  if (stencils.empty()) return 0;
+  // Area-weighted face normals (unnormalised); a side's normal is their sum over the side's faces.
+  const auto faces = topology.faces();
+  std::vector<Vec3> face_normal(faces.size());
+  parallel_for_chunks(faces.size(), options.threads, balanced_grain(faces.size(), options.threads, 1024, 65536),
+                      [&](std::size_t begin, std::size_t end) {
+                        for (std::size_t f = begin; f < end; ++f) {
+                          const Face& t = faces[f];
+                          face_normal[f] = (x[at(t[1])] - x[at(t[0])]).cross(x[at(t[2])] - x[at(t[0])]);
+                        }
+                      });
+  const auto unit_sum = [&](std::span<const Index> incident) {
+    Vec3 n = Vec3::Zero();
+    for (const Index f : incident) n += face_normal[at(f)];
+    const Scalar length = n.norm();
+    return length > 0 ? Vec3(n / length) : Vec3(Vec3::Zero());
+  };
+  const auto find_edge = [&](Index u, Index w) {
+    for (const Index e : topology.vertex_edges()[u]) {
+      const Edge& g = topology.edge(e);
+      if ((g[0] == u && g[1] == w) || (g[0] == w && g[1] == u)) return e;
+    }
+    return Index{-1};
+  };
+  const auto flat = [&](const Stencil& s) {
+    if (relative_normal(s, x) < options.keep_within) return false;
+    Vec3 na, nb;
+    if (s.edge_edge) {
+      const Index ea = find_edge(s.vertex[0], s.vertex[1]);
+      const Index eb = find_edge(s.vertex[2], s.vertex[3]);
+      if (ea < 0 || eb < 0) return false;
+      na = unit_sum(topology.edge_faces()[ea]);
+      nb = unit_sum(topology.edge_faces()[eb]);
+    } else {
+      na = unit_sum(topology.vertex_faces()[s.vertex[0]]);
+      // The face is the stencil's last three vertices; its normal is its own.
+      const Vec3 n = (x[at(s.vertex[2])] - x[at(s.vertex[1])]).cross(x[at(s.vertex[3])] - x[at(s.vertex[1])]);
+      const Scalar length = n.norm();
+      nb = length > 0 ? Vec3(n / length) : Vec3(Vec3::Zero());
+    }
+    // A zero normal (a degenerate side) fails `alike` and keeps the pair.
+    if (!(na.dot(nb) >= options.alike)) return false;
+    if (!(std::abs(s.normal.dot(na)) <= options.along) || !(std::abs(s.normal.dot(nb)) <= options.along)) {
+      return false;
+    }
+    const std::span<const Index> all(s.vertex.data(), 4);
+    const std::size_t split = s.edge_edge ? 2 : 1;
+    return within_rings(all.first(split), all.subspan(split), topology.vertex_vertices(), options.rings);
+  };
+  std::vector<char> drop(stencils.size());
+  parallel_for_chunks(stencils.size(), options.threads,
+                      balanced_grain(stencils.size(), options.threads, 1024, 65536),
+                      [&](std::size_t begin, std::size_t end) {
+                        for (std::size_t i = begin; i < end; ++i) drop[i] = flat(stencils[i]) ? 1 : 0;
+                      });
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < stencils.size(); ++i) {
+    if (!drop[i]) stencils[kept++] = stencils[i];
+  }
+  const std::size_t dropped = stencils.size() - kept;
+  stencils.resize(kept);
+  return dropped;
 }
 
 Scalar relative_normal(const Stencil& s, std::span<const Vec3> q) {

@@ -23,6 +23,7 @@
 
 #include <crumple/core/types.hpp>
 #include <crumple/detect/contact.hpp>
+#include <crumple/mesh/mesh.hpp>
 
 #include <array>
 #include <span>
@@ -56,6 +57,29 @@ Stencil make_stencil(const EdgeEdgeContact& contact);
 /// Stencils of every VF and EE contact of a set (TT contacts have no response), VF first.
 /// Contacts with a zero normal (degenerate geometry) are skipped.
 std::vector<Stencil> make_stencils(const ContactSet& contacts, std::span<const Face> faces);
+
+/// Cosines of `drop_flat_neighbours`: a stencil's normal n is "along the cloth" on one side when
+/// |n · N| <= `along` (N that side's unit normal: the face's, or the mean of the faces around
+/// the vertex or the edge), and the two sides "face alike" when N_a · N_b >= `alike`.
+struct FlatNeighbourOptions {
+  int rings = 2;          ///< the sides are this many edges apart on the mesh at most (1 or 2)
+  Scalar along = 0.5;     ///< n within 30° of both sides' tangent planes
+  Scalar alike = 0.866;   ///< the two sides' normals within 30° of each other
+  /// Flat pairs whose gap is below this stay (0: none stays by its gap).
+  Scalar keep_within = 0;
+  int threads = 1;  ///< threads of the test (0 = all); the result does not depend on them
+};
+
+/// Removes from `stencils` the pairs of one flat patch of the cloth whose gap is at least
+/// `keep_within`: the two sides are at most `rings` edges apart on the mesh (some vertex of one
+/// side is within `rings` one-rings of some vertex of the other), their normals face alike, and
+/// the pair's normal lies along both (see `FlatNeighbourOptions`), all at `positions`. Such a
+/// pair is not two layers closing in: its gap runs within the cloth, joined by at most `rings`
+/// edges, so it closes only as fast as those edges shorten, not as fast as a layer falls
+/// (docs/simulation.md, "Flat neighbours"). Returns how many were removed; the others keep
+/// their order.
+std::size_t drop_flat_neighbours(std::vector<Stencil>& stencils, const Topology& topology,
+                                 std::span<const Vec3> positions, const FlatNeighbourOptions& options = {});
 
 /// Σ c_i q_i · n over the stencil (the gap for positions, the separating speed for velocities).
 Scalar relative_normal(const Stencil& stencil, std::span<const Vec3> q);

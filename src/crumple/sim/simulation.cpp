@@ -87,6 +87,8 @@ Simulation::Simulation(Model model, State state, ForceField field,
   if (!state_.x.empty()) initial_spread_ = compute_bounds(state_.x).diagonal();
   DetectorOptions detection = settings_.detector;
   CRUMPLE_CHECK(settings_.search_factor > 1, "search_factor must be > 1");
+  CRUMPLE_CHECK(settings_.flat_neighbour_rings >= 0 && settings_.flat_neighbour_rings <= 2,
+                "flat_neighbour_rings must be 0, 1 or 2");
   if (per_frame()) detection.thickness *= settings_.search_factor;  // see `ResponseModel`
   detector_ = make_detector(settings_.method, detection);
   detector_->set_topology(model_.topology_ptr());
@@ -291,10 +293,19 @@ void Simulation::proximity_frame() {
   const Positions frame_start = state_.x;
   auto start = Clock::now();
   stencils_ = response::make_stencils(contacts_, model_.topology().faces());
+  // The flat neighbours keep the radius 2 h_c; with no larger radius there is nothing to drop.
+  if (settings_.flat_neighbour_rings > 0 && settings_.search_factor > kFlatNeighbourSearch) {
+    response::FlatNeighbourOptions flat;
+    flat.rings = settings_.flat_neighbour_rings;
+    flat.keep_within = kFlatNeighbourSearch * settings_.detector.thickness;
+    flat.threads = settings_.detector.threads;
+    flat_pairs_ += response::drop_flat_neighbours(stencils_, model_.topology(), state_.x, flat);
+  }
   response_ms_ += ms_since(start);
   motion_search();
   start = Clock::now();
   drop_tangled(stencils_, untangler_.get());
+  proximity_pairs_ += stencils_.size();
   response_ms_ += ms_since(start);
   response::ProximityOptions options;
   options.thickness = settings_.detector.thickness;
@@ -419,6 +430,8 @@ FrameStats Simulation::frame_stats() {
   s.ccd_first_restricted = ccd_stats_.first_restricted;
   s.motion_pairs = motion_pairs_;
   s.motion_vertices = motion_vertices_;
+  s.flat_pairs = flat_pairs_;
+  s.proximity_pairs = proximity_pairs_;
   const ContactSet& seen = per_frame() ? close_ : contacts_;
   s.vf = seen.vf.size();
   s.ee = seen.ee.size();
@@ -444,7 +457,7 @@ FrameStats Simulation::frame_stats() {
   if (!state_.x.empty()) s.bounds = compute_bounds(state_.x);
   integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = untangle_ms_ = 0;
   ccd_stats_ = {};
-  motion_pairs_ = motion_vertices_ = 0;
+  motion_pairs_ = motion_vertices_ = flat_pairs_ = proximity_pairs_ = 0;
   cg_iterations_ = 0;
   detections_ = 0;
   corrections_ = 0;
@@ -475,7 +488,7 @@ FrameStats Simulation::advance_frame() {
     contacts_valid_ = false;
     integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = untangle_ms_ = 0;
     ccd_stats_ = {};
-    motion_pairs_ = motion_vertices_ = 0;
+    motion_pairs_ = motion_vertices_ = flat_pairs_ = proximity_pairs_ = 0;
     cg_iterations_ = 0;
     corrections_ = 0;
     untangle_pulls_ = 0;

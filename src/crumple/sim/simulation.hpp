@@ -90,6 +90,10 @@ enum class ResponseModel { AnnexB, Proximity };
 /// for the built-in continuous fail-safe. It may change positions and velocities.
 using FailSafe = std::function<void(PositionsView frame_start, State& state)>;
 
+/// The proximity radius, in thicknesses, of the pairs of one flat patch of the cloth
+/// (`Settings::flat_neighbour_rings`).
+inline constexpr Scalar kFlatNeighbourSearch = 2;
+
 /// How a simulation steps, detects and responds.
 struct Settings {
   Scalar dt = 1.0 / 600;  ///< step length h (s)
@@ -114,6 +118,14 @@ struct Settings {
   /// those fast pairs apart instead of leaving them to the fail-safe. Off by default: the query
   /// costs more than the fail-safe work it saves (docs/simulation.md, "Motion search").
   bool motion_search = false;
+  /// Proximity model, with `search_factor` above `kFlatNeighbourSearch`: the frame's detected
+  /// pairs of one flat patch of the cloth — sides at most this many edges apart on the mesh,
+  /// facing alike, the pair's normal along the cloth — keep the radius `kFlatNeighbourSearch` ×
+  /// h_c: those farther apart are left out of the frame's proximity impulses
+  /// (`response::drop_flat_neighbours`; 1 or 2; 0 keeps every pair). Such a gap closes only as
+  /// fast as the few edges between its sides shorten; the larger radius is for layers falling
+  /// onto each other (docs/simulation.md, "Flat neighbours").
+  int flat_neighbour_rings = 2;
   /// Largest spread of the particles, as a multiple of the initial one, before the run counts
   /// as diverged (see `DivergenceError`). A cloth's springs keep it near its own size.
   Scalar max_spread_growth = 10;
@@ -154,6 +166,12 @@ struct FrameStats {
   /// vertices whose predicted motion was fast enough to be searched.
   std::size_t motion_pairs = 0;
   std::size_t motion_vertices = 0;
+  /// Detected pairs left out of the frame's proximity impulses as flat neighbours
+  /// (`Settings::flat_neighbour_rings`).
+  std::size_t flat_pairs = 0;
+  /// Pairs the frame's proximity impulses served (the detection's and the motion search's, less
+  /// the flat neighbours and the tangle's own).
+  std::size_t proximity_pairs = 0;
   std::size_t vf = 0, ee = 0, tt = 0;  ///< contacts at the frame's end positions
   Scalar collision_share = 0;          ///< see `collision_share`
   /// Smallest VF/EE distance at the frame's end (infinity when there is no contact).
@@ -274,7 +292,7 @@ class Simulation {
   Positions predicted_, predicted_velocity_;
   std::vector<char> fast_;
   ImpactSet motion_impacts_;
-  std::size_t motion_pairs_ = 0, motion_vertices_ = 0;
+  std::size_t motion_pairs_ = 0, motion_vertices_ = 0, flat_pairs_ = 0, proximity_pairs_ = 0;
   // Accumulated over the current frame.
   double integrate_ms_ = 0, detect_ms_ = 0, response_ms_ = 0, ccd_ms_ = 0;
   int cg_iterations_ = 0;
