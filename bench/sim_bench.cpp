@@ -303,13 +303,15 @@ double number_option(const std::string& arg, std::size_t prefix) {
 }  // namespace
 
 /// `--check-frames=SPEC [--frames=N] [--fail-safe=off] [--response=on] [--search-factor=F]
-/// [--motion-search=on] [--rho=R] [--iterations=N] [--settle=F] [--substeps=S] [--threads=T] [--verbose]`:
+/// [--motion-search=on] [--motion-retries=N] [--rho=R] [--iterations=N] [--settle=F] [--substeps=S] [--threads=T]
+/// [--verbose]`:
 /// runs N frames (1000) of the built-in scene SPEC with the `frame/` rows' settings
 /// (`--response=on` turns the response, and with it the fail-safe, on for scenes that have it
 /// off, e.g. hanging-cloth), counting the intersecting triangle pairs after every frame with the
 /// exact detector (kdop, kinds tt, as the rows do). `--search-factor` sets
 /// `Settings::search_factor` (the proximity radius in thicknesses), `--motion-search=on`
-/// turns `Settings::motion_search` on (contacts from the frame's predicted motion); `--rho`, `--iterations` and
+/// turns `Settings::motion_search` on (contacts from the frame's predicted motion), `--motion-retries`
+/// sets `Settings::motion_retries` (the scene's otherwise: 1 for crumple, 0 for the others); `--rho`, `--iterations` and
 /// `--settle` the projective step's Chebyshev ρ, iterations and settling tolerance (a fraction of
 /// h_c, as the ribbon's `settle` key); `--substeps` the steps per frame (the frame's length kept);
 /// `--threads` the detector's and the integrator's threads (0: all); `--flat-rings` sets
@@ -329,6 +331,7 @@ int check_frames(int argc, char** argv) {
   double settle = -1;        // < 0: the scene's
   int iterations_option = 0, substeps = 0;  // 0: the scene's
   int flat_rings = -1;                      // < 0: the default
+  int motion_retries = -1;                  // < 0: the scene's
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
@@ -359,6 +362,10 @@ int check_frames(int argc, char** argv) {
       } else if (a.rfind("--settle=", 0) == 0) {
         settle = number_option(a, 9);
         if (!(settle >= 0)) throw InputError("--settle expects a number >= 0");
+      } else if (a.rfind("--motion-retries=", 0) == 0) {
+        const double v = number_option(a, 17);
+        if (!(v >= 0) || v != std::floor(v) || v > 100) throw InputError("--motion-retries expects an integer in [0, 100]");
+        motion_retries = static_cast<int>(v);
       } else if (a.rfind("--substeps=", 0) == 0) {
         const double v = number_option(a, 11);
         if (!(v >= 1) || v != std::floor(v) || v > 1000) throw InputError("--substeps expects an integer >= 1");
@@ -392,8 +399,9 @@ int check_frames(int argc, char** argv) {
   settings.response = settings.response || response;
   settings.fail_safe = fail_safe;
   if (search_factor > 0) settings.search_factor = search_factor;
-  settings.motion_search = motion_search;
+  settings.motion_search = settings.motion_search || motion_search;
   if (flat_rings >= 0) settings.flat_neighbour_rings = flat_rings;
+  if (motion_retries >= 0) settings.motion_retries = motion_retries;
   if (rho >= 0) settings.integrator_options.projective_rho = rho;
   if (iterations_option > 0) settings.integrator_options.projective_iterations = iterations_option;
   if (settle >= 0) settings.integrator_options.projective_tolerance = settle * settings.detector.thickness;
@@ -416,9 +424,10 @@ int check_frames(int argc, char** argv) {
     step += buffer;
   }
   {
-    char buffer[96];
-    std::snprintf(buffer, sizeof buffer, ", %d steps of %.4g s, search %.3g h_c, motion search %s",
-                  settings.substeps, settings.dt, settings.search_factor, motion_search ? "on" : "off");
+    char buffer[160];
+    std::snprintf(buffer, sizeof buffer, ", %d steps of %.4g s, search %.3g h_c, motion search %s, motion retries %d",
+                  settings.substeps, settings.dt, settings.search_factor, settings.motion_search ? "on" : "off",
+                  settings.motion_retries);
     step += buffer;
   }
   std::printf("%s: %d vertices, response %s, fail-safe %s, %s, start: %zu intersecting pairs\n", spec.c_str(),
@@ -438,7 +447,7 @@ int check_frames(int argc, char** argv) {
   const double period = progress_period();
   int bad = 0, run = 0;
   std::size_t most = 0, impacts = 0, frozen = 0, most_impacts = 0, zone_vertices = 0;
-  int most_impacts_frame = 0, zone_frames = 0;
+  int most_impacts_frame = 0, zone_frames = 0, retried_frames = 0;
   double iterations = 0;
   double flat_pairs = 0;
   double ms = 0, ccd_ms = 0, queries = 0, motion_pairs = 0, integrate_ms = 0, detect_ms = 0, response_ms = 0, contacts = 0;
@@ -482,6 +491,7 @@ int check_frames(int argc, char** argv) {
     queries += st.ccd_queries;
     motion_pairs += static_cast<double>(st.motion_pairs);
     flat_pairs += static_cast<double>(st.flat_pairs);
+    retried_frames += st.retries > 0 ? 1 : 0;
     if (st.ccd_impacts > most_impacts) {
       most_impacts = st.ccd_impacts;
       most_impacts_frame = f;
@@ -519,12 +529,12 @@ int check_frames(int argc, char** argv) {
   std::printf(
       "summary %s: %d frames run of %d, %d with intersections (most %zu); %.1f ms/frame (integrate %.1f, "
       "detect %.1f, response %.1f, CCD %.1f), %.2f frames/s of wall time; %.0f contacts/frame, %.1f live "
-      "impacts/frame (max %zu at frame %d), %.2f queries/frame, %.1f motion-search contacts/frame, %.0f flat-neighbour pairs left out/frame, %d frames with impact zones (%zu zone vertices "
+      "impacts/frame (max %zu at frame %d), %.2f queries/frame, %.1f motion-search contacts/frame, %.0f flat-neighbour pairs left out/frame, %d frames run again, %d frames with impact zones (%zu zone vertices "
       "in all), %zu frozen in all; fastest %.3g m/s, longest spring %.3gx rest (frame %d), energy at most %.4g "
       "J; %.1f solver iterations/frame%s%s\n",
       spec.c_str(), run, frames, bad, most, ms / per, integrate_ms / per, detect_ms / per, response_ms / per,
       ccd_ms / per, run / std::max(elapsed(), 1e-9), contacts / per, static_cast<double>(impacts) / per,
-      most_impacts, most_impacts_frame, queries / per, motion_pairs / per, flat_pairs / per, zone_frames, zone_vertices, frozen, fastest, most_stretch,
+      most_impacts, most_impacts_frame, queries / per, motion_pairs / per, flat_pairs / per, retried_frames, zone_frames, zone_vertices, frozen, fastest, most_stretch,
       most_stretch_frame, run > 0 ? most_energy : 0.0, iterations / per, stopped.empty() ? "" : "; STOPPED: ",
       stopped.c_str());
   if (bad > 0 || stopped.rfind("DIVERGED", 0) == 0) return 1;

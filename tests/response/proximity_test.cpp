@@ -75,5 +75,29 @@ TEST(Proximity, RefreshKeepsTheSideACrossedPairCameFrom) {
   EXPECT_NEAR(relative_normal(c.stencil, c.x), -0.03, 1e-12);
 }
 
+// A vertex that lands on its face (the squeezed pile's steps carry vertices onto the layer
+// below): the closest points then differ by rounding noise, whose direction may lie in the
+// face's plane. The stencil keeps its normal, and the push-out lifts the vertex back to h
+// along it, never sideways. Landing points over a grid of the face (z = 0 and a few ulps off).
+TEST(Proximity, AVertexLandingOnItsFaceKeepsItsNormal) {
+  const Scalar h = 0.01;
+  for (int i = 1; i < 20; ++i) {
+    for (int j = 1; i + j < 20; ++j) {
+      for (const Scalar z : {0.0, 1e-18, -1e-18, 1e-12}) {
+        VertexOverFace c(0, Vec3::Zero());
+        c.x = {Vec3(0.3, 0.1, 0.2), Vec3(0.4, 0.1, 0.2), Vec3(0.3, 0.2, 0.2), Vec3::Zero()};
+        c.x[3] = Vec3(0.3 + 0.005 * i, 0.1 + 0.005 * j, 0.2 + z);
+        refresh_stencil(c.stencil, c.x);
+        EXPECT_EQ(c.stencil.normal, Vec3::UnitZ()) << "landing point " << i << ", " << j << ", z " << z;
+        ProximityOptions options;
+        options.thickness = h;
+        resolve_proximity(std::span<const Stencil>(&c.stencil, 1), c.inv_mass, c.x, c.v, options);
+        const Scalar lifted = c.x[3].z() - (c.x[0].z() + c.x[1].z() + c.x[2].z()) / 3;
+        EXPECT_GT(lifted, 0.5 * h) << "landing point " << i << ", " << j << ", z " << z;
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace crumple::response

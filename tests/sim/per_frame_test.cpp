@@ -185,5 +185,68 @@ TEST(PerFrame, FlatNeighboursKeepTwoThicknesses) {
     }
   }
 }
+
+/// A pinned at z = 0, B at rest 3.5 h above it, pulled down by a field of 576 m/s² that carries
+/// it 8 h in the frame: the motion a stretched spring releases from rest (the squeezed pile's
+/// case, docs/simulation.md "Energy under contact"), which the predicted motion x + H v, with
+/// v = 0, does not see.
+TwoTriangles pulled(bool motion_search, int retries) {
+  TwoTriangles scene(0, 0, motion_search);
+  scene.model = Model::create({0, 0, 0, 0.01, 0.01, 0.01}, {}, {{0, 1, 2}, {3, 4, 5}});
+  scene.settings.motion_retries = retries;
+  return scene;
+}
+
+Simulation make_pulled(const TwoTriangles& scene) {
+  ForceField field;
+  field.gravity = Vec3(0, 0, -576);
+  return Simulation(scene.model, scene.state, field, {}, {}, scene.settings);
+}
+
+// Without a retry the steps carry B through A and the fail-safe stops B's three corners at the
+// frame's end (the motion search too: it predicts no motion from rest); with one, the frame's
+// own motion puts the three pairs among its contacts, the frame runs again, the proximity
+// impulses hold B at h above A at every step and the fail-safe finds nothing.
+TEST(PerFrame, MotionRetryCatchesAPairThePredictionMisses) {
+  for (const bool search : {false, true}) {
+    for (const int retries : {0, 1, 2}) {
+      SCOPED_TRACE(std::string(search ? "motion search on" : "motion search off") + ", retries " +
+                   std::to_string(retries));
+      Simulation sim = make_pulled(pulled(search, retries));
+      const FrameStats st = sim.advance_frame();
+      EXPECT_EQ(st.ccd_impacts, retries > 0 ? 0u : 3u);
+      EXPECT_EQ(st.retries, retries > 0 ? 1 : 0) << "the second run finds no new pair";
+      EXPECT_EQ(st.motion_pairs, retries > 0 ? 3u : 0u) << "B's corners against A";
+      EXPECT_EQ(st.motion_vertices, 0u) << "the prediction from rest moves nothing";
+      const Positions& x = sim.state().x;
+      for (std::size_t i = 3; i < 6; ++i) {
+        EXPECT_GT(x[i].z(), 0) << "B stays above A, vertex " << i;
+        if (retries > 0) {
+          EXPECT_GT(x[i].z(), 0.99 * TwoTriangles::h) << "held at h from A, vertex " << i;
+          EXPECT_GE(sim.state().v[i].z(), -1e-9) << "no approaching velocity left, vertex " << i;
+        }
+      }
+    }
+  }
+}
+
+// A frame whose motion the detection's radius covers (B falls under plain gravity, 1.4 mm a
+// frame against a radius of 2 h) runs once, bit for bit as without retries.
+TEST(PerFrame, MotionRetryLeavesACoveredFrameAlone) {
+  ForceField field;
+  field.gravity = Vec3(0, 0, -9.81);
+  const TwoTriangles with = pulled(false, 1), without = pulled(false, 0);
+  Simulation a(with.model, with.state, field, {}, {}, with.settings);
+  Simulation b(without.model, without.state, field, {}, {}, without.settings);
+  for (int f = 0; f < 3; ++f) {
+    const FrameStats st = a.advance_frame();
+    b.advance_frame();
+    EXPECT_EQ(st.retries, 0);
+    EXPECT_EQ(st.motion_pairs, 0u);
+    EXPECT_EQ(a.state().x, b.state().x);
+    EXPECT_EQ(a.state().v, b.state().v);
+  }
+}
+
 }  // namespace
 }  // namespace crumple::sim

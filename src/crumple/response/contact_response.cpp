@@ -66,7 +66,13 @@ void refresh_stencil(Stencil& s, std::span<const Vec3> x) {
   }
   const Vec3 d = to - from;
   const Scalar length = d.norm();
-  if (!(length > 0)) return;
+  // The closest points carry rounding errors of a few ulps of the configuration's size: at a
+  // distance within a small multiple of that, d's direction is noise (a vertex landing on its
+  // face can get an in-plane "normal", and the push-out then moves it sideways and lets it
+  // through). Such a pair touches: it keeps its normal.
+  Scalar extent = 0;
+  for (int k = 1; k < s.count; ++k) extent = std::max(extent, (p(k) - p(0)).cwiseAbs().maxCoeff());
+  if (!(length > 1e-9 * extent)) return;
   const Vec3 n = d / length;
   s.normal = n.dot(s.normal) >= 0 ? n : Vec3(-n);
 }

@@ -42,7 +42,8 @@ struct Stencil {
 
 /// Moves a stencil to the closest points of its primitives at `positions`: new weights, and the
 /// normal of the new closest points, turned to the side of the stencil's current normal (a pair
-/// that crossed is still pushed back to the side it came from); kept when the primitives touch.
+/// that crossed is still pushed back to the side it came from); kept when the primitives touch
+/// (closest points within 1e-9 of the stencil's extent, where their direction is rounding noise).
 void refresh_stencil(Stencil& stencil, std::span<const Vec3> positions);
 
 /// Stencil of `vertex` against face `f` at barycentric coordinates `w` (weights 1, −w), with

@@ -101,6 +101,13 @@ Simulation::Simulation(Model model, State state, ForceField field,
   }
   CRUMPLE_CHECK(settings_.fail_safe_separation >= 0 && std::isfinite(settings_.fail_safe_separation),
                 "fail_safe_separation must be finite and >= 0");
+  CRUMPLE_CHECK(settings_.motion_retries >= 0, "motion_retries must be >= 0");
+  if (per_frame() && settings_.fail_safe && settings_.motion_retries > 0) {
+    ContinuousOptions options;
+    options.min_separation = settings_.fail_safe_separation * settings_.detector.thickness;
+    options.threads = settings_.detector.threads;
+    retry_query_ = std::make_unique<ContinuousQuery>(model_.topology_ptr(), options);
+  }
   if (settings_.response && settings_.fail_safe) {
     response::FailSafeOptions options;
     options.min_separation = settings_.fail_safe_separation * settings_.detector.thickness;
@@ -287,10 +294,101 @@ void Simulation::motion_search() {
   detect_ms_ += ms_since(start);
 }
 
+std::size_t Simulation::retry_search(PositionsView frame_start, std::vector<response::Stencil>& stencils) {
+  const auto start = Clock::now();
+  // As `motion_search`, with the frame's proposed motion itself: a pair whose vertices'
+  // displacements all lie within s/2 of the mean ū (s = R − δ) changes its distance by at most
+  // s, so if it comes within δ it was within R at the start, and the frame's detection has it.
+  const Scalar delta = retry_query_->options().min_separation;
+  const Scalar radius = settings_.search_factor * settings_.detector.thickness;
+  const auto inv_mass = model_.inv_mass();
+  const auto& x = state_.x;
+  const std::size_t n = x.size();
+  Vec3 mean = Vec3::Zero();
+  Scalar mass = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(inv_mass[i] > 0)) continue;
+    mean += (x[i] - frame_start[i]) / inv_mass[i];
+    mass += 1 / inv_mass[i];
+  }
+  if (mass > 0) mean /= mass;
+  const Scalar far = 0.5 * (radius - delta);
+  fast_.assign(n, 0);
+  std::size_t count = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if ((x[i] - frame_start[i] - mean).squaredNorm() > far * far) {
+      fast_[i] = 1;
+      ++count;
+    }
+  }
+  std::size_t added = 0;
+  if (count > 0) {
+    const PositionsView end(x.data(), n);
+    if (4 * count > n) {
+      retry_query_->query(frame_start, end, motion_impacts_);
+    } else {
+      retry_query_->query_moved(frame_start, end, fast_, motion_impacts_);
+    }
+    const auto faces = model_.topology().faces();
+    const Scalar radius2 = radius * radius;
+    const auto p0 = [&](Index v) { return frame_start[static_cast<std::size_t>(v)]; };
+    const auto add = [&](const response::Stencil& s) {
+      const std::array<Index, 5> key{s.vertex[0], s.vertex[1], s.vertex[2], s.vertex[3], s.edge_edge ? 1 : 0};
+      if (!retried_.insert(key).second) return;
+      stencils.push_back(s);
+      ++added;
+    };
+    for (const VertexFaceImpact& c : motion_impacts_.vf) {
+      const Face& f = faces[static_cast<std::size_t>(c.face)];
+      if (!(c.normal.squaredNorm() > 0) ||
+          geometry::point_triangle(p0(c.vertex), p0(f[0]), p0(f[1]), p0(f[2])).sqr_distance < radius2) {
+        continue;
+      }
+      add(response::vertex_face_stencil(c.vertex, f, c.barycentric, c.normal));
+    }
+    for (const EdgeEdgeImpact& c : motion_impacts_.ee) {
+      if (!(c.normal.squaredNorm() > 0) ||
+          geometry::segment_segment(p0(c.a[0]), p0(c.a[1]), p0(c.b[0]), p0(c.b[1])).sqr_distance < radius2) {
+        continue;
+      }
+      add(response::edge_edge_stencil(c.a, c.b, c.s, c.t, c.normal));
+    }
+  }
+  motion_pairs_ += added;
+  detect_ms_ += ms_since(start);
+  return added;
+}
+
+void Simulation::proximity_steps(const response::ProximityOptions& options) {
+  for (int k = 0; k < settings_.substeps; ++k) {
+    auto start = Clock::now();
+    integrator_->step(model_, field_, state_, settings_.dt);
+    cg_iterations_ += integrator_->last_iterations();
+    if (kinematics_) kinematics_(state_);
+    integrate_ms_ += ms_since(start);
+    start = Clock::now();
+    obstacles_pass();
+    // Each stencil's refresh reads positions only: the same bits on any number of threads.
+    parallel_for_chunks(stencils_.size(), settings_.detector.threads,
+                        balanced_grain(stencils_.size(), resolve_threads(settings_.detector.threads), 256, 4096),
+                        [&](std::size_t begin, std::size_t end) {
+                          for (std::size_t i = begin; i < end; ++i) response::refresh_stencil(stencils_[i], state_.x);
+                        });
+    const response::ResponseStats stats =
+        response::resolve_proximity(stencils_, model_.inv_mass(), state_.x, state_.v, options);
+    corrections_ += stats.corrections;
+    if (!obstacles_.empty() && stats.corrections > 0) obstacles_pass();
+    response_ms_ += ms_since(start);
+    untangle_push();
+    check_state(k + 1);
+  }
+}
+
 void Simulation::proximity_frame() {
   if (!contacts_valid_) detect_now();
   untangle_check();
   const Positions frame_start = state_.x;
+  retried_.clear();
   auto start = Clock::now();
   stencils_ = response::make_stencils(contacts_, model_.topology().faces());
   // The flat neighbours keep the radius 2 h_c; with no larger radius there is nothing to drop.
@@ -311,27 +409,20 @@ void Simulation::proximity_frame() {
   options.thickness = settings_.detector.thickness;
   options.friction = settings_.self_friction;
   options.passes = settings_.passes;
-  for (int k = 0; k < settings_.substeps; ++k) {
-    start = Clock::now();
-    integrator_->step(model_, field_, state_, settings_.dt);
-    cg_iterations_ += integrator_->last_iterations();
-    if (kinematics_) kinematics_(state_);
-    integrate_ms_ += ms_since(start);
-    start = Clock::now();
-    obstacles_pass();
-    // Each stencil's refresh reads positions only: the same bits on any number of threads.
-    parallel_for_chunks(stencils_.size(), settings_.detector.threads,
-                        balanced_grain(stencils_.size(), resolve_threads(settings_.detector.threads), 256, 4096),
-                        [&](std::size_t begin, std::size_t end) {
-                          for (std::size_t i = begin; i < end; ++i) response::refresh_stencil(stencils_[i], state_.x);
-                        });
-    const response::ResponseStats stats =
-        response::resolve_proximity(stencils_, model_.inv_mass(), state_.x, state_.v, options);
-    corrections_ += stats.corrections;
-    if (!obstacles_.empty() && stats.corrections > 0) obstacles_pass();
-    response_ms_ += ms_since(start);
-    untangle_push();
-    check_state(k + 1);
+  if (!retry_query_ || (untangler_ && untangler_->tangled())) {
+    proximity_steps(options);
+  } else {
+    // `Settings::motion_retries` (not while untangling: the untangler's pushes follow its
+    // analysis of the frame's start, which a rerun would not repeat).
+    const State frame_state = state_;
+    for (int attempt = 0;; ++attempt) {
+      std::vector<response::Stencil> next = stencils_;  // the steps refresh the stencils
+      proximity_steps(options);
+      if (attempt >= settings_.motion_retries || retry_search(frame_start, next) == 0) break;
+      ++retries_;
+      state_ = frame_state;
+      stencils_ = std::move(next);
+    }
   }
   // The frame's detection, at its start, is the fail-safe's proximity when it is complete.
   response::StartProximity proximity;
@@ -432,6 +523,7 @@ FrameStats Simulation::frame_stats() {
   s.motion_vertices = motion_vertices_;
   s.flat_pairs = flat_pairs_;
   s.proximity_pairs = proximity_pairs_;
+  s.retries = retries_;
   const ContactSet& seen = per_frame() ? close_ : contacts_;
   s.vf = seen.vf.size();
   s.ee = seen.ee.size();
@@ -458,6 +550,7 @@ FrameStats Simulation::frame_stats() {
   integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = untangle_ms_ = 0;
   ccd_stats_ = {};
   motion_pairs_ = motion_vertices_ = flat_pairs_ = proximity_pairs_ = 0;
+  retries_ = 0;
   cg_iterations_ = 0;
   detections_ = 0;
   corrections_ = 0;
@@ -489,6 +582,7 @@ FrameStats Simulation::advance_frame() {
     integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = untangle_ms_ = 0;
     ccd_stats_ = {};
     motion_pairs_ = motion_vertices_ = flat_pairs_ = proximity_pairs_ = 0;
+    retries_ = 0;
     cg_iterations_ = 0;
     corrections_ = 0;
     untangle_pulls_ = 0;

@@ -42,6 +42,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <set>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -80,7 +81,8 @@ class DivergenceError : public Error {
 ///    friction (`response::resolve_proximity`). A pair that was farther than 2 h_c at the
 ///    frame's start and closes in within the frame is not seen: the continuous (CCD) fail-safe
 ///    (`Settings::fail_safe`) is what catches it, unless the frame's predicted motion
-///    brought it into the frame's contacts (`Settings::motion_search`). Frame statistics
+///    brought it into the frame's contacts (`Settings::motion_search`) or the frame ran again
+///    with it there (`Settings::motion_retries`). Frame statistics
 ///    count the contacts closer than h_c at the frame's end (the same detection serves the
 ///    next frame).
 enum class ResponseModel { AnnexB, Proximity };
@@ -126,6 +128,16 @@ struct Settings {
   /// fast as the few edges between its sides shorten; the larger radius is for layers falling
   /// onto each other (docs/simulation.md, "Flat neighbours").
   int flat_neighbour_rings = 2;
+  /// Proximity model, with the built-in fail-safe: how many times a frame may be run again when
+  /// its proposed motion brings pairs within the fail-safe's δ that were farther than the
+  /// detection radius at its start (found by a continuous query over the pairs with a vertex
+  /// whose displacement differs from the mass-weighted mean one by more than half of R − δ,
+  /// as `motion_search` does for the predicted motion). Those pairs join the frame's contacts
+  /// and the frame restarts from its start: the proximity impulses then keep them apart at
+  /// every step, where the implicit step sees the correction, instead of leaving them to the
+  /// fail-safe, whose end-of-frame corrections the springs store and the next frame releases
+  /// (docs/simulation.md, "Energy under contact"). 0: never (the frame's motion is the first).
+  int motion_retries = 0;
   /// Largest spread of the particles, as a multiple of the initial one, before the run counts
   /// as diverged (see `DivergenceError`). A cloth's springs keep it near its own size.
   Scalar max_spread_growth = 10;
@@ -172,6 +184,7 @@ struct FrameStats {
   /// Pairs the frame's proximity impulses served (the detection's and the motion search's, less
   /// the flat neighbours and the tangle's own).
   std::size_t proximity_pairs = 0;
+  int retries = 0;  ///< times the frame ran again (`Settings::motion_retries`)
   std::size_t vf = 0, ee = 0, tt = 0;  ///< contacts at the frame's end positions
   Scalar collision_share = 0;          ///< see `collision_share`
   /// Smallest VF/EE distance at the frame's end (infinity when there is no contact).
@@ -242,11 +255,18 @@ class Simulation {
   }
   /// One frame of the Proximity model (see `ResponseModel`).
   void proximity_frame();
+  /// The frame's steps, each followed by the obstacles and the proximity impulses of `stencils_`.
+  void proximity_steps(const response::ProximityOptions& options);
   /// The contacts closer than h_c among the (wider) detected ones.
   void filter_contacts();
   /// `Settings::motion_search`: appends to `stencils_` the pairs that the frame's predicted
   /// motion brings within the detection radius and that were farther at the frame's start.
   void motion_search();
+  /// `Settings::motion_retries`: appends to `stencils` the pairs of the motion from
+  /// `frame_start` to the current positions that come within δ and were farther than the
+  /// detection radius at the start, leaving out those in `retried_` (and adding them to it);
+  /// returns how many it appended.
+  std::size_t retry_search(PositionsView frame_start, std::vector<response::Stencil>& stencils);
   void obstacles_pass();
   /// The custom or built-in fail-safe from `frame_start` to the current state (`proximity`:
   /// the frame's start detection, for the built-in one's first query).
@@ -293,6 +313,10 @@ class Simulation {
   std::vector<char> fast_;
   ImpactSet motion_impacts_;
   std::size_t motion_pairs_ = 0, motion_vertices_ = 0, flat_pairs_ = 0, proximity_pairs_ = 0;
+  /// `Settings::motion_retries`: its query (min separation δ), and the pairs it added this frame.
+  std::unique_ptr<ContinuousQuery> retry_query_;
+  std::set<std::array<Index, 5>> retried_;
+  int retries_ = 0;  ///< of the current frame
   // Accumulated over the current frame.
   double integrate_ms_ = 0, detect_ms_ = 0, response_ms_ = 0, ccd_ms_ = 0;
   int cg_iterations_ = 0;
