@@ -141,6 +141,7 @@ py::dict stats_dict(const sim::FrameStats& s) {
   d["motion_vertices"] = s.motion_vertices;
   d["proximity_pairs"] = s.proximity_pairs;
   d["flat_pairs"] = s.flat_pairs;
+  d["retries"] = s.retries;
   d["vf"] = s.vf;
   d["ee"] = s.ee;
   d["tt"] = s.tt;
@@ -417,7 +418,8 @@ On divergence raises crumple.DivergenceError; the frames before it stay done.
           "ccd_ms, ccd_impacts, ccd_queries, ccd_zone_vertices, ccd_frozen, ccd_first_restricted (the fail-safe; "
           "the last: its first query covered only the pairs the frame's start detection could not rule out), "
           "motion_pairs, motion_vertices (motion search), proximity_pairs (the frame's proximity stencils), "
-          "flat_pairs (pairs of one flat patch left out beyond 2 h_c), vf, ee, tt (contacts), collision_share (edges in contact, 0..1), min_distance, "
+          "flat_pairs (pairs of one flat patch left out beyond 2 h_c), retries (times the frame ran again: "
+          "its own motion brought far pairs within the fail-safe's reach), vf, ee, tt (contacts), collision_share (edges in contact, 0..1), min_distance, "
           "obstacle_penetration (m), cg_iterations, corrections, energy (J), max_speed (m/s), "
           "intersecting_pairs (intersecting triangle pairs at the frame's end, -1 when not measured: "
           "response or untangle off), pinches (intersecting pairs sharing one vertex, likewise), "

@@ -27,6 +27,8 @@ def test_scene_run_same_positions_as_cli_simulate(tmp_path, cli):
                                   crumple.read_mesh(tmp_path / "run/frames/000003.ply").vertices)
     np.testing.assert_array_equal(stats["frame"], [1, 2, 3])
     assert stats["vf"].dtype == np.int64 and stats["energy"].dtype == np.float64
+    for key in ("retries", "proximity_pairs", "flat_pairs", "motion_pairs", "motion_vertices"):
+        assert stats[key].dtype == np.int64 and (stats[key] >= 0).all(), key
     assert stats["bounds_min"].shape == (3, 3) and stats["bounds_max"].shape == (3, 3)
     np.testing.assert_array_equal(stats["bounds_min"][-1], s.positions.min(axis=0))
     csv = (tmp_path / "run/stats.csv").read_text().splitlines()
