@@ -38,6 +38,32 @@ bool reports_every_pair(const MethodSpec& method, const DetectorOptions& options
   return !p.cut_off() && (p.max_contacts == 0 || p.overflow_error);
 }
 
+/// Flags (`fast`) the vertices whose displacement `to` − `from` lies farther than `far` from the
+/// mass-weighted mean displacement of the free vertices, and returns how many. Two points of a
+/// pair with no flagged vertex move relative to each other by at most 2 `far` (their relative
+/// motion is a convex combination of differences of displacements within `far` of the mean).
+std::size_t flag_far_vertices(PositionsView from, PositionsView to, std::span<const Scalar> inv_mass, Scalar far,
+                              std::vector<char>& fast) {
+  const std::size_t n = from.size();
+  Vec3 mean = Vec3::Zero();
+  Scalar mass = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(inv_mass[i] > 0)) continue;
+    mean += (to[i] - from[i]) / inv_mass[i];
+    mass += 1 / inv_mass[i];
+  }
+  if (mass > 0) mean /= mass;
+  fast.assign(n, 0);
+  std::size_t count = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if ((to[i] - from[i] - mean).squaredNorm() > far * far) {
+      fast[i] = 1;
+      ++count;
+    }
+  }
+  return count;
+}
+
 std::string number(Scalar v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.3g", v);
@@ -235,23 +261,8 @@ void Simulation::motion_search() {
       response::resolve_obstacle(o, state_.time + duration, inv_mass, predicted_, predicted_velocity_);
     }
   }
-  Vec3 mean = Vec3::Zero();
-  Scalar mass = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!(inv_mass[i] > 0)) continue;
-    mean += (predicted_[i] - state_.x[i]) / inv_mass[i];
-    mass += 1 / inv_mass[i];
-  }
-  if (mass > 0) mean /= mass;
-  const Scalar far = 0.5 * (radius - h);
-  fast_.assign(n, 0);
-  std::size_t count = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if ((predicted_[i] - state_.x[i] - mean).squaredNorm() > far * far) {
-      fast_[i] = 1;
-      ++count;
-    }
-  }
+  const std::size_t count = flag_far_vertices(PositionsView(state_.x.data(), n), PositionsView(predicted_.data(), n),
+                                              inv_mass, 0.5 * (radius - h), fast_);
   motion_vertices_ += count;
   if (count == 0) {
     detect_ms_ += ms_since(start);
@@ -304,23 +315,8 @@ std::size_t Simulation::retry_search(PositionsView frame_start, std::vector<resp
   const auto inv_mass = model_.inv_mass();
   const auto& x = state_.x;
   const std::size_t n = x.size();
-  Vec3 mean = Vec3::Zero();
-  Scalar mass = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!(inv_mass[i] > 0)) continue;
-    mean += (x[i] - frame_start[i]) / inv_mass[i];
-    mass += 1 / inv_mass[i];
-  }
-  if (mass > 0) mean /= mass;
-  const Scalar far = 0.5 * (radius - delta);
-  fast_.assign(n, 0);
-  std::size_t count = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if ((x[i] - frame_start[i] - mean).squaredNorm() > far * far) {
-      fast_[i] = 1;
-      ++count;
-    }
-  }
+  const std::size_t count =
+      flag_far_vertices(frame_start, PositionsView(x.data(), n), inv_mass, 0.5 * (radius - delta), fast_);
   std::size_t added = 0;
   if (count > 0) {
     const PositionsView end(x.data(), n);
@@ -361,12 +357,8 @@ std::size_t Simulation::retry_search(PositionsView frame_start, std::vector<resp
 
 void Simulation::proximity_steps(const response::ProximityOptions& options) {
   for (int k = 0; k < settings_.substeps; ++k) {
-    auto start = Clock::now();
-    integrator_->step(model_, field_, state_, settings_.dt);
-    cg_iterations_ += integrator_->last_iterations();
-    if (kinematics_) kinematics_(state_);
-    integrate_ms_ += ms_since(start);
-    start = Clock::now();
+    integrate_step();
+    const auto start = Clock::now();
     obstacles_pass();
     // Each stencil's refresh reads positions only: the same bits on any number of threads.
     parallel_for_chunks(stencils_.size(), settings_.detector.threads,
@@ -449,16 +441,19 @@ void Simulation::obstacles_pass() {
   }
 }
 
-void Simulation::step() {
-  if (settings_.response && !contacts_valid_) detect_now();
-
-  auto start = Clock::now();
+void Simulation::integrate_step() {
+  const auto start = Clock::now();
   integrator_->step(model_, field_, state_, settings_.dt);
   cg_iterations_ += integrator_->last_iterations();
   if (kinematics_) kinematics_(state_);
   integrate_ms_ += ms_since(start);
+}
 
-  start = Clock::now();
+void Simulation::step() {
+  if (settings_.response && !contacts_valid_) detect_now();
+  integrate_step();
+
+  auto start = Clock::now();
   obstacles_pass();
   if (settings_.response) {
     stencils_ = response::make_stencils(contacts_, model_.topology().faces());

@@ -268,6 +268,8 @@ class Simulation {
   /// returns how many it appended.
   std::size_t retry_search(PositionsView frame_start, std::vector<response::Stencil>& stencils);
   void obstacles_pass();
+  /// One integration step of `settings_.dt` and the kinematics, timed as integration.
+  void integrate_step();
   /// The custom or built-in fail-safe from `frame_start` to the current state (`proximity`:
   /// the frame's start detection, for the built-in one's first query).
   void run_fail_safe(PositionsView frame_start, const response::StartProximity* proximity = nullptr);
