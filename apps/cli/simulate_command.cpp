@@ -50,6 +50,8 @@ struct SimulateArgs {
   std::optional<int> passes;
   std::optional<std::string> fail_safe;
   std::optional<std::string> untangle;
+  std::optional<std::string> motion_search;
+  std::optional<int> motion_retries;
   std::optional<long long> response_from;
   std::optional<std::uint64_t> seed;
   std::optional<std::string> out;  ///< default: the resumed state's folder, else kDefaultOut
@@ -254,6 +256,8 @@ void save_state(const std::filesystem::path& out, const sim::Simulation& simulat
                                     .add("passes", settings.passes)
                                     .add("fail_safe", settings.fail_safe)
                                     .add("untangle", settings.untangle)
+                                    .add("motion_search", settings.motion_search)
+                                    .add("motion_retries", settings.motion_retries)
                                     .add("detector_state", simulation.detector_state())
                                     .str();
   write_file_atomically(out / "state.json", [&](std::ostream& os) { os << side_json << "\n"; });
@@ -396,6 +400,12 @@ int run_simulate(const SimulateArgs& args) {
     // Absent from states saved before the fail-safe existed: the default (on).
     if (side->values.count("fail_safe")) settings.fail_safe = side->text("fail_safe", side_path) == "true";
     if (side->values.count("untangle")) settings.untangle = side->text("untangle", side_path) == "true";
+    if (side->values.count("motion_search")) {
+      settings.motion_search = side->text("motion_search", side_path) == "true";
+    }
+    if (side->values.count("motion_retries")) {
+      settings.motion_retries = static_cast<int>(side->number("motion_retries", side_path));
+    }
   }
   if (args.dt) settings.dt = *args.dt;
   if (args.substeps) settings.substeps = *args.substeps;
@@ -407,6 +417,8 @@ int run_simulate(const SimulateArgs& args) {
   if (args.passes) settings.passes = *args.passes;
   if (args.fail_safe) settings.fail_safe = parse_on_off(*args.fail_safe, "--fail-safe");
   if (args.untangle) settings.untangle = parse_on_off(*args.untangle, "--untangle");
+  if (args.motion_search) settings.motion_search = parse_on_off(*args.motion_search, "--motion-search");
+  if (args.motion_retries) settings.motion_retries = *args.motion_retries;
   if (args.response_from) {
     if (*args.response_from < start.frame) {
       throw InputError("--response-from " + std::to_string(*args.response_from) + " is before the first frame (" +
@@ -634,6 +646,15 @@ Run add_simulate_command(CLI::App& app) {
                  "on|off: with response on, untangle a cloth that already intersects itself (Global "
                  "Intersection Analysis); the column intersecting_pairs of stats.csv counts the "
                  "intersecting triangle pairs every frame; default on");
+  app.add_option("--motion-search", args->motion_search,
+                 "on|off: with response on, pairs that the velocities bring within the thickness over "
+                 "the frame join its contacts (a continuous query over the fast vertices); default: the "
+                 "scene's (off)");
+  app.add_option("--motion-retries", args->motion_retries,
+                 "With response on, how many times a frame may run again when its own motion brings "
+                 "pairs within the fail-safe's reach that were beyond the detection radius at its start "
+                 "(they join its contacts); default: the scene's (crumple 1, others 0)")
+      ->check(CLI::Range(0, 100));
   app.add_option("--response-from", args->response_from,
                  "Frame from which the response is on; before it the run has no response (e.g. a "
                  "hanging cloth falls through itself, then untangles)");

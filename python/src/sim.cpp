@@ -36,6 +36,8 @@ struct SettingsArgs {
   std::optional<bool> response;
   std::optional<bool> fail_safe;
   std::optional<bool> untangle;
+  std::optional<bool> motion_search;
+  std::optional<int> motion_retries;
   std::optional<std::int64_t> response_from;
   std::optional<int> passes;
   std::optional<double> dt;
@@ -50,6 +52,8 @@ struct SettingsArgs {
     if (response) s.response = *response;
     if (fail_safe) s.fail_safe = *fail_safe;
     if (untangle) s.untangle = *untangle;
+    if (motion_search) s.motion_search = *motion_search;
+    if (motion_retries) s.motion_retries = *motion_retries;
     if (passes) s.passes = *passes;
     if (dt) s.dt = *dt;
     if (substeps) s.substeps = *substeps;
@@ -58,6 +62,7 @@ struct SettingsArgs {
     if (!(s.dt > 0 && std::isfinite(s.dt))) throw InputError("Simulation: dt must be > 0");
     if (s.substeps < 1) throw InputError("Simulation: substeps must be >= 1");
     if (s.passes < 1) throw InputError("Simulation: passes must be >= 1");
+    if (s.motion_retries < 0) throw InputError("Simulation: motion_retries must be >= 0");
     if (!(s.detector.thickness >= 0 && std::isfinite(s.detector.thickness))) {
       throw InputError("Simulation: thickness must be finite and >= 0");
     }
@@ -321,6 +326,8 @@ SettingsArgs settings_args(const py::kwargs& kw) {
     else if (key == "response") a.response = v.cast<bool>();
     else if (key == "fail_safe") a.fail_safe = v.cast<bool>();
     else if (key == "untangle") a.untangle = v.cast<bool>();
+    else if (key == "motion_search") a.motion_search = v.cast<bool>();
+    else if (key == "motion_retries") a.motion_retries = v.cast<int>();
     else if (key == "response_from") a.response_from = v.cast<std::int64_t>();
     else if (key == "passes") a.passes = v.cast<int>();
     else if (key == "dt") a.dt = v.cast<double>();
@@ -329,7 +336,8 @@ SettingsArgs settings_args(const py::kwargs& kw) {
     else if (key == "threads") a.threads = v.cast<int>();
     else {
       throw py::type_error("Simulation: unexpected keyword '" + key +
-                           "' (method, thickness, kinds, response, fail_safe, untangle, response_from, passes, dt, "
+                           "' (method, thickness, kinds, response, fail_safe, untangle, motion_search, motion_retries, "
+                           "response_from, passes, dt, "
                            "substeps, integrator, threads; scene options go in the spec text)");
     }
   }
@@ -347,7 +355,10 @@ method (detection spec, as Detector's), thickness (contact thickness, m), kinds 
 response (bool: self-collision response), fail_safe (bool, default on with response: the
 continuous fail-safe that keeps every frame intersection-free, docs/simulation.md), untangle
 (bool, default on with response: a cloth that already intersects itself is untangled; the
-figures intersecting_pairs, contours and untangle_pulls), response_from (frame from which the
+figures intersecting_pairs, contours and untangle_pulls), motion_search (bool: pairs the
+velocities bring within the thickness join the frame's contacts), motion_retries (int >= 0: times
+a frame may run again when its own motion brings far pairs within the fail-safe's reach; the
+crumple scene uses 1), response_from (frame from which the
 response is on, off before it, as the CLI's --response-from), passes (>= 1), dt (step, s),
 substeps (steps per frame), integrator ("implicit-euler", "explicit-euler",
 "symplectic-euler", "rk4", "projective"), threads (0 = all).
@@ -524,6 +535,8 @@ The GIL is released while drawing. crumple.InputError on a bad size or camera.
             d["response"] = st.response;
             d["fail_safe"] = st.fail_safe;
             d["untangle"] = st.untangle;
+            d["motion_search"] = st.motion_search;
+            d["motion_retries"] = st.motion_retries;
             d["response_from"] = s.response_from() ? py::object(py::int_(*s.response_from())) : py::object(py::none());
             d["passes"] = st.passes;
             d["threads"] = st.detector.threads;

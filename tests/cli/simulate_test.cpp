@@ -176,6 +176,34 @@ TEST(Simulate, FailSafeFlagIsSavedAndChecked) {
   EXPECT_NE(r.out.find("--fail-safe expects on or off, got 'maybe'"), std::string::npos) << r.out;
 }
 
+// The motion settings: the scene's by default (crumple retries once), overridden by the options,
+// saved in state.json and kept by a resumed run; a bad value is refused with the option's name.
+TEST(Simulate, MotionSettingsAreSavedAndKept) {
+  const testing::TempDir dir;
+  const auto state_json = [&](const char* run) {
+    std::ifstream in(dir / run / "state.json");
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  };
+  auto r = run_cli("simulate crumple:n=4 --frames 1 -q -o " + (dir / "scene").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(state_json("scene").find("\"motion_retries\":1"), std::string::npos) << state_json("scene");
+  EXPECT_NE(state_json("scene").find("\"motion_search\":false"), std::string::npos);
+  r = run_cli("simulate crumple:n=4 --frames 1 -q --motion-retries 0 --motion-search on -o " + (dir / "set").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(state_json("set").find("\"motion_retries\":0"), std::string::npos) << state_json("set");
+  EXPECT_NE(state_json("set").find("\"motion_search\":true"), std::string::npos);
+  r = run_cli("simulate " + (dir / "set" / "state.x3d").string() + " --frames 1 -q");
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(state_json("set").find("\"motion_retries\":0"), std::string::npos) << "kept on resume";
+  EXPECT_NE(state_json("set").find("\"motion_search\":true"), std::string::npos) << "kept on resume";
+  r = run_cli("simulate crumple:n=4 --frames 1 -q --motion-search maybe -o " + (dir / "bad").string());
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("--motion-search expects on or off, got 'maybe'"), std::string::npos) << r.out;
+  r = run_cli("simulate crumple:n=4 --frames 1 -q --motion-retries -1 -o " + (dir / "bad").string());
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("--motion-retries"), std::string::npos) << r.out;
+}
+
 /// The field `column` (0-based) of a stats.csv line.
 std::string field(const std::string& line, std::size_t column) {
   std::stringstream in(line);

@@ -218,6 +218,16 @@ def test_fail_safe_setting_and_its_figures():
     assert a["ccd_first_restricted"].dtype == np.bool_ and not b["ccd_first_restricted"].any()
 
 
+def test_motion_settings_follow_the_scene_unless_given():
+    """crumple retries a frame once by default; the keywords override the scene's motion settings."""
+    assert crumple.Simulation("crumple:n=6", threads=1).settings["motion_retries"] == 1
+    assert crumple.Simulation("cloth-on-sphere:n=6", threads=1).settings["motion_retries"] == 0
+    s = crumple.Simulation("crumple:n=6", threads=1, motion_retries=0, motion_search=True)
+    assert s.settings["motion_retries"] == 0 and s.settings["motion_search"] is True
+    with pytest.raises(crumple.InputError, match="motion_retries"):
+        crumple.Simulation("crumple:n=6", threads=1, motion_retries=-1)
+
+
 def test_fail_safe_first_query_restricted_by_an_exact_detection_only():
     """A resting crumple pile's first fail-safe query is restricted by the start's exact
     detection; a stochastic detection (which may miss pairs) never restricts it."""
