@@ -937,6 +937,14 @@ __attribute__((flatten)) CcdResult ccd_checked(CcdPair pair, const CcdPoints& st
 // the multiplications by it (exact) are left out.
 #define CRUMPLE_ADVANCE_LANES inline __attribute__((always_inline, target("avx2")))
 
+// splat and abs for the AVX2 functions below (clang refuses to pass a 32-byte vector between a
+// function compiled for AVX2 and one that is not, even inlined): the same operations.
+CRUMPLE_ADVANCE_LANES Lanes lane_splat(Scalar x) { return Lanes{x, x, x, x}; }
+CRUMPLE_ADVANCE_LANES Lanes lane_abs(Lanes x) {
+  const LaneMask sign = reinterpret_cast<LaneMask>(lane_splat(-0.0));
+  return reinterpret_cast<Lanes>(reinterpret_cast<LaneMask>(x) & ~sign);
+}
+
 /// One query per lane: what `advance` reads, and its loop's state.
 struct AdvanceLanes {
   Lanes x0[4][3], dx[4][3];  // the points at t = 0, and end − start
@@ -1013,8 +1021,8 @@ CRUMPLE_ADVANCE_LANES void store(std::array<Scalar, 4>& to, Lanes x) {
 /// std::clamp(x, 0, 1) (NaN stays NaN, and fails the witness' range test), floored to the
 /// 2^-40 grid.
 CRUMPLE_ADVANCE_LANES Lanes snap(Lanes x) {
-  x = x < splat(0) ? splat(0) : (splat(1) < x ? splat(1) : x);
-  return floor(x * splat(0x1p40)) * splat(0x1p-40);
+  x = x < lane_splat(0) ? lane_splat(0) : (lane_splat(1) < x ? lane_splat(1) : x);
+  return floor(x * lane_splat(0x1p40)) * lane_splat(0x1p-40);
 }
 
 /// `advance`'s above_at: every line (1 − time) s0 + time s1 certified above its limit.
@@ -1022,7 +1030,7 @@ template <int Half>
 CRUMPLE_ADVANCE_LANES LaneMask above_at(Lanes time, const Lanes (&s0)[Half], const Lanes (&s1)[Half],
                                         const Lanes (&limit)[Half]) {
   LaneMask all = ~LaneMask{};
-  for (int i = 0; i < Half; ++i) all &= (splat(1) - time) * s0[i] + time * s1[i] > limit[i];
+  for (int i = 0; i < Half; ++i) all &= (lane_splat(1) - time) * s0[i] + time * s1[i] > limit[i];
   return all;
 }
 
@@ -1036,9 +1044,9 @@ struct Stopped {
 template <bool Face>
 CRUMPLE_ADVANCE_LANES Stopped advance_step(AdvanceLanes& L, FourPointBatch& batch, Scalar max_time, Scalar max_steps) {
   constexpr int half = Face ? 3 : 4;
-  const Lanes zero = splat(0), one = splat(1);
+  const Lanes zero = lane_splat(0), one = lane_splat(1);
   const Lanes t = L.t;
-  LaneMask stop = t >= splat(max_time);  // no contact before t ≥ max_time
+  LaneMask stop = t >= lane_splat(max_time);  // no contact before t ≥ max_time
   LaneMask separated = stop;
   // Closest points at t (the query's points at t, as `advance` computes them).
   for (int i = 0; i < 4; ++i) {
@@ -1072,8 +1080,8 @@ CRUMPLE_ADVANCE_LANES Stopped advance_step(AdvanceLanes& L, FourPointBatch& batc
   }
   const LaneMask witness = inside & ((f[0] * f[0] + f[1] * f[1]) + f[2] * f[2] <= L.reach2);
   stop |= witness & (L.step > zero);
-  stop |= (L.step == splat(max_steps)) | (L.progress < splat(0x1p-30));
-  stop |= ~((len > zero) & (len <= splat(std::numeric_limits<Scalar>::max())));  // > 0 and finite
+  stop |= (L.step == lane_splat(max_steps)) | (L.progress < lane_splat(0x1p-30));
+  stop |= ~((len > zero) & (len <= lane_splat(std::numeric_limits<Scalar>::max())));  // > 0 and finite
   // The projections of the hull points on n and the certified threshold.
   Lanes s0[half], s1[half];
   Lanes mag = zero;
@@ -1082,23 +1090,23 @@ CRUMPLE_ADVANCE_LANES Stopped advance_step(AdvanceLanes& L, FourPointBatch& batc
       const Lanes (&d)[3] = L.hull[i + tau * half];
       const Lanes x = d[0] * n[0], y = d[1] * n[1], z = d[2] * n[2];
       (tau == 0 ? s0 : s1)[i] = (x + y) + z;
-      const Lanes m = abs(x) + abs(y) + abs(z);
+      const Lanes m = lane_abs(x) + lane_abs(y) + lane_abs(z);
       mag = mag < m ? m : mag;  // std::max(mag, m)
     }
   }
   const Lanes nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
-  const Lanes slack = abs(n[0]) * L.err[0] + abs(n[1]) * L.err[1] + abs(n[2]) * L.err[2];
+  const Lanes slack = lane_abs(n[0]) * L.err[0] + lane_abs(n[1]) * L.err[1] + lane_abs(n[2]) * L.err[2];
   const Lanes threshold =
-      (L.delta * sqrt(nn) + slack + splat(4 * kU) * mag) * splat(1 + 16 * kU) + splat(kUnderflowSlack);
+      (L.delta * sqrt(nn) + slack + lane_splat(4 * kU) * mag) * lane_splat(1 + 16 * kU) + lane_splat(kUnderflowSlack);
   Lanes limit[half];
   for (int i = 0; i < half; ++i) {
-    limit[i] = (threshold + splat(4 * kU) * (abs(s0[i]) + abs(s1[i]))) * splat(1 + 0x1p-50) + splat(kUnderflowSlack);
+    limit[i] = (threshold + lane_splat(4 * kU) * (lane_abs(s0[i]) + lane_abs(s1[i]))) * lane_splat(1 + 0x1p-50) + lane_splat(kUnderflowSlack);
   }
   stop |= ~above_at<half>(t, s0, s1, limit);
   // The earliest time a line falls to the threshold plus a margin, then its verification.
   Lanes next = one;
   for (int i = 0; i < half; ++i) {
-    const Lanes margin = threshold + splat(16 * kU) * (abs(s0[i]) + abs(s1[i])) + splat(kUnderflowSlack);
+    const Lanes margin = threshold + lane_splat(16 * kU) * (lane_abs(s0[i]) + lane_abs(s1[i])) + lane_splat(kUnderflowSlack);
     const Lanes candidate = (s0[i] - margin) / (s0[i] - s1[i]);
     next = ((s1[i] < s0[i]) & (candidate < next)) ? candidate : next;  // std::min(next, candidate)
   }
@@ -1110,7 +1118,7 @@ CRUMPLE_ADVANCE_LANES Stopped advance_step(AdvanceLanes& L, FourPointBatch& batc
     const LaneMask ok = above_at<half>(next, s0, s1, limit);
     verified |= trying & ok;
     const LaneMask failed = trying & ~ok;
-    next = failed ? t + (next - t) / splat(2) : next;
+    next = failed ? t + (next - t) / lane_splat(2) : next;
     trying = failed & (next > t);
   }
   L.step = go ? L.step + one : L.step;  // ++r.steps
