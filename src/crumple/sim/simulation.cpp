@@ -64,6 +64,40 @@ std::size_t flag_far_vertices(PositionsView from, PositionsView to, std::span<co
   return count;
 }
 
+/// Queries `query` for the motion `from` → `to` over the pairs holding a vertex flagged in
+/// `fast` (`count` of them; the whole mesh when they are more than a quarter, whose swept k-DOP
+/// tree is then cheaper than the one-sided query), into `impacts`, and calls `add` with the
+/// stencil of each impact whose pair was `radius` or farther apart at `from` (a closer one is
+/// the frame's detection's already): at its time of impact, its normal pointing from the side
+/// the pair comes from (the proximity response refreshes weights and normal at every step,
+/// keeping that side).
+template <class Add>
+void add_far_impacts(ContinuousQuery& query, PositionsView from, PositionsView to, const std::vector<char>& fast,
+                     std::size_t count, std::span<const Face> faces, Scalar radius, ImpactSet& impacts, Add&& add) {
+  if (4 * count > from.size()) {
+    query.query(from, to, impacts);
+  } else {
+    query.query_moved(from, to, fast, impacts);
+  }
+  const Scalar radius2 = radius * radius;
+  const auto p0 = [&](Index v) { return from[static_cast<std::size_t>(v)]; };
+  for (const VertexFaceImpact& c : impacts.vf) {
+    const Face& f = faces[static_cast<std::size_t>(c.face)];
+    if (!(c.normal.squaredNorm() > 0) ||
+        geometry::point_triangle(p0(c.vertex), p0(f[0]), p0(f[1]), p0(f[2])).sqr_distance < radius2) {
+      continue;
+    }
+    add(response::vertex_face_stencil(c.vertex, f, c.barycentric, c.normal));
+  }
+  for (const EdgeEdgeImpact& c : impacts.ee) {
+    if (!(c.normal.squaredNorm() > 0) ||
+        geometry::segment_segment(p0(c.a[0]), p0(c.a[1]), p0(c.b[0]), p0(c.b[1])).sqr_distance < radius2) {
+      continue;
+    }
+    add(response::edge_edge_stencil(c.a, c.b, c.s, c.t, c.normal));
+  }
+}
+
 std::string number(Scalar v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.3g", v);
@@ -268,39 +302,12 @@ void Simulation::motion_search() {
     detect_ms_ += ms_since(start);
     return;
   }
-  // The pairs with a fast vertex that come within h_c over the predicted motion. When most
-  // vertices are fast the whole-mesh query (its swept k-DOP tree) is cheaper than the one-sided
-  // one; the pairs it adds with no fast vertex were within R at the start (above) and are
-  // dropped below with the detection's own.
-  if (4 * count > n) {
-    motion_query_->query(state_.x, predicted_, motion_impacts_);
-  } else {
-    motion_query_->query_moved(state_.x, predicted_, fast_, motion_impacts_);
-  }
-  // A pair within R at the start is the detection's already. The others get the stencil of
-  // their predicted time of impact, whose normal points from the side they come from (the
-  // proximity response refreshes weights and normal at every step, keeping that side).
-  const auto faces = model_.topology().faces();
-  const auto& x = state_.x;
-  const Scalar radius2 = radius * radius;
+  // The pairs with a fast vertex that come within h_c over the predicted motion; those it adds
+  // with no fast vertex (the whole-mesh query) were within R at the start (above) and are
+  // dropped with the detection's own.
   const std::size_t before = stencils_.size();
-  for (const VertexFaceImpact& c : motion_impacts_.vf) {
-    const Face& f = faces[static_cast<std::size_t>(c.face)];
-    const auto at = [&](Index v) { return x[static_cast<std::size_t>(v)]; };
-    if (!(c.normal.squaredNorm() > 0) ||
-        geometry::point_triangle(at(c.vertex), at(f[0]), at(f[1]), at(f[2])).sqr_distance < radius2) {
-      continue;
-    }
-    stencils_.push_back(response::vertex_face_stencil(c.vertex, f, c.barycentric, c.normal));
-  }
-  for (const EdgeEdgeImpact& c : motion_impacts_.ee) {
-    const auto at = [&](Index v) { return x[static_cast<std::size_t>(v)]; };
-    if (!(c.normal.squaredNorm() > 0) ||
-        geometry::segment_segment(at(c.a[0]), at(c.a[1]), at(c.b[0]), at(c.b[1])).sqr_distance < radius2) {
-      continue;
-    }
-    stencils_.push_back(response::edge_edge_stencil(c.a, c.b, c.s, c.t, c.normal));
-  }
+  add_far_impacts(*motion_query_, state_.x, predicted_, fast_, count, model_.topology().faces(), radius,
+                  motion_impacts_, [&](const response::Stencil& st) { stencils_.push_back(st); });
   motion_pairs_ += stencils_.size() - before;
   detect_ms_ += ms_since(start);
 }
@@ -319,36 +326,14 @@ std::size_t Simulation::retry_search(PositionsView frame_start, std::vector<resp
       flag_far_vertices(frame_start, PositionsView(x.data(), n), inv_mass, 0.5 * (radius - delta), fast_);
   std::size_t added = 0;
   if (count > 0) {
-    const PositionsView end(x.data(), n);
-    if (4 * count > n) {
-      retry_query_->query(frame_start, end, motion_impacts_);
-    } else {
-      retry_query_->query_moved(frame_start, end, fast_, motion_impacts_);
-    }
-    const auto faces = model_.topology().faces();
-    const Scalar radius2 = radius * radius;
-    const auto p0 = [&](Index v) { return frame_start[static_cast<std::size_t>(v)]; };
-    const auto add = [&](const response::Stencil& s) {
-      const std::array<Index, 5> key{s.vertex[0], s.vertex[1], s.vertex[2], s.vertex[3], s.edge_edge ? 1 : 0};
-      if (!retried_.insert(key).second) return;
-      stencils.push_back(s);
-      ++added;
-    };
-    for (const VertexFaceImpact& c : motion_impacts_.vf) {
-      const Face& f = faces[static_cast<std::size_t>(c.face)];
-      if (!(c.normal.squaredNorm() > 0) ||
-          geometry::point_triangle(p0(c.vertex), p0(f[0]), p0(f[1]), p0(f[2])).sqr_distance < radius2) {
-        continue;
-      }
-      add(response::vertex_face_stencil(c.vertex, f, c.barycentric, c.normal));
-    }
-    for (const EdgeEdgeImpact& c : motion_impacts_.ee) {
-      if (!(c.normal.squaredNorm() > 0) ||
-          geometry::segment_segment(p0(c.a[0]), p0(c.a[1]), p0(c.b[0]), p0(c.b[1])).sqr_distance < radius2) {
-        continue;
-      }
-      add(response::edge_edge_stencil(c.a, c.b, c.s, c.t, c.normal));
-    }
+    add_far_impacts(*retry_query_, frame_start, PositionsView(x.data(), n), fast_, count, model_.topology().faces(),
+                    radius, motion_impacts_, [&](const response::Stencil& st) {
+                      const std::array<Index, 5> key{st.vertex[0], st.vertex[1], st.vertex[2], st.vertex[3],
+                                                     st.edge_edge ? 1 : 0};
+                      if (!retried_.insert(key).second) return;
+                      stencils.push_back(st);
+                      ++added;
+                    });
   }
   motion_pairs_ += added;
   detect_ms_ += ms_since(start);
@@ -542,15 +527,19 @@ FrameStats Simulation::frame_stats() {
   s.energy = compute_energy(model_, field_, state_).total();
   for (const Vec3& v : state_.v) s.max_speed = std::max(s.max_speed, v.norm());
   if (!state_.x.empty()) s.bounds = compute_bounds(state_.x);
+  clear_frame_figures();
+  detections_ = 0;
+  return s;
+}
+
+void Simulation::clear_frame_figures() {
   integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = untangle_ms_ = 0;
   ccd_stats_ = {};
   motion_pairs_ = motion_vertices_ = flat_pairs_ = proximity_pairs_ = 0;
   retries_ = 0;
   cg_iterations_ = 0;
-  detections_ = 0;
   corrections_ = 0;
   untangle_pulls_ = 0;
-  return s;
 }
 
 FrameStats Simulation::current_stats() { return frame_stats(); }
@@ -574,13 +563,7 @@ FrameStats Simulation::advance_frame() {
   } catch (const DivergenceError&) {  // the frame is undone: the state stays the last good one
     state_ = start;
     contacts_valid_ = false;
-    integrate_ms_ = detect_ms_ = response_ms_ = ccd_ms_ = untangle_ms_ = 0;
-    ccd_stats_ = {};
-    motion_pairs_ = motion_vertices_ = flat_pairs_ = proximity_pairs_ = 0;
-    retries_ = 0;
-    cg_iterations_ = 0;
-    corrections_ = 0;
-    untangle_pulls_ = 0;
+    clear_frame_figures();
     throw;
   }
   ++frame_;

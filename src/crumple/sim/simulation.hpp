@@ -270,6 +270,9 @@ class Simulation {
   void obstacles_pass();
   /// One integration step of `settings_.dt` and the kinematics, timed as integration.
   void integrate_step();
+  /// Zeroes the figures accumulated over the current frame (times, fail-safe, motion, response
+  /// and untangling counts; not `detections_`, which a frame undone by a divergence keeps).
+  void clear_frame_figures();
   /// The custom or built-in fail-safe from `frame_start` to the current state (`proximity`:
   /// the frame's start detection, for the built-in one's first query).
   void run_fail_safe(PositionsView frame_start, const response::StartProximity* proximity = nullptr);
