@@ -18,6 +18,14 @@
 // every function taking or returning one; all of those are inlined into the two kernels.
 #pragma GCC diagnostic ignored "-Wpsabi"
 
+// Inlining only, the same operations: under the sanitizers GCC's flatten inlines every
+// instrumented callee recursively, and this file alone took over 14 CPU minutes to compile.
+#if defined(CRUMPLE_SANITIZED)
+#define CRUMPLE_CCD_FLATTEN
+#else
+#define CRUMPLE_CCD_FLATTEN __attribute__((flatten))
+#endif
+
 namespace crumple::geometry {
 
 namespace {
@@ -241,7 +249,7 @@ struct Advance {
 /// gains less than 2^-30 or cannot be certified.
 /// Flattened: the closest-point kernels are inlined into the loop (their unused outputs, such
 /// as the squared distance, are then not computed; the values used are the same bits).
-__attribute__((flatten)) Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
+CRUMPLE_CCD_FLATTEN Advance advance(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
                                          const Prepared& p, const Hull& hull, Scalar reach2,
                                          std::int64_t max_steps, Scalar max_time) {
   Advance r;
@@ -882,7 +890,7 @@ CcdResult ccd_search(const Setup& s, const Advance& a, const CcdOptions& options
 
 // Flattened, as `advance`: the filters, the advancement and the bisection inlined (the same
 // operations, the same bits).
-__attribute__((flatten)) CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
+CRUMPLE_CCD_FLATTEN CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
                                                const CcdOptions& options, unsigned done) {
   const Scalar delta = options.min_separation;
   CcdResult result;
@@ -1134,7 +1142,7 @@ CRUMPLE_ADVANCE_LANES Stopped advance_step(AdvanceLanes& L, FourPointBatch& batc
 
 /// ccd_after_direction on each query of `queries` (all of type `Face`), the advancement in lanes.
 template <bool Face>
-__attribute__((target("avx2"), flatten)) void after_direction_lanes(std::span<const detail::CcdQuery> queries,
+__attribute__((target("avx2"))) CRUMPLE_CCD_FLATTEN void after_direction_lanes(std::span<const detail::CcdQuery> queries,
                                                            const CcdOptions& options, CcdResult* out) {
   constexpr CcdPair pair = Face ? CcdPair::kVertexFace : CcdPair::kEdgeEdge;
   constexpr unsigned done = kCoplanarityDone | kDirectionDone;
