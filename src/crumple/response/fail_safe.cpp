@@ -359,7 +359,7 @@ FailSafeStats CcdFailSafe::apply(PositionsView start, std::span<const Scalar> in
       near.push_back(s);
     }
   }
-  std::vector<char> since;  // per vertex: an impulse moved it since the last query (local rounds)
+  std::vector<char> since;  // per vertex: an impulse moved it since the last test (local rounds)
   if (!near.empty()) since.assign(n, 0);
   const auto key = [](const Stencil& s) {  // a pair's identity, whatever the order of its edges
     std::array<Index, 5> k{s.vertex[0], s.vertex[1], s.vertex[2], s.vertex[3], s.edge_edge ? 1 : 0};
@@ -402,10 +402,12 @@ FailSafeStats CcdFailSafe::apply(PositionsView start, std::span<const Scalar> in
       }
       if (near.empty() || local >= options_.local_rounds) break;
       // A local round: the next round's pairs are the live impacts among this round's pairs
-      // and the pairs of `proximity` holding a vertex moved since the last query, each re-tested
-      // by the narrow phase (a pair with no such vertex keeps the last query's answer, and was
-      // not live). Every pair so found is a live impact of the current motion; the pairs farther
-      // than R at the start are left to the next query, which alone ends the stage.
+      // and the pairs of `proximity` holding a vertex this round moved, each re-tested by the
+      // narrow phase. A near pair none of whose vertices moved since its last test (the last
+      // query, or an earlier local round) keeps that test's answer, not live; so when a local
+      // round finds none live, no near pair is. Every pair so found is a live impact of the
+      // current motion; the pairs farther than R at the start are left to the next query, which
+      // alone ends the stage.
       ++local;
       ++stats.local_rounds;
       std::erase_if(live_, [&](Stencil& s) { return !retest(s, start, positions, narrow); });
@@ -419,6 +421,7 @@ FailSafeStats CcdFailSafe::apply(PositionsView start, std::span<const Scalar> in
         Stencil s = candidate;
         if (retest(s, start, positions, narrow) && !touches_tangle_on_both_sides(s, tangle_)) live_.push_back(s);
       }
+      std::fill(since.begin(), since.end(), 0);
       if (live_.empty()) break;
     }
     if (!since.empty()) std::fill(since.begin(), since.end(), 0);
