@@ -2,6 +2,7 @@
 // fail-safe hook.
 #include <crumple/detect/continuous.hpp>
 #include <crumple/geometry/distance.hpp>
+#include <crumple/response/contact_response.hpp>
 #include <crumple/sim/scene.hpp>
 
 #include <gtest/gtest.h>
@@ -156,6 +157,38 @@ TEST(PerFrame, MotionSearchSkipsMotionTheRadiusCovers) {
 // frame's proximity impulses serve the other pairs only (the cloth's crease over the ridge, a
 // sharp one at this edge, keeps its pairs), and the motion of the lying cloth is the same, bit
 // for bit, as with every pair served (none of the pairs left out comes within h_c).
+// A vertex squeezed between two held layers 0.6 h apart (no room for the two gaps h it wants):
+// its two pairs conflict. Full pushes (ω = 1) alternate between the ends, each moving the
+// vertex by a whole violation, and the last one wins: after the sweeps it lies 0.4 h past the
+// lower layer, and the next sweep would put it back 1.4 h up — the exchange the springs of the
+// `crumple` pile stored at every step. The scene's half pushes settle between the layers.
+TEST(PerFrame, CrumplePushesASqueezedVertexWithoutPassingEitherLayer) {
+  const Scalar h = 0.1;
+  const Scene scene = make_scene(SceneSpec::parse("crumple:n=4"), 1);
+  ASSERT_EQ(scene.settings.response_model, ResponseModel::Proximity);
+  // The squeezed vertex's height after the scene's sweeps with relaxation ω.
+  const auto squeeze = [&](Scalar omega) {
+    // Faces A (0, 1, 2) at z = 0 and B (3, 4, 5) at z = 0.6 h, held; vertex 6 between them.
+    std::vector<Vec3> x{Vec3(0, 0, 0),       Vec3(1, 0, 0),       Vec3(0, 1, 0),          Vec3(0, 0, 0.6 * h),
+                        Vec3(1, 0, 0.6 * h), Vec3(0, 1, 0.6 * h), Vec3(0.25, 0.25, 0.3 * h)};
+    std::vector<Vec3> v(x.size(), Vec3::Zero());
+    const std::vector<Scalar> inv_mass{0, 0, 0, 0, 0, 0, 1};
+    const Vec3 w(0.5, 0.25, 0.25);
+    const std::vector<response::Stencil> stencils{response::vertex_face_stencil(6, {0, 1, 2}, w, Vec3::UnitZ()),
+                                                  response::vertex_face_stencil(6, {3, 4, 5}, w, -Vec3::UnitZ())};
+    response::ProximityOptions options;
+    options.thickness = h;
+    options.passes = scene.settings.passes;
+    options.relaxation = omega;
+    response::resolve_proximity(stencils, inv_mass, x, v, options);
+    return x[6].z();
+  };
+  EXPECT_NEAR(squeeze(1), -0.4 * h, 1e-12) << "full pushes: the last one wins, past layer A";
+  const Scalar z = squeeze(scene.settings.proximity_relaxation);
+  EXPECT_GT(z, 0.05 * h) << "above layer A";
+  EXPECT_LT(z, 0.55 * h) << "below layer B";
+}
+
 TEST(PerFrame, FlatNeighboursKeepTwoThicknesses) {
   const auto run = [](const std::string& spec, int rings) {
     Scene s = make_scene(SceneSpec::parse(spec), 1);

@@ -249,10 +249,12 @@ ResponseStats resolve_proximity(std::span<const Stencil> stencils, std::span<con
                                 std::span<Vec3> x, std::span<Vec3> v, const ProximityOptions& options) {
   CRUMPLE_CHECK(options.passes >= 1, "response passes must be >= 1");
   CRUMPLE_CHECK(options.friction >= 0, "friction must be >= 0");
+  CRUMPLE_CHECK(options.relaxation > 0 && options.relaxation <= 1, "proximity relaxation must be in (0, 1]");
   CRUMPLE_CHECK(x.size() == inv_mass.size() && v.size() == inv_mass.size(),
                 "response arrays must have #V entries");
   ResponseStats stats;
   const Scalar h = options.thickness;
+  const Scalar omega = options.relaxation;
   const Scalar too_close = h * (1 - options.position_tolerance);
   for (int pass = 0; pass < options.passes; ++pass) {
     ++stats.passes;
@@ -262,7 +264,7 @@ ResponseStats resolve_proximity(std::span<const Stencil> stencils, std::span<con
       if (!(gap < too_close)) continue;
       const Scalar d = inverse_effective_mass(s, inv_mass);
       if (!(d > 0)) continue;
-      apply_along(s, inv_mass, x, (h - gap) / d, s.normal);
+      apply_along(s, inv_mass, x, omega * (h - gap) / d, s.normal);
       Vec3 r = Vec3::Zero();
       for (int k = 0; k < s.count; ++k) r += s.weight[k] * v[at(s.vertex[k])];
       const Scalar vn = r.dot(s.normal);

@@ -129,13 +129,21 @@ struct ProximityOptions {
   int passes = 4;        ///< maximum sweeps (>= 1)
   /// A contact is "too close" when its gap < thickness·(1 − position_tolerance).
   Scalar position_tolerance = 1e-6;
+  /// ω in (0, 1]: each push-out closes ω of the pair's shortfall h − g (under-relaxed
+  /// Gauss–Seidel). 1 = the whole shortfall in one push. Where pairs conflict (a vertex
+  /// squeezed between two layers closer than 2h), full pushes alternate between the
+  /// constraints' ends, each moving the shared vertex by a whole violation and the last one
+  /// winning (the vertex can end past the other layer); ω < 1 damps that cycle towards the
+  /// compromise. A lone pair reaches h − (1 − ω)^k (h − g) after k sweeps.
+  Scalar relaxation = 1;
 };
 
 /// Proximity impulses with friction (Bridson, Fedkiw, Anderson, *Robust treatment of
 /// collisions, contact and friction for cloth animation*, SIGGRAPH 2002, §7.1, in the stencil
 /// form above). Only contacts whose gap (Σ cᵢxᵢ)·n is below h act — stencils may come from a
 /// detection with a larger radius, made once per frame — and each one that does, Gauss–Seidel:
-///  1. is pushed out to the gap h (μ = (h − g) / Σ cᵢ² mᵢ⁻¹, as `correct_position`);
+///  1. is pushed out to the gap h (μ = ω (h − g) / Σ cᵢ² mᵢ⁻¹, ω = `relaxation`; with ω = 1
+///     as `correct_position`);
 ///  2. loses its approaching normal relative velocity (λ = −v_rel·n / Σ cᵢ² mᵢ⁻¹ when < 0);
 ///  3. has its tangential relative velocity v_t reduced by Coulomb friction: an impulse
 ///     λ_t = min(μ λ, |v_t| / Σ cᵢ² mᵢ⁻¹) against v_t, so sliding stops when |v_t| ≤ μ λ Σ cᵢ² mᵢ⁻¹.

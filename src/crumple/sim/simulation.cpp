@@ -162,6 +162,8 @@ Simulation::Simulation(Model model, State state, ForceField field,
   CRUMPLE_CHECK(settings_.fail_safe_separation >= 0 && std::isfinite(settings_.fail_safe_separation),
                 "fail_safe_separation must be finite and >= 0");
   CRUMPLE_CHECK(settings_.motion_retries >= 0, "motion_retries must be >= 0");
+  CRUMPLE_CHECK(settings_.proximity_relaxation > 0 && settings_.proximity_relaxation <= 1,
+                "proximity_relaxation must be in (0, 1]");
   if (per_frame() && settings_.fail_safe && settings_.motion_retries > 0) {
     ContinuousOptions options;
     options.min_separation = settings_.fail_safe_separation * settings_.detector.thickness;
@@ -386,6 +388,7 @@ void Simulation::proximity_frame() {
   options.thickness = settings_.detector.thickness;
   options.friction = settings_.self_friction;
   options.passes = settings_.passes;
+  options.relaxation = settings_.proximity_relaxation;
   if (!retry_query_ || (untangler_ && untangler_->tangled())) {
     proximity_steps(options);
   } else {
