@@ -52,6 +52,7 @@ struct SimulateArgs {
   std::optional<std::string> untangle;
   std::optional<std::string> motion_search;
   std::optional<int> motion_retries;
+  std::optional<double> push_relaxation;
   std::optional<long long> response_from;
   std::optional<std::uint64_t> seed;
   std::optional<std::string> out;  ///< default: the resumed state's folder, else kDefaultOut
@@ -258,6 +259,7 @@ void save_state(const std::filesystem::path& out, const sim::Simulation& simulat
                                     .add("untangle", settings.untangle)
                                     .add("motion_search", settings.motion_search)
                                     .add("motion_retries", settings.motion_retries)
+                                    .add("push_relaxation", settings.proximity_relaxation)
                                     .add("detector_state", simulation.detector_state())
                                     .str();
   write_file_atomically(out / "state.json", [&](std::ostream& os) { os << side_json << "\n"; });
@@ -406,6 +408,12 @@ int run_simulate(const SimulateArgs& args) {
     if (side->values.count("motion_retries")) {
       settings.motion_retries = static_cast<int>(side->number("motion_retries", side_path));
     }
+    if (side->values.count("push_relaxation")) {
+      settings.proximity_relaxation = side->number("push_relaxation", side_path);
+      if (!(settings.proximity_relaxation > 0 && settings.proximity_relaxation <= 1)) {
+        throw InputError(side_path.string() + ": push_relaxation must be in (0, 1]");
+      }
+    }
   }
   if (args.dt) settings.dt = *args.dt;
   if (args.substeps) settings.substeps = *args.substeps;
@@ -419,6 +427,12 @@ int run_simulate(const SimulateArgs& args) {
   if (args.untangle) settings.untangle = parse_on_off(*args.untangle, "--untangle");
   if (args.motion_search) settings.motion_search = parse_on_off(*args.motion_search, "--motion-search");
   if (args.motion_retries) settings.motion_retries = *args.motion_retries;
+  if (args.push_relaxation) {
+    if (!(*args.push_relaxation > 0 && *args.push_relaxation <= 1)) {
+      throw InputError("--push-relaxation expects a number in (0, 1], got " + std::to_string(*args.push_relaxation));
+    }
+    settings.proximity_relaxation = *args.push_relaxation;
+  }
   if (args.response_from) {
     if (*args.response_from < start.frame) {
       throw InputError("--response-from " + std::to_string(*args.response_from) + " is before the first frame (" +
@@ -655,6 +669,10 @@ Run add_simulate_command(CLI::App& app) {
                  "pairs within the fail-safe's reach that were beyond the detection radius at its start "
                  "(they join its contacts); default: the scene's (crumple 1, others 0)")
       ->check(CLI::Range(0, 100));
+  app.add_option("--push-relaxation", args->push_relaxation,
+                 "With response on, the share (0, 1] of a pair's shortfall below the thickness that each "
+                 "push-out closes (below 1, layers squeezed from both sides settle instead of trading "
+                 "pushes with the springs); default: the scene's (crumple 0.5, others 1)");
   app.add_option("--response-from", args->response_from,
                  "Frame from which the response is on; before it the run has no response (e.g. a "
                  "hanging cloth falls through itself, then untangles)");

@@ -38,6 +38,7 @@ struct SettingsArgs {
   std::optional<bool> untangle;
   std::optional<bool> motion_search;
   std::optional<int> motion_retries;
+  std::optional<double> push_relaxation;
   std::optional<std::int64_t> response_from;
   std::optional<int> passes;
   std::optional<double> dt;
@@ -54,6 +55,7 @@ struct SettingsArgs {
     if (untangle) s.untangle = *untangle;
     if (motion_search) s.motion_search = *motion_search;
     if (motion_retries) s.motion_retries = *motion_retries;
+    if (push_relaxation) s.proximity_relaxation = *push_relaxation;
     if (passes) s.passes = *passes;
     if (dt) s.dt = *dt;
     if (substeps) s.substeps = *substeps;
@@ -63,6 +65,9 @@ struct SettingsArgs {
     if (s.substeps < 1) throw InputError("Simulation: substeps must be >= 1");
     if (s.passes < 1) throw InputError("Simulation: passes must be >= 1");
     if (s.motion_retries < 0) throw InputError("Simulation: motion_retries must be >= 0");
+    if (!(s.proximity_relaxation > 0 && s.proximity_relaxation <= 1)) {
+      throw InputError("Simulation: push_relaxation must be in (0, 1]");
+    }
     if (!(s.detector.thickness >= 0 && std::isfinite(s.detector.thickness))) {
       throw InputError("Simulation: thickness must be finite and >= 0");
     }
@@ -328,6 +333,7 @@ SettingsArgs settings_args(const py::kwargs& kw) {
     else if (key == "untangle") a.untangle = v.cast<bool>();
     else if (key == "motion_search") a.motion_search = v.cast<bool>();
     else if (key == "motion_retries") a.motion_retries = v.cast<int>();
+    else if (key == "push_relaxation") a.push_relaxation = v.cast<double>();
     else if (key == "response_from") a.response_from = v.cast<std::int64_t>();
     else if (key == "passes") a.passes = v.cast<int>();
     else if (key == "dt") a.dt = v.cast<double>();
@@ -337,7 +343,7 @@ SettingsArgs settings_args(const py::kwargs& kw) {
     else {
       throw py::type_error("Simulation: unexpected keyword '" + key +
                            "' (method, thickness, kinds, response, fail_safe, untangle, motion_search, motion_retries, "
-                           "response_from, passes, dt, "
+                           "push_relaxation, response_from, passes, dt, "
                            "substeps, integrator, threads; scene options go in the spec text)");
     }
   }
@@ -358,7 +364,8 @@ continuous fail-safe that keeps every frame intersection-free, docs/simulation.m
 figures intersecting_pairs, contours and untangle_pulls), motion_search (bool: pairs the
 velocities bring within the thickness join the frame's contacts), motion_retries (int >= 0: times
 a frame may run again when its own motion brings far pairs within the fail-safe's reach; the
-crumple scene uses 1), response_from (frame from which the
+crumple scene uses 1), push_relaxation (the share in (0, 1] of a pair's shortfall below the
+thickness each push-out closes; the crumple scene uses 0.5), response_from (frame from which the
 response is on, off before it, as the CLI's --response-from), passes (>= 1), dt (step, s),
 substeps (steps per frame), integrator ("implicit-euler", "explicit-euler",
 "symplectic-euler", "rk4", "projective"), threads (0 = all).
@@ -537,6 +544,7 @@ The GIL is released while drawing. crumple.InputError on a bad size or camera.
             d["untangle"] = st.untangle;
             d["motion_search"] = st.motion_search;
             d["motion_retries"] = st.motion_retries;
+            d["push_relaxation"] = st.proximity_relaxation;
             d["response_from"] = s.response_from() ? py::object(py::int_(*s.response_from())) : py::object(py::none());
             d["passes"] = st.passes;
             d["threads"] = st.detector.threads;

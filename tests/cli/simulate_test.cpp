@@ -188,20 +188,30 @@ TEST(Simulate, MotionSettingsAreSavedAndKept) {
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(state_json("scene").find("\"motion_retries\":1"), std::string::npos) << state_json("scene");
   EXPECT_NE(state_json("scene").find("\"motion_search\":false"), std::string::npos);
-  r = run_cli("simulate crumple:n=4 --frames 1 -q --motion-retries 0 --motion-search on -o " + (dir / "set").string());
+  EXPECT_NE(state_json("scene").find("\"push_relaxation\":0.5"), std::string::npos) << state_json("scene");
+  r = run_cli("simulate crumple:n=4 --frames 1 -q --motion-retries 0 --motion-search on --push-relaxation 0.25 -o " +
+              (dir / "set").string());
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(state_json("set").find("\"motion_retries\":0"), std::string::npos) << state_json("set");
   EXPECT_NE(state_json("set").find("\"motion_search\":true"), std::string::npos);
+  EXPECT_NE(state_json("set").find("\"push_relaxation\":0.25"), std::string::npos) << state_json("set");
   r = run_cli("simulate " + (dir / "set" / "state.x3d").string() + " --frames 1 -q");
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(state_json("set").find("\"motion_retries\":0"), std::string::npos) << "kept on resume";
   EXPECT_NE(state_json("set").find("\"motion_search\":true"), std::string::npos) << "kept on resume";
+  EXPECT_NE(state_json("set").find("\"push_relaxation\":0.25"), std::string::npos) << "kept on resume";
   r = run_cli("simulate crumple:n=4 --frames 1 -q --motion-search maybe -o " + (dir / "bad").string());
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.out.find("--motion-search expects on or off, got 'maybe'"), std::string::npos) << r.out;
   r = run_cli("simulate crumple:n=4 --frames 1 -q --motion-retries -1 -o " + (dir / "bad").string());
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.out.find("--motion-retries"), std::string::npos) << r.out;
+  for (const char* bad : {"0", "1.5", "nan"}) {
+    r = run_cli(std::string("simulate crumple:n=4 --frames 1 -q --push-relaxation ") + bad + " -o " +
+                (dir / "bad").string());
+    EXPECT_NE(r.status, 0) << bad;
+    EXPECT_NE(r.out.find("--push-relaxation"), std::string::npos) << r.out;
+  }
 }
 
 /// The field `column` (0-based) of a stats.csv line.

@@ -226,6 +226,12 @@ def test_motion_settings_follow_the_scene_unless_given():
     assert s.settings["motion_retries"] == 0 and s.settings["motion_search"] is True
     with pytest.raises(crumple.InputError, match="motion_retries"):
         crumple.Simulation("crumple:n=6", threads=1, motion_retries=-1)
+    assert crumple.Simulation("crumple:n=6", threads=1).settings["push_relaxation"] == 0.5
+    assert crumple.Simulation("cloth-on-sphere:n=6", threads=1).settings["push_relaxation"] == 1
+    assert crumple.Simulation("crumple:n=6", threads=1, push_relaxation=0.25).settings["push_relaxation"] == 0.25
+    for bad in (0, 1.5, float("nan")):
+        with pytest.raises(crumple.InputError, match="push_relaxation"):
+            crumple.Simulation("crumple:n=6", threads=1, push_relaxation=bad)
 
 
 def test_fail_safe_first_query_restricted_by_an_exact_detection_only():
