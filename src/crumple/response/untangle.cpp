@@ -428,8 +428,8 @@ std::size_t Untangler::analyse(PositionsView x, std::span<const Scalar> inv_mass
       if (side == 0) continue;
       pulls_.push_back(vertex_face_stencil(inner, t, c.barycentric, side > 0 ? n : Vec3(-n)));
       held_face_.push_back(k.band ? 1 : 0);
-      // A short fold's crossings are also shortened (below): the pulls alone move its curve
-      // along the fold rather than closing it.
+      // A short fold's crossings are also shortened (below): pulled alone, its curve walked
+      // along the fold rather than closing.
       if (!k.short_fold) continue;
     } else if (!k.inside.empty() && !k.short_fold) {
       continue;

@@ -39,10 +39,10 @@
 ///     next stretch, which the next frame finds through again (the pulls see-saw along the
 ///     fold): a band's pulls move the inside end alone, the crossed face held.
 ///  3c. **Short folds**: a closed curve between two or more pinches enclosing 1 to 4 vertices
-///     (`Contour::short_fold`) is a short stretch of a fold folded beyond flat. The pulls alone
-///     move it along the fold (the next stretch goes through as this one comes back); its
-///     crossings also get contour minimisation, which shortens the curve towards its pinches
-///     until it closes.
+///     (`Contour::short_fold`) is a short stretch of a fold folded beyond flat. Pulled alone,
+///     such curves walked along the fold without closing (docs/simulation.md); its crossings
+///     also get contour minimisation, which shortens the curve towards its pinches until it
+///     closes.
 ///
 /// Pushes (`Untangler::apply`), built at the analysed positions, applied after each step:
 ///  - a crossing whose edge has one end inside (or at a pinch of its contour: the part of the
@@ -113,9 +113,9 @@ struct Contour {
   /// 4 of them — a band of pockets along a long fold through a sheet (see the file comment, 3b).
   /// Its pulls move the inside end alone, the crossed face held.
   bool band = false;
-  /// Closed, between two or more pinches (with `tt` pairs), and enclosing 1 to 4 vertices: a short stretch of a
-  /// fold folded beyond flat (see the file comment, 3c). Its crossings get contour
-  /// minimisation as well as the pulls.
+  /// Closed, between two or more pinches (with `tt` pairs), and enclosing 1 to 4 vertices: a
+  /// short stretch of a fold folded beyond flat (see the file comment, 3c). Its crossings get
+  /// contour minimisation as well as the pulls.
   bool short_fold = false;
 };
 
