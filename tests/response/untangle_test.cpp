@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <functional>
 #include <limits>
 
@@ -334,6 +335,56 @@ TEST(Untangle, PullsALonePinchApart) {
   const int rounds = untangle_statically(s, s.x, options, 100);
   EXPECT_GE(rounds, 1);
   EXPECT_LE(rounds, 100);
+}
+
+/// A strip (8 × 4 quads, rows j = 0..4) folded along its middle row j = 2 (the crease, at
+/// y = 0), its sides rising to y = 0.2 at z = ±0.06; at column 4 the rows j = 1 and j = 3 have
+/// swapped sides (z = ∓0.045), a stretch of the fold folded beyond flat: one closed curve
+/// between the pinches 21 and 23 (the crease's vertices next to column 4), enclosing the
+/// column's vertices 13, 22 and 31.
+Sheets short_fold() {
+  Sheets s;
+  s.add(8, 4, [](Index i, Index j) {
+    const Scalar side = static_cast<Scalar>(j - 2);
+    const Scalar z = (i == 4 && (j == 1 || j == 3)) ? -1.5 * 0.03 * side : 0.03 * side;
+    return Vec3(i * 0.1, std::abs(side) * 0.1, z + 0.001 * i * i);
+  });
+  return s;
+}
+
+TEST(Untangle, ShortFoldBeyondFlatIsShortenedAsWellAsPulled) {
+  const Sheets s = short_fold();
+  const auto topology = s.topology();
+  const auto pairs = testing::intersecting_triangles(topology, s.x);
+  const IntersectionAnalysis a = analyse_intersections(*topology, s.x, pairs);
+  ASSERT_EQ(a.contours.size(), 1u);
+  const Contour& k = a.contours[0];
+  EXPECT_FALSE(k.open);
+  EXPECT_EQ(k.pinches, (std::vector<Index>{21, 23}));
+  EXPECT_EQ(k.inside, (std::vector<Index>{13, 22, 31}));
+  EXPECT_TRUE(k.short_fold);
+  EXPECT_FALSE(k.band);
+  // The other handcrafted curves are no short folds (no pinch, or too much inside).
+  for (const Sheets& other : {bump(), flap(), fold(), pinched_star()}) {
+    const auto t = other.topology();
+    const IntersectionAnalysis b = analyse_intersections(*t, other.x, testing::intersecting_triangles(t, other.x));
+    for (const Contour& c : b.contours) EXPECT_FALSE(c.short_fold);
+  }
+
+  // The pushes: pulls of the enclosed ends and, on every crossing, contour minimisation.
+  UntangleOptions options;
+  options.thickness = 0.005;
+  options.max_step = 0.005;
+  options.contour_step = 0.002;
+  Untangler untangler(topology, options);
+  Positions x = s.x;
+  std::vector<Scalar> inv_mass(x.size(), 1);
+  std::vector<Vec3> v(x.size(), Vec3::Zero());
+  untangler.analyse(x, inv_mass);
+  const UntangleStats first = untangler.apply(inv_mass, x, v);
+  EXPECT_GT(first.pulls, 0u);
+  EXPECT_EQ(first.contour_moves, a.crossings.size());
+  EXPECT_GE(untangle_statically(s, s.x, options, 50), 1);
 }
 
 TEST(Untangle, TangleExemptsOnlyPairsWithBothSidesInIt) {

@@ -18,6 +18,9 @@ inline std::size_t at(Index i) { return static_cast<std::size_t>(i); }
 constexpr std::size_t kBandCrossings = 32;
 /// ... and at least this many crossings per inside vertex.
 constexpr std::size_t kBandRatio = 4;
+/// A closed curve between pinches enclosing at most this many vertices is a short fold
+/// (`Contour::short_fold`).
+constexpr std::size_t kShortFoldInside = 4;
 
 using detail::root;
 
@@ -330,6 +333,8 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
     }
     k.band = !k.inside.empty() && k.crossings.size() >= kBandCrossings &&
              k.inside.size() * kBandRatio <= k.crossings.size();
+    k.short_fold = !k.open && k.pairs > 0 && k.pinches.size() >= 2 && !k.inside.empty() &&
+                   k.inside.size() <= kShortFoldInside;
   }
   // A closed curve between pinches is a stretch of a fold folded beyond flat, its two sides
   // through each other. Flipping it back moves its vertices through faces next to the
@@ -423,9 +428,12 @@ std::size_t Untangler::analyse(PositionsView x, std::span<const Scalar> inv_mass
       if (side == 0) continue;
       pulls_.push_back(vertex_face_stencil(inner, t, c.barycentric, side > 0 ? n : Vec3(-n)));
       held_face_.push_back(k.band ? 1 : 0);
+      // A short fold's crossings are also shortened (below): pulled alone, its curve walked
+      // along the fold rather than closing.
+      if (!k.short_fold) continue;
+    } else if (!k.inside.empty() && !k.short_fold) {
       continue;
     }
-    if (!k.inside.empty()) continue;
     if (k.pairs == 0) {
       // A pinch alone: its star folded beyond flat. The end of the crossing side nearer the
       // face's plane goes back through it.
@@ -438,7 +446,7 @@ std::size_t Untangler::analyse(PositionsView x, std::span<const Scalar> inv_mass
       }
       continue;
     }
-    // No inside: shorten the curve (contour minimisation).
+    // No inside, or a short fold: shorten the curve (contour minimisation).
     const Vec3 p = c.barycentric[0] * x[at(t[0])] + c.barycentric[1] * x[at(t[1])] + c.barycentric[2] * x[at(t[2])];
     const Vec3 along = x[at(ed[1])] - x[at(ed[0])];
     if (along.norm() == 0) continue;

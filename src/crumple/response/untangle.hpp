@@ -38,6 +38,11 @@
 ///     crease just beyond the sheet. Pulling both sides there moves the sheet into the fold's
 ///     next stretch, which the next frame finds through again (the pulls see-saw along the
 ///     fold): a band's pulls move the inside end alone, the crossed face held.
+///  3c. **Short folds**: a closed curve between two or more pinches enclosing 1 to 4 vertices
+///     (`Contour::short_fold`) is a short stretch of a fold folded beyond flat. Pulled alone,
+///     such curves walked along the fold without closing (docs/simulation.md); its crossings
+///     also get contour minimisation, which shortens the curve towards its pinches until it
+///     closes.
 ///
 /// Pushes (`Untangler::apply`), built at the analysed positions, applied after each step:
 ///  - a crossing whose edge has one end inside (or at a pinch of its contour: the part of the
@@ -50,7 +55,8 @@
 ///    face held, the end's own velocity against the pull removed);
 ///  - a crossing of a pinch alone (a contour with no `tt` pair): the end of the edge nearer the
 ///    face's plane is pulled back through it, as above;
-///  - any other crossing of a contour with no inside: its edge's ends move by +σG, the face's
+///  - any other crossing of a contour with no inside, and every crossing of a short fold (3c),
+///    besides its pulls: its edge's ends move by +σG, the face's
 ///    corners by −σG (σ = `contour_step`), G the direction that shortens the intersection curve:
 ///    Σ over the edge's faces f of R_f − (E·R_f)/(E·N) N (E the edge's direction, N the
 ///    face's normal, R_f the curve's direction into f), normalised — the first-order change of
@@ -107,6 +113,10 @@ struct Contour {
   /// 4 of them — a band of pockets along a long fold through a sheet (see the file comment, 3b).
   /// Its pulls move the inside end alone, the crossed face held.
   bool band = false;
+  /// Closed, between two or more pinches (with `tt` pairs), and enclosing 1 to 4 vertices: a
+  /// short stretch of a fold folded beyond flat (see the file comment, 3c). Its crossings get
+  /// contour minimisation as well as the pulls.
+  bool short_fold = false;
 };
 
 /// A side of a face of a vertex's star passing through another face of that star sharing only
