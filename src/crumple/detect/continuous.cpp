@@ -1049,8 +1049,10 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
 
   const auto t3 = std::chrono::steady_clock::now();
   out = std::move(sink.impacts);
-  std::sort(out.vf.begin(), out.vf.end(), vf_less);
-  std::sort(out.ee.begin(), out.ee.end(), ee_less);
+  // Lambdas, not the function pointers: std::sort then inlines the comparison (the pointers
+  // made every comparison an indirect call; keys are unique, so the order is the same).
+  std::sort(out.vf.begin(), out.vf.end(), [](const auto& x, const auto& y) { return vf_less(x, y); });
+  std::sort(out.ee.begin(), out.ee.end(), [](const auto& x, const auto& y) { return ee_less(x, y); });
   if (scaled.exponent != 0) {
     for (auto& i : out.vf) i.distance = std::scalbn(i.distance, -scaled.exponent);
     for (auto& i : out.ee) i.distance = std::scalbn(i.distance, -scaled.exponent);

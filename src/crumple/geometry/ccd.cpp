@@ -639,8 +639,9 @@ struct LaterFirst {
 };
 
 /// Bisection of [t_begin, 1] × [0, 1]² (no contact before t_begin is already certified); stops
-/// without a hit once the earliest live box starts at or after max_time.
-CcdResult bisect(const Prepared& p, Scalar reach2, Scalar tol_t, std::int64_t max_boxes, Scalar t_begin,
+/// without a hit once the earliest live box starts at or after max_time. Never inlined: few
+/// queries reach it (none on most real frame pairs), and the flattened callers would each copy it.
+__attribute__((noinline)) CcdResult bisect(const Prepared& p, Scalar reach2, Scalar tol_t, std::int64_t max_boxes, Scalar t_begin,
                  Scalar max_time) {
   std::vector<Box> storage;
   storage.reserve(64);
@@ -801,8 +802,9 @@ namespace {
 constexpr unsigned kCoplanarityDone = 1, kDirectionDone = 2;
 
 /// `ccd` after its option checks, skipping the filters in `done` for an unscaled query.
-CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options,
-                      unsigned done);
+/// Never inlined: the advancement lanes call it only for scaled or out-of-range queries.
+__attribute__((noinline)) CcdResult ccd_checked(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
+                                                const CcdOptions& options, unsigned done);
 
 void check_options(const CcdOptions& options) {
   const Scalar delta = options.min_separation;
