@@ -303,7 +303,7 @@ double number_option(const std::string& arg, std::size_t prefix) {
 }  // namespace
 
 /// `--check-frames=SPEC [--frames=N] [--fail-safe=off] [--response=on] [--search-factor=F]
-/// [--motion-search=on] [--motion-retries=N] [--relaxation=W] [--local-rounds=N] [--rho=R] [--iterations=N] [--settle=F]
+/// [--motion-search=on] [--motion-retries=N] [--relaxation=W] [--rho=R] [--iterations=N] [--settle=F]
 /// [--substeps=S] [--threads=T]
 /// [--verbose]`:
 /// runs N frames (1000) of the built-in scene SPEC with the `frame/` rows' settings
@@ -313,8 +313,7 @@ double number_option(const std::string& arg, std::size_t prefix) {
 /// `Settings::search_factor` (the proximity radius in thicknesses), `--motion-search=on`
 /// turns `Settings::motion_search` on (contacts from the frame's predicted motion), `--motion-retries`
 /// sets `Settings::motion_retries` (the scene's otherwise: 1 for crumple, 0 for the others), `--relaxation`
-/// `Settings::proximity_relaxation` (the scene's otherwise: 0.5 for crumple, 1 for the others), `--local-rounds`
-/// `Settings::fail_safe_local_rounds`; `--rho`, `--iterations` and
+/// `Settings::proximity_relaxation` (the scene's otherwise: 0.5 for crumple, 1 for the others); `--rho`, `--iterations` and
 /// `--settle` the projective step's Chebyshev ρ, iterations and settling tolerance (a fraction of
 /// h_c, as the ribbon's `settle` key); `--substeps` the steps per frame (the frame's length kept);
 /// `--threads` the detector's and the integrator's threads (0: all); `--flat-rings` sets
@@ -336,7 +335,6 @@ int check_frames(int argc, char** argv) {
   int iterations_option = 0, substeps = 0;  // 0: the scene's
   int flat_rings = -1;                      // < 0: the default
   int motion_retries = -1;                  // < 0: the scene's
-  int local_rounds = -1;                    // < 0: the default
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
@@ -370,10 +368,6 @@ int check_frames(int argc, char** argv) {
       } else if (a.rfind("--relaxation=", 0) == 0) {
         relaxation = number_option(a, 13);
         if (!(relaxation > 0 && relaxation <= 1)) throw InputError("--relaxation expects a number in (0, 1]");
-      } else if (a.rfind("--local-rounds=", 0) == 0) {
-        const double v = number_option(a, 15);
-        if (!(v >= 0) || v != std::floor(v) || v > 100) throw InputError("--local-rounds expects an integer in [0, 100]");
-        local_rounds = static_cast<int>(v);
       } else if (a.rfind("--motion-retries=", 0) == 0) {
         const double v = number_option(a, 17);
         if (!(v >= 0) || v != std::floor(v) || v > 100) throw InputError("--motion-retries expects an integer in [0, 100]");
@@ -415,7 +409,6 @@ int check_frames(int argc, char** argv) {
   if (flat_rings >= 0) settings.flat_neighbour_rings = flat_rings;
   if (motion_retries >= 0) settings.motion_retries = motion_retries;
   if (relaxation > 0) settings.proximity_relaxation = relaxation;
-  if (local_rounds >= 0) settings.fail_safe_local_rounds = local_rounds;
   if (rho >= 0) settings.integrator_options.projective_rho = rho;
   if (iterations_option > 0) settings.integrator_options.projective_iterations = iterations_option;
   if (settle >= 0) settings.integrator_options.projective_tolerance = settle * settings.detector.thickness;
@@ -439,11 +432,9 @@ int check_frames(int argc, char** argv) {
   }
   {
     char buffer[192];
-    std::snprintf(buffer, sizeof buffer, ", %d steps of %.4g s, search %.3g h_c, motion search %s, motion retries %d, push relaxation %.3g, "
-                  "local rounds %d",
+    std::snprintf(buffer, sizeof buffer, ", %d steps of %.4g s, search %.3g h_c, motion search %s, motion retries %d, push relaxation %.3g",
                   settings.substeps, settings.dt, settings.search_factor, settings.motion_search ? "on" : "off",
-                  settings.motion_retries, settings.proximity_relaxation,
-                  settings.fail_safe_local_rounds);
+                  settings.motion_retries, settings.proximity_relaxation);
     step += buffer;
   }
   std::printf("%s: %d vertices, response %s, fail-safe %s, %s, start: %zu intersecting pairs\n", spec.c_str(),

@@ -417,9 +417,6 @@ Scene crumple_scene(const SceneSpec& spec, std::uint64_t seed) {
   // walls squeeze) exchange the push-outs with the springs at every step, an exchange that grew
   // at n = 100 from frame ~850 until the fail-safe's loop above took over (docs/simulation.md).
   s.settings.proximity_relaxation = 0.5;
-  // No local rounds: with them (and everything else equal) the n = 100 pile heated from frame
-  // ~900 (12,001 vertices frozen by frame 1,000); without, 1,000 frames calm (docs/simulation.md).
-  s.settings.fail_safe_local_rounds = 0;
   return s;
 }
 

@@ -174,7 +174,6 @@ Simulation::Simulation(Model model, State state, ForceField field,
     response::FailSafeOptions options;
     options.min_separation = settings_.fail_safe_separation * settings_.detector.thickness;
     options.query.threads = settings_.detector.threads;
-    options.local_rounds = settings_.fail_safe_local_rounds;
     ccd_ = std::make_unique<response::CcdFailSafe>(model_.topology_ptr(), options);
   }
   CRUMPLE_CHECK(settings_.untangle_step > 0 && std::isfinite(settings_.untangle_step),

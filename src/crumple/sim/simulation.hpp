@@ -153,8 +153,6 @@ struct Settings {
   bool fail_safe = true;
   /// The fail-safe's minimum separation δ as a fraction of the thickness h_c (>= 0).
   Scalar fail_safe_separation = 0.1;
-  /// The fail-safe's local rounds between two queries (`FailSafeOptions::local_rounds`, >= 0).
-  int fail_safe_local_rounds = 8;
   /// With `response` on: analyse the intersecting triangle pairs at every frame's start and
   /// untangle them (see the file comment). Costs one exact intersection query per frame until
   /// a frame is found intersection-free with the built-in fail-safe on.
