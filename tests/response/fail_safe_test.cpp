@@ -543,9 +543,6 @@ TEST(FailSafe, RejectsBadOptions) {
   EXPECT_THROW(CcdFailSafe(c.topology, o), Error);
   o = options(-1, 8);
   EXPECT_THROW(CcdFailSafe(c.topology, o), Error);
-  o = options(3, 8);
-  o.local_rounds = -1;
-  EXPECT_THROW(CcdFailSafe(c.topology, o), Error);
 }
 
 /// Two 6 × 6 lattices in one mesh: the lower one in z = 0, the upper one shifted a little in x
@@ -621,7 +618,6 @@ TEST(FailSafe, FirstQueryRestrictedByTheStartProximityGivesTheSameCorrection) {
         FailSafeOptions o = options(3, 8);
         o.min_separation = 0.01;
         o.restricted_share = 1;  // restricted however many vertices it flags
-        o.local_rounds = 0;      // they use the proximity too (tested below): the first query alone
         CcdFailSafe safe(sheets.topology, o);
         end[seeded] = proposed;
         velocity[seeded] = Positions(start.size(), Vec3::Zero());
@@ -647,64 +643,6 @@ TEST(FailSafe, FirstQueryRestrictedByTheStartProximityGivesTheSameCorrection) {
   }
   EXPECT_GE(with_impacts, 14) << "most frames (of 20) must have impacts";
   EXPECT_GE(partly_flagged, 12) << "most restricted queries must leave vertices out";
-}
-
-// Local rounds (`FailSafeOptions::local_rounds`): after an impulse round, the start-proximity
-// pairs holding a vertex the impulses moved are re-tested by the narrow phase and corrected
-// before the next query. A stack as on the sphere's landing skirt: two 6 × 6 sheets 0.04 apart
-// (within R = 0.1) and a third one 0.16 above the middle one (beyond R) falling 0.175 in the
-// frame, through the middle one. The impulses that stop the falling sheet push the middle one
-// down by about 0.044, through the lowest: near pairs the proximity lists (3 queries without
-// local rounds, 2 with them). With and without local rounds the first query finds the same
-// impacts and the corrected motion has no touching pair (an independent query of it); with
-// them the near pairs are answered between queries, in fewer queries.
-TEST(FailSafe, LocalRoundsAnswerNearPairsBetweenQueries) {
-  const Scalar radius = 0.1;
-  int queries[2] = {0, 0};
-  int local = 0;
-  for (std::uint64_t seed = 1; seed <= 4; ++seed) {
-    SCOPED_TRACE(::testing::Message() << "seed " << seed);
-    const TriMesh lattice = shapes::lattice(6, 6);
-    const std::size_t nv = lattice.positions().size();
-    Positions start;
-    std::vector<Face> faces;
-    std::mt19937_64 rng(seed);
-    std::uniform_real_distribution<Scalar> jitter(-0.005, 0.005);
-    for (const Scalar z : {0.0, 0.04, 0.2}) {
-      const auto offset = static_cast<Index>(start.size());
-      for (const Vec3& x : lattice.positions()) {
-        start.push_back(x + Vec3(0.031 * z / 0.04 + jitter(rng), 0.017 * z / 0.04 + jitter(rng), z + jitter(rng)));
-      }
-      for (const Face& f : lattice.topology().faces()) faces.push_back({f[0] + offset, f[1] + offset, f[2] + offset});
-    }
-    const auto topology = TriMesh::create(start, faces).topology_ptr();
-    Positions proposed = start;
-    for (std::size_t i = 2 * nv; i < proposed.size(); ++i) proposed[i].z() -= 0.175;
-    const std::vector<Scalar> inv_mass(start.size(), 1);
-    auto detector = make_detector(MethodSpec::parse("naive"), {.thickness = radius, .threads = 1});
-    detector->set_topology(topology);
-    ContactSet near;
-    detector->update(start, near);
-    const StartProximity proximity{radius, &near};
-    FailSafeStats stats[2];
-    for (const int rounds : {0, 8}) {
-      FailSafeOptions o = options(20, 8);
-      o.min_separation = 0.01;
-      o.local_rounds = rounds;
-      CcdFailSafe safe(topology, o);
-      Positions end = proposed, velocity(start.size(), Vec3::Zero());
-      FailSafeStats& s = stats[rounds > 0];
-      s = safe.apply(start, inv_mass, 1.0 / 60, end, velocity, &proximity);
-      EXPECT_EQ(touching_pairs(topology, start, end), 0u);
-      queries[rounds > 0] += s.queries;
-    }
-    EXPECT_GT(stats[0].impacts, 0u) << "the top sheet must fall through the others";
-    EXPECT_EQ(stats[1].impacts, stats[0].impacts) << "the first query is the same";
-    EXPECT_EQ(stats[0].local_rounds, 0);
-    local += stats[1].local_rounds;
-  }
-  EXPECT_GT(local, 0);
-  EXPECT_LT(queries[1], queries[0]) << "local rounds must spare queries";
 }
 
 // A start proximity that cannot bound the motion (a radius at or below δ (1 + σ)) leaves the

@@ -134,8 +134,7 @@ bool retest(Stencil& s, PositionsView start, std::span<const Vec3> positions, co
 namespace {
 /// `options` with the query's δ set to the fail-safe's (checked first).
 FailSafeOptions checked(FailSafeOptions options) {
-  CRUMPLE_CHECK(options.impulse_rounds >= 0 && options.zone_rounds >= 0 && options.local_rounds >= 0,
-                "fail-safe rounds must be >= 0");
+  CRUMPLE_CHECK(options.impulse_rounds >= 0 && options.zone_rounds >= 0, "fail-safe rounds must be >= 0");
   if (!(options.restricted_share >= 0 && options.restricted_share <= 1)) {
     throw InputError("fail-safe restricted share must be in [0, 1]");
   }
@@ -339,92 +338,25 @@ FailSafeStats CcdFailSafe::apply(PositionsView start, std::span<const Scalar> in
   };
   std::vector<std::array<Index, 5>> last_pairs = pairs_of();
   bool stalled = false;
-  // Local rounds: the pairs of `proximity` (within R at the start), as candidates to re-test.
-  std::vector<Stencil> near;
-  if (proximity != nullptr && proximity->pairs != nullptr && options_.local_rounds > 0) {
-    near.reserve(proximity->pairs->vf.size() + proximity->pairs->ee.size());
-    const auto faces = topology_->faces();
-    for (const VertexFaceContact& c : proximity->pairs->vf) {
-      const Face& f = faces[at(c.face)];
-      Stencil s;
-      s.vertex = {c.vertex, f[0], f[1], f[2]};
-      s.count = 4;
-      near.push_back(s);
-    }
-    for (const EdgeEdgeContact& c : proximity->pairs->ee) {
-      Stencil s;
-      s.vertex = {c.a[0], c.a[1], c.b[0], c.b[1]};
-      s.count = 4;
-      s.edge_edge = true;
-      near.push_back(s);
-    }
-  }
-  std::vector<char> since;  // per vertex: an impulse moved it since the last test (local rounds)
-  if (!near.empty()) since.assign(n, 0);
-  const auto key = [](const Stencil& s) {  // a pair's identity, whatever the order of its edges
-    std::array<Index, 5> k{s.vertex[0], s.vertex[1], s.vertex[2], s.vertex[3], s.edge_edge ? 1 : 0};
-    if (s.edge_edge) {
-      if (k[0] > k[1]) std::swap(k[0], k[1]);
-      if (k[2] > k[3]) std::swap(k[2], k[3]);
-      if (std::pair(k[2], k[3]) < std::pair(k[0], k[1])) {
-        std::swap(k[0], k[2]);
-        std::swap(k[1], k[3]);
-      }
-    }
-    return k;
-  };
-  std::vector<std::array<Index, 5>> keys;
   for (int r = 0; r < options_.impulse_rounds;) {
     bool applied = false;
-    int local = 0;
     for (;;) {
-      if (local == 0) ++r;  // a local round does not count against `impulse_rounds`
+      ++r;
       ++stats.impulse_rounds;
       bool any = false;
       for (const Stencil& s : live_) {
         if (s.normal.squaredNorm() > 0 && correct_velocity(s, inv_mass, u) > 0) {
           mark(s);
-          if (!since.empty()) {
-            for (int k = 0; k < s.count; ++k) since[at(s.vertex[static_cast<std::size_t>(k)])] = 1;
-          }
           any = true;
         }
       }
       applied = applied || any;
       move();
-      if (!any) break;
-      if (stalled) {
-        if (r >= options_.impulse_rounds) break;
-        std::erase_if(live_, [&](Stencil& s) { return !retest(s, start, positions, narrow); });
-        if (live_.empty()) break;
-        ++stats.retested_rounds;  // the next round runs on the re-tested pairs
-        continue;
-      }
-      if (near.empty() || local >= options_.local_rounds) break;
-      // A local round: the next round's pairs are the live impacts among this round's pairs
-      // and the pairs of `proximity` holding a vertex this round moved, each re-tested by the
-      // narrow phase. A near pair none of whose vertices moved since its last test (the last
-      // query, or an earlier local round) keeps that test's answer, not live; so when a local
-      // round finds none live, no near pair is. Every pair so found is a live impact of the
-      // current motion; the pairs farther than R at the start are left to the next query, which
-      // alone ends the stage.
-      ++local;
-      ++stats.local_rounds;
+      if (!stalled || !any || r >= options_.impulse_rounds) break;
       std::erase_if(live_, [&](Stencil& s) { return !retest(s, start, positions, narrow); });
-      keys.clear();
-      for (const Stencil& s : live_) keys.push_back(key(s));
-      std::sort(keys.begin(), keys.end());
-      for (const Stencil& candidate : near) {
-        bool touched = false;
-        for (const Index v : candidate.vertex) touched = touched || since[at(v)] != 0;
-        if (!touched || std::binary_search(keys.begin(), keys.end(), key(candidate))) continue;
-        Stencil s = candidate;
-        if (retest(s, start, positions, narrow) && !touches_tangle_on_both_sides(s, tangle_)) live_.push_back(s);
-      }
-      std::fill(since.begin(), since.end(), 0);
       if (live_.empty()) break;
+      ++stats.retested_rounds;  // the next round runs on the re-tested pairs
     }
-    if (!since.empty()) std::fill(since.begin(), since.end(), 0);
     if (detect(start, positions, stats) == 0) return finish();
     // No impulse since the last query: the motion is that query's, and so would every later
     // round be (each starts from the query's impacts): on to the zones.

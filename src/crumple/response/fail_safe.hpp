@@ -16,9 +16,7 @@
 ///     the time of impact) removes the pair's approaching relative normal displacement,
 ///     Gauss–Seidel, for `impulse_rounds` rounds, a query after each; a round that applies no
 ///     impulse ends the stage, and after a query that returns the last query's pairs again the
-///     rounds run on those pairs alone (re-tested per round) until the next query; with a
-///     `StartProximity`, the rounds between two queries also take the near pairs (within R at
-///     the start) that an impulse may have made live, re-tested (`FailSafeOptions::local_rounds`);
+///     rounds run on those pairs alone (re-tested per round) until the next query;
 ///  2. impact zones (Provot 1997; Bridson et al. 2002, §7.4): the vertices of impacting pairs
 ///     are merged into zones (union–find, zones only grow), and each zone moves rigidly with the
 ///     mass-weighted mean displacement and the rotation of its angular momentum
@@ -58,11 +56,6 @@ struct FailSafeOptions {
   /// contact"). So impulses run until the query is clean, up to this many rounds, before zones.
   int impulse_rounds = 20;
   int zone_rounds = 8;     ///< rounds of impact zones (>= 0)
-  /// With a `StartProximity`: after an impulse round, up to this many further rounds (>= 0)
-  /// before the next query, each on the live impacts among the last round's pairs and the
-  /// start-proximity pairs holding a vertex an impulse moved since the last query, re-tested by
-  /// the narrow phase (`CcdFailSafe::apply`). 0: a query after every round.
-  int local_rounds = 8;
   /// The continuous query's broad phase, threads and narrow-phase options.
   ContinuousOptions query{};
   /// After the first query of a frame, query only the pairs holding a vertex whose proposed
@@ -101,13 +94,10 @@ struct FailSafeStats {
   /// Vertices the first query was restricted to (`StartProximity`; when `first_restricted`).
   std::size_t first_flagged = 0;
   bool first_restricted = false;  ///< the first query was so restricted
-  int impulse_rounds = 0;      ///< impulse rounds run (including `retested_rounds` and `local_rounds`)
+  int impulse_rounds = 0;      ///< impulse rounds run (including `retested_rounds`)
   /// Impulse rounds run on the last query's pairs alone, each re-tested by the narrow phase
   /// instead of queried (after a query returned the pairs of the one before; file comment).
   int retested_rounds = 0;
-  /// Impulse rounds run on re-tested pairs between two queries with a `StartProximity`
-  /// (`FailSafeOptions::local_rounds`; counted in `impulse_rounds`, not against its limit).
-  int local_rounds = 0;
   int zone_rounds = 0;         ///< zone rounds run
   std::size_t zone_vertices = 0;  ///< vertices in impact zones
   std::size_t frozen = 0;      ///< vertices kept at their start positions by the fallback
