@@ -191,6 +191,17 @@ int untangle_statically(const Sheets& s, Positions x, const UntangleOptions& opt
   return untangler.count(x) == 0 && untangler.pinch_pairs() == 0 ? rounds : -1;
 }
 
+/// The intersection contours of each of `sheets` as it is.
+std::vector<Contour> contours_of(std::initializer_list<Sheets> sheets) {
+  std::vector<Contour> out;
+  for (const Sheets& s : sheets) {
+    const auto t = s.topology();
+    const IntersectionAnalysis a = analyse_intersections(*t, s.x, testing::intersecting_triangles(t, s.x));
+    out.insert(out.end(), a.contours.begin(), a.contours.end());
+  }
+  return out;
+}
+
 TEST(Untangle, PullsTheBumpBackThrough) {
   const Sheets s = bump();
   UntangleOptions options;
@@ -246,11 +257,7 @@ TEST(Untangle, LongFoldIsABandPulledBackWithTheSheetHeld) {
   EXPECT_GE(k.crossings.size(), 4 * below.size());
   EXPECT_TRUE(k.band);
   // The other handcrafted curves are no bands: what they cut off is not thin.
-  for (const Sheets& other : {bump(), flap()}) {
-    const auto t = other.topology();
-    const IntersectionAnalysis b = analyse_intersections(*t, other.x, testing::intersecting_triangles(t, other.x));
-    for (const Contour& c : b.contours) EXPECT_FALSE(c.band);
-  }
+  for (const Contour& c : contours_of({bump(), flap()})) EXPECT_FALSE(c.band);
 
   // The pushes alone: the crease goes back over B, and B (the sheet the fold went through) is
   // held where it was.
@@ -365,11 +372,7 @@ TEST(Untangle, ShortFoldBeyondFlatIsShortenedAsWellAsPulled) {
   EXPECT_TRUE(k.short_fold);
   EXPECT_FALSE(k.band);
   // The other handcrafted curves are no short folds (no pinch, or too much inside).
-  for (const Sheets& other : {bump(), flap(), fold(), pinched_star()}) {
-    const auto t = other.topology();
-    const IntersectionAnalysis b = analyse_intersections(*t, other.x, testing::intersecting_triangles(t, other.x));
-    for (const Contour& c : b.contours) EXPECT_FALSE(c.short_fold);
-  }
+  for (const Contour& c : contours_of({bump(), flap(), fold(), pinched_star()})) EXPECT_FALSE(c.short_fold);
 
   // The pushes: pulls of the enclosed ends and, on every crossing, contour minimisation.
   UntangleOptions options;
