@@ -13,6 +13,7 @@
 #include <crumple/sim/time_step.hpp>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cerrno>
@@ -411,7 +412,8 @@ int run_simulate(const SimulateArgs& args) {
     if (side->values.count("push_relaxation")) {
       settings.proximity_relaxation = side->number("push_relaxation", side_path);
       if (!(settings.proximity_relaxation > 0 && settings.proximity_relaxation <= 1)) {
-        throw InputError(side_path.string() + ": push_relaxation must be in (0, 1]");
+        throw ParseError(side_path.string(), {}, "key 'push_relaxation' expects a number in (0, 1], got '" +
+                                                     side->text("push_relaxation", side_path) + "'");
       }
     }
   }
@@ -429,7 +431,9 @@ int run_simulate(const SimulateArgs& args) {
   if (args.motion_retries) settings.motion_retries = *args.motion_retries;
   if (args.push_relaxation) {
     if (!(*args.push_relaxation > 0 && *args.push_relaxation <= 1)) {
-      throw InputError("--push-relaxation expects a number in (0, 1], got " + std::to_string(*args.push_relaxation));
+      char text[32];
+      const auto end = std::to_chars(text, text + sizeof text, *args.push_relaxation).ptr;
+      throw InputError("--push-relaxation expects a number in (0, 1], got " + std::string(text, end));
     }
     settings.proximity_relaxation = *args.push_relaxation;
   }

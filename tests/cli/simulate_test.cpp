@@ -212,6 +212,18 @@ TEST(Simulate, MotionSettingsAreSavedAndKept) {
     EXPECT_NE(r.status, 0) << bad;
     EXPECT_NE(r.out.find("--push-relaxation"), std::string::npos) << r.out;
   }
+  r = run_cli("simulate crumple:n=4 --frames 1 -q --push-relaxation=-1e-9 -o " + (dir / "bad").string());
+  EXPECT_NE(r.out.find("got -1e-09"), std::string::npos) << r.out;
+  // A saved value out of range is refused with the file's name.
+  std::string json = state_json("set");
+  const auto at = json.find("\"push_relaxation\":0.25");
+  ASSERT_NE(at, std::string::npos);
+  json.replace(at, std::string("\"push_relaxation\":0.25").size(), "\"push_relaxation\":2");
+  std::ofstream(dir / "set" / "state.json") << json;
+  r = run_cli("simulate " + (dir / "set" / "state.x3d").string() + " --frames 1 -q");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.out.find("state.json"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("key 'push_relaxation' expects a number in (0, 1], got '2'"), std::string::npos) << r.out;
 }
 
 /// The field `column` (0-based) of a stats.csv line.
