@@ -336,13 +336,14 @@ IntersectionAnalysis analyse_intersections(const Topology& topology, PositionsVi
     k.short_fold = !k.open && k.pairs > 0 && k.pinches.size() >= 2 && !k.inside.empty() &&
                    k.inside.size() <= kShortFoldInside;
   }
-  // A closed curve between pinches is a stretch of a fold folded beyond flat, its two sides
-  // through each other. Flipping it back moves its vertices through faces next to the
-  // intersecting ones, which the contacts and the fail-safe would hold: the vertices one edge
-  // from the curve's crossing edges and crossed faces join the tangle.
+  // A curve ending at a pinch is a fold folded beyond flat there, its two sides through each
+  // other (between two pinches, or from a pinch to the border or to itself). Flipping it back
+  // moves its vertices through faces next to the intersecting ones, which the contacts and the
+  // fail-safe would hold: the vertices one edge from the curve's crossing edges and crossed
+  // faces join the tangle.
   std::vector<char> ring(at(nv), 0);
   for (const Contour& k : out.contours) {
-    if (k.pinches.size() < 2 || k.open) continue;
+    if (k.pinches.empty()) continue;
     for (Index i : k.crossings) {
       const Crossing& c = out.crossings[at(i)];
       for (Index v : topology.edge(c.edge)) ring[at(v)] = 1;

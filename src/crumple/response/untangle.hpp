@@ -64,9 +64,9 @@
 ///    border crossings of a contour that ends at a pinch move by σ_b (`border_step`) instead:
 ///    a curve from the border to a pinch left with no inside (its flap holds a pin) encloses
 ///    nothing, and its border end is the only end that can leave the cloth.
-/// The vertices of inside regions and of intersecting faces, and for a closed curve between two
-/// or more pinches (a stretch of a fold folded beyond flat) every vertex one edge from its
-/// crossing edges and crossed faces, form the *tangle*; a contact or
+/// The vertices of inside regions and of intersecting faces, and for a curve ending at a pinch
+/// (a fold folded beyond flat there) every vertex one edge from its crossing edges and crossed
+/// faces, form the *tangle*; a contact or
 /// impact whose two sides both touch the tangle is exempt from the regular response and the
 /// fail-safe (`touches_tangle_on_both_sides`), which would otherwise hold the intersection in
 /// place.
