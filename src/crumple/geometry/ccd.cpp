@@ -826,6 +826,15 @@ struct Setup {
   bool advance = false;
 };
 
+/// The witnesses' reach, squared, of lengths times `square` (Prepared::square), from the
+/// query's err, its hull's `extent` and the options: a computed ‖F‖ ≤ reach puts the exact point
+/// within reach + ‖err‖. One function for the scalar set-up and the advancement's lanes.
+Scalar reach_squared(const Vec3& err, Scalar square, Scalar extent, const CcdOptions& options) {
+  const Scalar eps = std::max(options.distance_tolerance * extent, 4 * err.maxCoeff());
+  const Scalar reach = options.min_separation * (1 + options.separation_tolerance) + eps + (err * square).norm() / square;
+  return (reach * square) * (reach * square);
+}
+
 /// ccd_checked after its scaling (`m`: the query's largest |coordinate| per axis): the range
 /// check, the filters not in `done`, and what the search needs, in `s`. True when `result` is
 /// the answer.
@@ -859,13 +868,25 @@ bool ccd_filters(CcdPair pair, const CcdPoints& start, const CcdPoints& end, con
     result.outcome = CcdOutcome::kSeparatedDirection;
     return true;
   }
-  const Scalar eps = std::max(options.distance_tolerance * extent, 4 * p.err.maxCoeff());
-  const Scalar tol_t = std::clamp(options.time_tolerance, kMinWidth, Scalar(1));
-  // Witnesses: computed ‖F‖ ≤ reach, so the exact point is within reach + ‖err‖.
-  const Scalar reach = delta * (1 + options.separation_tolerance) + eps + (p.err * p.square).norm() / p.square;
-  s.reach2 = (reach * p.square) * (reach * p.square);  // of lengths times p.square
-  s.tol_t = tol_t;
+  s.reach2 = reach_squared(p.err, p.square, extent, options);
+  s.tol_t = std::clamp(options.time_tolerance, kMinWidth, Scalar(1));
   s.advance = magnitude <= kMaxSignFilterMagnitude && options.max_advance_steps > 0;
+  return false;
+}
+
+/// The result when the advancement `a` answers the query (separated, or a witness at a.t).
+bool advance_answers(const Advance& a, CcdResult& result) {
+  result.advance_steps = a.steps;
+  if (a.state == Advance::kSeparated) {
+    result.outcome = CcdOutcome::kSeparatedAdvancement;
+    return true;
+  }
+  if (a.state == Advance::kWitness) {
+    result.hit = true;
+    result.toi = a.t;
+    result.outcome = CcdOutcome::kHitTolerance;
+    return true;
+  }
   return false;
 }
 
@@ -874,17 +895,7 @@ bool ccd_filters(CcdPair pair, const CcdPoints& start, const CcdPoints& end, con
 /// question open, the bisection of [a.t, 1].
 CcdResult ccd_search(const Setup& s, const Advance& a, const CcdOptions& options) {
   CcdResult result;
-  result.advance_steps = a.steps;
-  if (a.state == Advance::kSeparated) {
-    result.outcome = CcdOutcome::kSeparatedAdvancement;
-    return result;
-  }
-  if (a.state == Advance::kWitness) {
-    result.hit = true;
-    result.toi = a.t;
-    result.outcome = CcdOutcome::kHitTolerance;
-    return result;
-  }
+  if (advance_answers(a, result)) return result;
   result = bisect(s.p, s.reach2, s.tol_t, options.max_boxes, a.t, options.max_time);
   result.advance_steps = a.steps;
   return result;
@@ -955,61 +966,35 @@ CRUMPLE_ADVANCE_LANES Lanes lane_abs(Lanes x) {
   return reinterpret_cast<Lanes>(reinterpret_cast<LaneMask>(x) & ~sign);
 }
 
-/// One query per lane: what `advance` reads, and its loop's state.
+/// One query per lane: its points, what `advance` reads, and its loop's state.
 struct AdvanceLanes {
-  Lanes x0[4][3], dx[4][3];  // the points at t = 0, and end − start
+  Lanes x0[4][3], x1[4][3];  // the points at t = 0 and t = 1, stored by `load_lane`
+  Lanes dx[4][3];            // end − start; this and the rest set by `set_up_lanes`
   Lanes hull[8][3];          // Hull::points: `half` at t = 0, then the same at t = 1
   Lanes a[2][3], b[2][3], c[2][3];  // Prepared's differences
   Lanes err[3], delta, reach2;
   Lanes t, progress, step;  // the loop's t, progress and step (= steps taken; exact in a double)
 };
 
-/// Lane l of `to` from lane `from` of the same lanes (a lane with no query keeps running on a
-/// copy of a live one: finite inputs, results not read).
-void copy_lane(AdvanceLanes& lanes, int from, int to) {
-  const auto copy = [&](Lanes& x) { x[to] = x[from]; };
-  const auto copy3 = [&](Lanes (&x)[3]) {
-    for (Lanes& y : x) copy(y);
-  };
+/// Lane l takes the points of query (start, end): the only values stored one lane at a time.
+void load_lane(AdvanceLanes& lanes, int l, const CcdPoints& start, const CcdPoints& end) {
   for (int i = 0; i < 4; ++i) {
-    copy3(lanes.x0[i]);
-    copy3(lanes.dx[i]);
-  }
-  for (auto& point : lanes.hull) copy3(point);
-  for (int tau = 0; tau < 2; ++tau) {
-    copy3(lanes.a[tau]);
-    copy3(lanes.b[tau]);
-    copy3(lanes.c[tau]);
-  }
-  copy3(lanes.err);
-  for (Lanes* x : {&lanes.delta, &lanes.reach2, &lanes.t, &lanes.progress, &lanes.step}) copy(*x);
-}
-
-/// Lane l starts `advance` on query (start, end) prepared in `s`.
-void load_lane(AdvanceLanes& lanes, int l, const CcdPoints& start, const CcdPoints& end, const Setup& s) {
-  for (int i = 0; i < 4; ++i) {
-    const Vec3 d = end[i] - start[i];
     for (int k = 0; k < 3; ++k) {
       lanes.x0[i][k][l] = start[i][k];
-      lanes.dx[i][k][l] = d[k];
+      lanes.x1[i][k][l] = end[i][k];
     }
   }
-  for (int i = 0; i < s.hull.count; ++i) {
-    for (int k = 0; k < 3; ++k) lanes.hull[i][k][l] = s.hull.points[i][k];
-  }
-  for (int tau = 0; tau < 2; ++tau) {
+}
+
+/// Lane `to` takes the points of lane `from` (a lane with no query keeps running on a copy of
+/// a live one: finite inputs in range, results not read).
+void copy_points(AdvanceLanes& lanes, int from, int to) {
+  for (int i = 0; i < 4; ++i) {
     for (int k = 0; k < 3; ++k) {
-      lanes.a[tau][k][l] = s.p.a[tau][k];
-      lanes.b[tau][k][l] = s.p.b[tau][k];
-      lanes.c[tau][k][l] = s.p.c[tau][k];
+      lanes.x0[i][k][to] = lanes.x0[i][k][from];
+      lanes.x1[i][k][to] = lanes.x1[i][k][from];
     }
   }
-  for (int k = 0; k < 3; ++k) lanes.err[k][l] = s.p.err[k];
-  lanes.delta[l] = s.p.delta;
-  lanes.reach2[l] = s.reach2;
-  lanes.t[l] = 0;
-  lanes.progress[l] = 1;
-  lanes.step[l] = 0;
 }
 
 CRUMPLE_ADVANCE_LANES Lanes floor(Lanes x) {
@@ -1042,6 +1027,84 @@ CRUMPLE_ADVANCE_LANES LaneMask above_at(Lanes time, const Lanes (&s0)[Half], con
   LaneMask all = ~LaneMask{};
   for (int i = 0; i < Half; ++i) all &= (lane_splat(1) - time) * s0[i] + time * s1[i] > limit[i];
   return all;
+}
+
+/// What `set_up_lanes` finds, bit l for lane l.
+struct LaneSetup {
+  unsigned unscaled = 0;  ///< every coordinate within 2^300 (NaN fails), the largest ≥ 2^-300
+  unsigned apart = 0;     ///< the hull filter rejects
+  Lanes extent;           ///< the hull points' largest |coordinate|
+};
+
+/// ccd_filters' set-up of every lane's query from its points (x0, x1), four at once: the
+/// largest |coordinate| per axis (max_abs_coordinates), err and the hull bound (set_bounds),
+/// the hull points, its test and extent (hull_may_touch), the differences (prepare) and
+/// end − start (`advance`'s motion), each by the scalar code's operations (maxima and minima of
+/// finite values do not depend on their order). For the lanes in `unscaled`, ccd_filters runs
+/// these unscaled (Prepared::square = 1) and in_range holds, so their values are its bits; the
+/// other lanes' values are not used.
+template <bool Face>
+CRUMPLE_ADVANCE_LANES LaneSetup set_up_lanes(AdvanceLanes& L, Scalar delta) {
+  constexpr int half = Face ? 3 : 4;
+  const Lanes zero = lane_splat(0);
+  LaneMask finite = ~LaneMask{};
+  Lanes m[3], largest = zero;
+  for (int k = 0; k < 3; ++k) {
+    m[k] = zero;
+    for (int i = 0; i < 4; ++i) {
+      L.dx[i][k] = L.x1[i][k] - L.x0[i][k];
+      const Lanes a0 = lane_abs(L.x0[i][k]), a1 = lane_abs(L.x1[i][k]);
+      finite &= (a0 <= lane_splat(kMaxSignFilterMagnitude)) & (a1 <= lane_splat(kMaxSignFilterMagnitude));
+      m[k] = m[k] < a0 ? a0 : m[k];
+      m[k] = m[k] < a1 ? a1 : m[k];
+    }
+    largest = largest < m[k] ? m[k] : largest;
+    L.err[k] = lane_splat(kCornerErrorFactor) * m[k] + lane_splat(kUnderflowSlack);  // axis_error
+  }
+  L.delta = lane_splat(delta);
+  Lanes lo[3], hi[3];
+  for (int k = 0; k < 3; ++k) {
+    lo[k] = lane_splat(INFINITY);
+    hi[k] = lane_splat(-INFINITY);
+  }
+  for (int tau = 0; tau < 2; ++tau) {
+    const Lanes (&x)[4][3] = tau == 0 ? L.x0 : L.x1;
+    constexpr int kFirst[2][4] = {{0, 0, 1, 1}, {2, 3, 2, 3}};  // EE: a_i − b_j
+    for (int j = 0; j < half; ++j) {
+      const int p = Face ? 0 : kFirst[0][j], q = Face ? j + 1 : kFirst[1][j];
+      Lanes (&d)[3] = L.hull[j + tau * half];
+      for (int k = 0; k < 3; ++k) {
+        d[k] = x[p][k] - x[q][k];
+        lo[k] = d[k] < lo[k] ? d[k] : lo[k];
+        hi[k] = hi[k] < d[k] ? d[k] : hi[k];
+      }
+    }
+    for (int k = 0; k < 3; ++k) {  // prepare
+      if constexpr (Face) {
+        L.a[tau][k] = x[0][k] - x[1][k];
+        L.b[tau][k] = x[1][k] - x[2][k];
+        L.c[tau][k] = x[1][k] - x[3][k];
+      } else {
+        L.a[tau][k] = x[0][k] - x[2][k];
+        L.b[tau][k] = x[1][k] - x[0][k];
+        L.c[tau][k] = x[2][k] - x[3][k];
+      }
+    }
+  }
+  LaneMask apart = LaneMask{};
+  Lanes extent = zero;
+  for (int k = 0; k < 3; ++k) {
+    const Lanes bound = (L.err[k] + L.delta) * lane_splat(1 + 0x1p-50) + lane_splat(kUnderflowSlack);  // round_up
+    apart |= (lo[k] > bound) | (hi[k] < -bound);
+    const Lanes l = lane_abs(lo[k]), h = lane_abs(hi[k]);
+    extent = extent < l ? l : extent;
+    extent = extent < h ? h : extent;
+  }
+  LaneSetup out;
+  out.unscaled = mask_bits(finite & (largest >= lane_splat(kMinUnscaledMagnitude)));
+  out.apart = mask_bits(apart);
+  out.extent = extent;
+  return out;
 }
 
 /// Lanes whose advancement stopped in a step, and how.
@@ -1143,61 +1206,88 @@ CRUMPLE_ADVANCE_LANES Stopped advance_step(AdvanceLanes& L, FourPointBatch& batc
 }
 
 /// ccd_after_direction on each query of `queries` (all of type `Face`), the advancement in lanes.
+/// A query's points are stored in a lane once; its set-up (ccd_filters' values) is computed in
+/// lanes before the step that follows a refill. A query the lanes do not compute unscaled runs
+/// ccd_checked; one the hull filter rejects is answered here; an advancement that ends open
+/// gets its scalar set-up again for the bisection (rare).
 template <bool Face>
 __attribute__((target("avx2"))) CRUMPLE_CCD_FLATTEN void after_direction_lanes(std::span<const detail::CcdQuery> queries,
                                                            const CcdOptions& options, CcdResult* out) {
   constexpr CcdPair pair = Face ? CcdPair::kVertexFace : CcdPair::kEdgeEdge;
   constexpr unsigned done = kCoplanarityDone | kDirectionDone;
   AdvanceLanes lanes{};  // zeroed once: a VF query leaves hull rows 6 and 7 unset
-  std::array<Setup, 4> setups;
   std::array<std::size_t, 4> who{};
   std::size_t next_query = 0;
-  // Lane l takes the next query that reaches the advancement; the others are answered here.
+  // Lane l takes the next query's points.
   const auto refill = [&](int l) {
-    while (next_query < queries.size()) {
-      const std::size_t i = next_query++;
-      const detail::CcdQuery& q = queries[i];
-      const Vec3 m = max_abs_coordinates(q.start, q.end);
-      if (!(m.maxCoeff() >= kMinUnscaledMagnitude && m.maxCoeff() <= kMaxSignFilterMagnitude)) {
-        out[i] = ccd_checked(pair, q.start, q.end, options, done);  // scaled, or out of range
-        continue;
-      }
-      Setup& s = setups[static_cast<std::size_t>(l)];
-      CcdResult decided;
-      if (ccd_filters(pair, q.start, q.end, options, done, m, decided, s)) {
-        out[i] = decided;
-        continue;
-      }
-      if (!s.advance) {
-        out[i] = ccd_search(s, Advance{}, options);
-        continue;
-      }
-      load_lane(lanes, l, q.start, q.end, s);
-      who[static_cast<std::size_t>(l)] = i;
-      return true;
-    }
-    return false;
+    if (next_query == queries.size()) return false;
+    const std::size_t i = next_query++;
+    load_lane(lanes, l, queries[i].start, queries[i].end);
+    who[static_cast<std::size_t>(l)] = i;
+    return true;
   };
-  unsigned live = 0;
-  for (int l = 0; l < 4; ++l) live |= (refill(l) ? 1u : 0u) << l;
-  if (live == 0) return;
-  const int first = __builtin_ctz(live);
-  for (int l = 0; l < 4; ++l) {
-    if ((live >> l & 1u) == 0) copy_lane(lanes, first, l);
-  }
+  unsigned live = 0;   // lanes advancing a query
+  unsigned fresh = 0;  // lanes holding a query not yet set up
+  for (int l = 0; l < 4; ++l) fresh |= (refill(l) ? 1u : 0u) << l;
   const Scalar max_steps = static_cast<Scalar>(options.max_advance_steps);
   FourPointBatch batch;  // filled at every step (not value-initialised there)
-  while (live != 0) {
+  unsigned foreign = 0xFu & ~fresh;  // lanes holding no query, or one outside the lanes' range
+  for (;;) {
+    while (fresh != 0) {
+      const LaneSetup set = set_up_lanes<Face>(lanes, options.min_separation);
+      unsigned again = 0;
+      for (unsigned f = fresh; f != 0; f &= f - 1) {
+        const int l = __builtin_ctz(f);
+        const std::size_t i = who[static_cast<std::size_t>(l)];
+        const unsigned bit = 1u << l;
+        foreign &= ~bit;
+        if ((set.unscaled & bit) == 0) {
+          out[i] = ccd_checked(pair, queries[i].start, queries[i].end, options, done);  // scaled, or out of range
+          foreign |= bit;
+        } else if ((set.apart & bit) != 0) {
+          out[i] = CcdResult{};
+          out[i].outcome = CcdOutcome::kSeparatedHull;
+        } else {
+          const Vec3 err(lanes.err[0][l], lanes.err[1][l], lanes.err[2][l]);
+          lanes.reach2[l] = reach_squared(err, 1, set.extent[l], options);
+          lanes.t[l] = 0;
+          lanes.progress[l] = 1;
+          lanes.step[l] = 0;
+          live |= bit;
+          continue;
+        }
+        if (refill(l)) again |= bit;
+      }
+      fresh = again;
+    }
+    if (live == 0) return;
+    if (foreign != 0) {
+      // A lane with no query keeps running on a copy of a live one (finite inputs in range,
+      // results not read).
+      const int first = __builtin_ctz(live);
+      for (unsigned f = foreign; f != 0; f &= f - 1) copy_points(lanes, first, __builtin_ctz(f));
+      foreign = 0;
+      set_up_lanes<Face>(lanes, options.min_separation);  // the live lanes' values are unchanged
+    }
     const Stopped s = advance_step<Face>(lanes, batch, options.max_time, max_steps);
     for (unsigned ended = s.stop & live; ended != 0; ended &= ended - 1) {
       const int l = __builtin_ctz(ended);
-      const std::size_t li = static_cast<std::size_t>(l);
+      const std::size_t i = who[static_cast<std::size_t>(l)];
       Advance a;
       a.state = (s.separated >> l & 1u) ? Advance::kSeparated : (s.witness >> l & 1u) ? Advance::kWitness : Advance::kOpen;
       a.t = lanes.t[l];
       a.steps = static_cast<std::int64_t>(lanes.step[l]);
-      out[who[li]] = ccd_search(setups[li], a, options);
-      if (!refill(l)) live &= ~(1u << l);
+      CcdResult r;
+      if (!advance_answers(a, r)) {
+        const detail::CcdQuery& q = queries[i];
+        Setup setup;
+        CcdResult decided;
+        ccd_filters(pair, q.start, q.end, options, done, max_abs_coordinates(q.start, q.end), decided, setup);
+        r = ccd_search(setup, a, options);
+      }
+      out[i] = r;
+      live &= ~(1u << l);
+      if (refill(l)) fresh |= 1u << l;
     }
   }
 }
@@ -1262,7 +1352,8 @@ void ccd_after_direction(CcdPair pair, std::span<const CcdQuery> queries, const 
                          bool lanes) {
   check_options(options);
   // The lanes count steps in doubles: exact far beyond any budget that can be spent.
-  if (lanes && ccd_has_avx2() && options.max_advance_steps <= (std::int64_t{1} << 40)) {
+  // Without steps (max_advance_steps = 0) every query goes to the bisection: one at a time.
+  if (lanes && ccd_has_avx2() && options.max_advance_steps > 0 && options.max_advance_steps <= (std::int64_t{1} << 40)) {
     if (pair == CcdPair::kVertexFace) {
       after_direction_lanes<true>(queries, options, out);
     } else {
