@@ -176,6 +176,37 @@ TEST(CcdBatch, DirectionMarksAreTheNarrowPhasesRejections) {
   EXPECT_GT(kept_hits, 50);
 }
 
+TEST(CcdBatch, ANonFiniteCoordinateIsNeverMarkedApart) {
+  // Far apart at both times, so that without the non-finite coordinate both filters would
+  // mark the query apart; with a NaN or an infinity in any of the 24 coordinates neither may
+  // (the query is then `ccd`'s, which reports it out of range).
+  CcdQuery apart;
+  apart.start = {Vec3(0.2, 0.2, 5), Vec3(-1, -1, 0), Vec3(1, -1, 0), Vec3(0, 1, 0)};
+  apart.end = {Vec3(0.3, 0.1, 5), Vec3(-1, -1, 0), Vec3(1, -1, 0), Vec3(0, 1, 0)};
+  for (const bool avx2 : {false, true}) {
+    for (const CcdPair pair : {CcdPair::kVertexFace, CcdPair::kEdgeEdge}) {
+      std::uint8_t index[1] = {0}, mark[1] = {9};
+      detail::ccd_separated_by_a_direction(pair, {&apart, 1}, index, 0.0, mark, avx2);
+      ASSERT_EQ(mark[0], 1) << "the finite query is not a case for the filter";
+      for (const Scalar bad : {std::nan(""), Scalar(INFINITY)}) {
+        for (int slot = 0; slot < 24; ++slot) {
+          CcdQuery q = apart;
+          (slot < 12 ? q.start : q.end)[(slot % 12) / 3][slot % 3] = bad;
+          // Lane 0 carries the bad query; partial batches repeat it in the other lanes, so a
+          // batch of two puts a finite query beside it.
+          const CcdQuery batch[2] = {q, apart};
+          std::uint8_t two[2] = {0, 1}, marks[2] = {9, 9}, coplanar[2] = {9, 9};
+          detail::ccd_separated_by_a_direction(pair, batch, two, 0.0, marks, avx2);
+          detail::ccd_never_coplanar(batch, coplanar, avx2);
+          EXPECT_EQ(marks[0], 0) << "slot " << slot << " value " << bad << " avx2 " << avx2;
+          EXPECT_EQ(coplanar[0], 0) << "slot " << slot << " value " << bad << " avx2 " << avx2;
+          EXPECT_EQ(marks[1], 1) << "slot " << slot;
+        }
+      }
+    }
+  }
+}
+
 TEST(CcdBatch, EveryBatchSizeAndLaneGivesTheSameMarks) {
   const std::vector<CcdQuery> queries = make_queries(7);
   std::vector<std::uint8_t> whole(queries.size());

@@ -473,11 +473,16 @@ CRUMPLE_CCD_LANES void load_lanes(const detail::CcdQuery* q, const std::uint8_t*
     }
   }
   for (int k = 0; k < 3; ++k) {
-    Lanes m = splat(0);
+    // The select drops a NaN unless it comes last; `poison` (x·0 summed: NaN for a NaN or
+    // infinite x) makes m NaN then, so unscaled_lanes leaves the lane to the scalar path.
+    Lanes m = splat(0), poison = splat(0);
     for (int tau = 0; tau < 2; ++tau) {
-      for (int i = 0; i < 4; ++i) m = m > abs(out.x[tau][i][k]) ? m : abs(out.x[tau][i][k]);
+      for (int i = 0; i < 4; ++i) {
+        m = m > abs(out.x[tau][i][k]) ? m : abs(out.x[tau][i][k]);
+        poison += out.x[tau][i][k] * splat(0);
+      }
     }
-    out.m[k] = m;
+    out.m[k] = m + poison;
   }
 }
 
