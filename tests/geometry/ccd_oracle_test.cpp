@@ -710,9 +710,9 @@ TEST(CcdOracle, TightInclusionPortSlidingDegenerateGeneric) { ti_sliding_and_gen
 // The full tally quoted in docs/benchmarks/ccd-narrow.md (minutes):
 // test_geometry --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_TightInclusionPortFull*'
 TEST(CcdOracle, DISABLED_TightInclusionPortFull) {
-  ti_contacts(200);
-  ti_near_misses(200);
-  ti_sliding_and_generic(200, true);
+  ti_contacts(100);
+  ti_near_misses(100);
+  ti_sliding_and_generic(100, true);
 }
 
 }  // namespace
