@@ -8,10 +8,18 @@
 //
 //   ccd_bench [--data DIR] [--max-queries N] [--oracle-sample K] [--scene NAME] [--json]
 //             [--threads 1,2] [--max-boxes N] [--max-advance-steps N] [--profile]
+//             [--vs-tight-inclusion [--rounds R]]
 //
 // Threads claim chunks of 1024 queries dynamically. --max-advance-steps 0 runs bisection alone
 // (the narrow phase before conservative advancement). --profile times each query alone on the
 // 1-thread run and prints, per outcome, its share of the time, ns, steps and boxes per query.
+//
+// --vs-tight-inclusion prints another table: the narrow phase against an independent port of
+// Tight-Inclusion (bench/tight_inclusion_ref.hpp, ipc-toolkit's default settings) on the same
+// queries and thread counts, R rounds alternating which goes first, each pass timed in thread
+// CPU time (CLOCK_THREAD_CPUTIME_ID, summed over the threads). Queries on which the two
+// disagree are sent to the exact oracle (at most K of each kind): a certified contact that
+// either misses is a false negative, and the program fails.
 //
 // δ is 0 and 1e-3 × the first frame's bounding-box diagonal.
 #include <crumple/geometry/ccd.hpp>
@@ -19,6 +27,7 @@
 #include <crumple/mesh/mesh.hpp>
 
 #include "support/ccd_oracle.hpp"
+#include "tight_inclusion_ref.hpp"
 
 #include <algorithm>
 #include <atomic>
@@ -32,6 +41,7 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <time.h>
 #include <vector>
 
 namespace {
@@ -204,6 +214,143 @@ Run run(const std::vector<Query>& queries, const Positions& x0, const Positions&
   return total;
 }
 
+/// Thread CPU ns of one pass of `solve(i)` over queries [0, n) with `threads` threads (chunks of
+/// 1024 claimed dynamically), summed over the threads.
+template <class Solve>
+double cpu_pass(std::size_t n, int threads, const Solve& solve) {
+  std::atomic<std::size_t> next{0};
+  std::atomic<long long> total{0};
+  const auto work = [&] {
+    timespec a{}, b{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
+    for (std::size_t begin; (begin = next.fetch_add(1024)) < n;) {
+      const std::size_t end = std::min(n, begin + 1024);
+      for (std::size_t i = begin; i < end; ++i) solve(i);
+    }
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
+    total += (b.tv_sec - a.tv_sec) * 1000000000LL + (b.tv_nsec - a.tv_nsec);
+  };
+  std::vector<std::thread> pool;
+  for (int k = 1; k < threads; ++k) pool.emplace_back(work);
+  work();
+  for (std::thread& t : pool) t.join();
+  return static_cast<double>(total.load());
+}
+
+/// Oracle verdicts on a sample of queries: certified no contact / certified contact / undecided.
+struct Verdicts {
+  std::size_t count = 0;
+  int no = 0, yes = 0, undecided = 0;
+  std::string str() const {
+    return std::to_string(count) + (count ? " (" + std::to_string(no) + " / " + std::to_string(yes) + " / " +
+                                                std::to_string(undecided) + ")"
+                                          : std::string());
+  }
+};
+
+Verdicts oracle_verdicts(const std::vector<std::size_t>& ids, std::size_t cap, const std::vector<Query>& queries,
+                         const Positions& x0, const Positions& x1, Scalar delta) {
+  Verdicts v;
+  v.count = ids.size();
+  if (ids.empty() || cap == 0) return v;
+  const std::size_t step = std::max<std::size_t>(1, ids.size() / cap);
+  for (std::size_t k = 0; k < ids.size(); k += step) {
+    const Query& q = queries[ids[k]];
+    const bool vf = q.pair == CcdPair::kVertexFace;
+    const CcdPoints s = {x0[q.v[0]], x0[q.v[1]], x0[q.v[2]], x0[q.v[3]]};
+    const CcdPoints e = {x1[q.v[0]], x1[q.v[1]], x1[q.v[2]], x1[q.v[3]]};
+    const auto d = ccd_oracle::decide(ccd_oracle::make_query(vf, s, e, delta), 300);
+    ccd_oracle::Q crossing;
+    if (d.verdict == ccd_oracle::Verdict::kNo) ++v.no;
+    else if (d.verdict == ccd_oracle::Verdict::kYes) ++v.yes;
+    else if (delta == 0 && ccd_oracle::certified_crossing(ccd_oracle::make_points(vf, s, e), crossing)) ++v.yes;
+    else ++v.undecided;
+  }
+  return v;
+}
+
+/// One row of the comparison with Tight-Inclusion; false when the oracle certifies a contact
+/// that one of the two misses.
+bool compare_tight_inclusion(const char* scene, const std::vector<Query>& queries, const Positions& x0,
+                             const Positions& x1, Scalar delta, int threads, int rounds, const geometry::CcdOptions& base,
+                             int oracle_sample) {
+  geometry::CcdOptions options = base;
+  options.min_separation = delta;
+  const ti_ref::Settings ti_settings;  // ipc-toolkit's defaults: δ_tol 1e-6, max_itr 1e7, err per query
+  const std::size_t n = queries.size();
+  std::vector<std::uint8_t> ours(n), theirs(n);
+  std::vector<std::int64_t> ti_boxes(n);
+  std::vector<std::uint8_t> ti_capped(n);
+  const auto points = [&](std::size_t i, CcdPoints& s, CcdPoints& e) {
+    const Query& q = queries[i];
+    s = {x0[q.v[0]], x0[q.v[1]], x0[q.v[2]], x0[q.v[3]]};
+    e = {x1[q.v[0]], x1[q.v[1]], x1[q.v[2]], x1[q.v[3]]};
+  };
+  const auto run_ours = [&] {
+    return cpu_pass(n, threads, [&](std::size_t i) {
+      CcdPoints s, e;
+      points(i, s, e);
+      ours[i] = geometry::ccd(queries[i].pair, s, e, options).hit;
+    });
+  };
+  const auto run_theirs = [&] {
+    return cpu_pass(n, threads, [&](std::size_t i) {
+      CcdPoints s, e;
+      points(i, s, e);
+      const ti_ref::Result r = queries[i].pair == CcdPair::kVertexFace ? ti_ref::vertex_face_ccd(s, e, delta, ti_settings)
+                                                                      : ti_ref::edge_edge_ccd(s, e, delta, ti_settings);
+      theirs[i] = r.hit;
+      ti_boxes[i] = r.boxes;
+      ti_capped[i] = r.output_tolerance > ti_settings.tolerance;
+    });
+  };
+  std::vector<double> ns_ours, ns_theirs, ratios;
+  for (int round = 0; round < rounds; ++round) {
+    double a, b;
+    if (round % 2 == 0) {
+      a = run_ours();
+      b = run_theirs();
+    } else {
+      b = run_theirs();
+      a = run_ours();
+    }
+    const double q = std::max<double>(1, static_cast<double>(n));
+    ns_ours.push_back(a / q);
+    ns_theirs.push_back(b / q);
+    ratios.push_back(b / std::max(a, 1.0));
+    std::fprintf(stderr, "ccd_bench: %s delta %.3g threads %d round %d: %.1f / %.1f ns a query (TI / ours %.1fx)\n",
+                 scene, delta, threads, round + 1, a / q, b / q, ratios.back());
+  }
+  const auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v.empty() ? 0.0 : v[v.size() / 2];
+  };
+  std::vector<std::size_t> ours_only, theirs_only;
+  long long ours_hits = 0, theirs_hits = 0, boxes = 0, capped = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    ours_hits += ours[i];
+    theirs_hits += theirs[i];
+    boxes += ti_boxes[i];
+    capped += ti_capped[i];
+    if (ours[i] && !theirs[i]) ours_only.push_back(i);
+    if (theirs[i] && !ours[i]) theirs_only.push_back(i);
+  }
+  const std::size_t cap = static_cast<std::size_t>(std::max(0, oracle_sample));
+  const Verdicts vo = oracle_verdicts(ours_only, cap, queries, x0, x1, delta);
+  const Verdicts vt = oracle_verdicts(theirs_only, cap, queries, x0, x1, delta);
+  const double ratio = median(ratios);
+  const auto [lo, hi] = std::minmax_element(ratios.begin(), ratios.end());
+  std::printf("| %s | %.3g | %zu | %d | %d | %.0f | %.0f | %.1f (%.1f–%.1f) | %s | %lld | %lld | %.1f | %lld | %s | %s |\n",
+              scene, delta, n, threads, rounds, median(ns_ours), median(ns_theirs), ratio, ratios.empty() ? 0 : *lo,
+              ratios.empty() ? 0 : *hi, ratio >= 10 ? "met" : "not met", ours_hits, theirs_hits,
+              static_cast<double>(boxes) / std::max<double>(1, static_cast<double>(n)), capped, vo.str().c_str(),
+              vt.str().c_str());
+  std::fflush(stdout);
+  if (vo.yes > 0) std::fprintf(stderr, "ccd_bench: %s: the Tight-Inclusion port misses a certified contact\n", scene);
+  if (vt.yes > 0) std::fprintf(stderr, "ccd_bench: %s: the narrow phase misses a certified contact\n", scene);
+  return vo.yes == 0 && vt.yes == 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -211,7 +358,8 @@ int main(int argc, char** argv) {
   std::size_t max_queries = 1000000;
   int oracle_sample = 100;
   std::string only;
-  bool json = false, profile = false;
+  bool json = false, profile = false, vs_ti = false;
+  int rounds = 3;
   std::vector<int> thread_counts{1, 2};
   geometry::CcdOptions base;
   for (int i = 1; i < argc; ++i) {
@@ -229,6 +377,8 @@ int main(int argc, char** argv) {
     else if (a == "--scene") only = value();
     else if (a == "--json") json = true;
     else if (a == "--profile") profile = true;
+    else if (a == "--vs-tight-inclusion") vs_ti = true;
+    else if (a == "--rounds") rounds = std::max(1, std::stoi(value()));
     else if (a == "--max-boxes") base.max_boxes = std::stoll(value());
     else if (a == "--max-advance-steps") base.max_advance_steps = std::stoll(value());
     else if (a == "--threads") {
@@ -238,16 +388,23 @@ int main(int argc, char** argv) {
     } else {
       std::fprintf(stderr,
                    "usage: ccd_bench [--data DIR] [--max-queries N] [--oracle-sample K] [--scene NAME] [--json]\n"
-                   "                 [--threads 1,2] [--max-boxes N] [--max-advance-steps N] [--profile]\n");
+                   "                 [--threads 1,2] [--max-boxes N] [--max-advance-steps N] [--profile]\n"
+                   "                 [--vs-tight-inclusion [--rounds R]]\n");
       return 2;
     }
   }
-  if (!json) {
+  if (vs_ti) {
+    std::printf("| scene | delta | queries | threads | rounds | crumple CPU ns/query | Tight-Inclusion port CPU ns/query "
+                "| ratio, median (min–max) | ≥ 10× | crumple hits | TI hits | TI boxes/query | TI at max_itr "
+                "| crumple-only hits (oracle no / yes / undecided) | TI-only hits (oracle no / yes / undecided) |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  } else if (!json) {
     std::printf("| scene | delta | queries | threads | ns/query | hull | coplanar | direction | advancement-no | bisection-no "
                 "| hits | budget hits | steps/query | boxes/query | oracle sample: FP / yes / undecided |\n");
     std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   }
   std::string profile_table;
+  bool failed = false;
   for (const Scene& scene : kScenes) {
     if (!only.empty() && only != scene.name) continue;
     const std::filesystem::path dir = std::filesystem::path(data) / "sample-scalable-ccd";
@@ -271,6 +428,15 @@ int main(int argc, char** argv) {
     const Scalar diag = compute_bounds(m0.positions).diagonal();
     for (const Scalar delta : {0.0, 1e-3 * diag}) {
       const std::vector<Query> queries = candidates(m0.positions, m1.positions, m0.faces, edges, delta, max_queries);
+      if (vs_ti) {
+        for (const int threads : thread_counts) {
+          if (!compare_tight_inclusion(scene.name, queries, m0.positions, m1.positions, delta, threads, rounds, base,
+                                       oracle_sample)) {
+            failed = true;
+          }
+        }
+        continue;
+      }
       Run one, last;
       for (const int threads : thread_counts) {
         last = run(queries, m0.positions, m1.positions, delta, threads, base, profile && threads == 1);
@@ -344,5 +510,5 @@ int main(int argc, char** argv) {
     std::printf("| scene | delta | outcome | queries | share of time | ns/query | steps/query | boxes/query |\n");
     std::printf("|---|---|---|---|---|---|---|---|\n%s", profile_table.c_str());
   }
-  return 0;
+  return failed ? 1 : 0;
 }
