@@ -222,5 +222,62 @@ TEST(ContactResponse, StackOfContactsConvergesOverPasses) {
   for (int k = 1; k < layers; ++k) EXPECT_NEAR(v[static_cast<std::size_t>(3 * k)].z(), 0, 1e-8);
 }
 
+// The contacts' share of a projective local step: a vertex 0.5 h above a held face gets a force
+// along the normal that grows while the pair stays closer than h, shrinks once it is farther
+// and is gone when it has separated; a held vertex (diagonal 0) takes none, and with both sides
+// free the forces sum to zero.
+TEST(ContactForces, GrowWhileClosePushApartAndReleaseWhenFar) {
+  const Scalar h = 0.1;
+  std::vector<Vec3> x{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0.25, 0.25, 0.5 * h)};
+  const std::vector<Stencil> stencils{vertex_face_stencil(3, {0, 1, 2}, Vec3(0.5, 0.25, 0.25), Vec3::UnitZ())};
+  ContactForceOptions options;
+  options.thickness = h;
+  options.relaxation = 0.5;
+  std::vector<Scalar> lambda(1, 0);
+  // The global step's response: each vertex by its force over its diagonal, times `spread`
+  // (a patch moving as one goes farther than its diagonal says).
+  Scalar spread = 1;
+  const auto update = [&](std::span<const Scalar> diagonal) {
+    std::vector<Vec3> force(x.size(), Vec3::Zero());
+    const auto solve = [&](std::span<const Vec3> f, std::span<Vec3> moved) {
+      for (std::size_t i = 0; i < f.size(); ++i) moved[i] = diagonal[i] > 0 ? Vec3((spread / diagonal[i]) * f[i]) : Vec3::Zero();
+    };
+    update_contact_forces(stencils, x, diagonal, solve, options, lambda, force);
+    return force;
+  };
+  const std::vector<Scalar> held{0, 0, 0, 200};
+  std::vector<Vec3> f = update(held);
+  // λ = ω (h − g) / (1² · 1 / D) = 0.5 · 0.05 · 200.
+  EXPECT_NEAR(lambda[0], 5, 1e-12);
+  EXPECT_EQ(f[3], lambda[0] * Vec3::UnitZ());
+  for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(f[i], Vec3::Zero()) << "held vertex " << i;
+  f = update(held);
+  EXPECT_NEAR(lambda[0], 10, 1e-12) << "still 0.5 h apart: the force grows";
+  x[3].z() = 1.5 * h;
+  f = update(held);
+  EXPECT_NEAR(lambda[0], 5, 1e-12) << "farther than h: it shrinks";
+  f = update(held);
+  EXPECT_EQ(lambda[0], 0) << "clamped at 0";
+  EXPECT_EQ(f[3], Vec3::Zero());
+  f = update(held);
+  EXPECT_EQ(lambda[0], 0) << "a separated pair with no force does not act";
+  // Both sides free: equal and opposite forces, shared over the face by its weights.
+  x[3].z() = 0.5 * h;
+  f = update(std::vector<Scalar>{100, 100, 100, 100});
+  EXPECT_GT(lambda[0], 0);
+  Vec3 sum = Vec3::Zero();
+  for (const Vec3& fi : f) sum += fi;
+  EXPECT_LT(sum.norm(), 1e-12 * lambda[0]);
+  EXPECT_NEAR(f[0].z(), -0.5 * lambda[0], 1e-12);
+  // A response 10 times what the diagonal says: the change is scaled to what the pair asked.
+  lambda[0] = 0;
+  spread = 10;
+  update(held);
+  EXPECT_NEAR(lambda[0], 0.5, 1e-12) << "a tenth of the diagonal's 5";
+  spread = 0.5;
+  update(held);
+  EXPECT_NEAR(lambda[0], 5.5, 1e-12) << "a response below the estimate is not scaled up";
+}
+
 }  // namespace
 }  // namespace crumple::response

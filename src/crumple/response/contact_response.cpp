@@ -287,4 +287,69 @@ ResponseStats resolve_proximity(std::span<const Stencil> stencils, std::span<con
   return stats;
 }
 
+void update_contact_forces(std::span<const Stencil> stencils, std::span<const Vec3> x,
+                           std::span<const Scalar> diagonal,
+                           const std::function<void(std::span<const Vec3>, std::span<Vec3>)>& solve,
+                           const ContactForceOptions& options, std::span<Scalar> lambda, std::span<Vec3> force) {
+  CRUMPLE_CHECK(options.relaxation > 0 && options.relaxation <= 1, "contact force relaxation must be in (0, 1]");
+  CRUMPLE_CHECK(lambda.size() == stencils.size(), "contact forces need one multiplier per stencil");
+  CRUMPLE_CHECK(diagonal.size() == x.size() && force.size() == x.size(), "contact force arrays must have #V entries");
+  const Scalar h = options.thickness;
+  std::vector<Scalar> change(stencils.size(), 0), asked(stencils.size(), 0);
+  std::vector<int> count(x.size(), 0);
+  std::vector<char> acting(stencils.size(), 0);
+  for (std::size_t k = 0; k < stencils.size(); ++k) {
+    const Stencil& s = stencils[k];
+    asked[k] = relative_normal(s, x);  // the gap, for now
+    if (!(asked[k] < h || lambda[k] > 0)) continue;
+    acting[k] = 1;
+    for (int c = 0; c < s.count; ++c) {
+      if (diagonal[at(s.vertex[c])] > 0 && s.weight[c] != 0) ++count[at(s.vertex[c])];
+    }
+  }
+  // The proposed changes, and the gap change each asks for.
+  std::vector<Vec3> proposed(x.size(), Vec3::Zero());
+  bool any = false;
+  for (std::size_t k = 0; k < stencils.size(); ++k) {
+    if (!acting[k]) continue;
+    const Stencil& s = stencils[k];
+    Scalar compliance = 0;
+    for (int c = 0; c < s.count; ++c) {
+      const Scalar d = diagonal[at(s.vertex[c])];
+      if (d > 0) compliance += s.weight[c] * s.weight[c] * count[at(s.vertex[c])] / d;
+    }
+    if (!(compliance > 0)) {
+      change[k] = -lambda[k];
+      asked[k] = 0;
+      continue;
+    }
+    change[k] = std::max<Scalar>(-lambda[k], options.relaxation * (h - asked[k]) / compliance);
+    asked[k] = change[k] * compliance;
+    if (change[k] == 0) continue;
+    any = true;
+    for (int c = 0; c < s.count; ++c) {
+      if (diagonal[at(s.vertex[c])] > 0) proposed[at(s.vertex[c])] += (s.weight[c] * change[k]) * s.normal;
+    }
+  }
+  if (any) {
+    // Their response in the global step; a pair moved farther than it asked takes its share.
+    std::vector<Vec3> moved(x.size(), Vec3::Zero());
+    solve(proposed, moved);
+    for (std::size_t k = 0; k < stencils.size(); ++k) {
+      if (change[k] == 0 || asked[k] == 0) continue;
+      const Scalar got = relative_normal(stencils[k], moved);
+      if (std::abs(got) > std::abs(asked[k])) change[k] *= std::abs(asked[k]) / std::abs(got);
+    }
+  }
+  for (std::size_t k = 0; k < stencils.size(); ++k) {
+    if (!acting[k]) continue;
+    lambda[k] = std::max<Scalar>(0, lambda[k] + change[k]);
+    if (!(lambda[k] > 0)) continue;
+    const Stencil& s = stencils[k];
+    for (int c = 0; c < s.count; ++c) {
+      if (diagonal[at(s.vertex[c])] > 0) force[at(s.vertex[c])] += (s.weight[c] * lambda[k]) * s.normal;
+    }
+  }
+}
+
 }  // namespace crumple::response

@@ -26,6 +26,7 @@
 #include <crumple/mesh/mesh.hpp>
 
 #include <array>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -152,4 +153,27 @@ ResponseStats resolve_proximity(std::span<const Stencil> stencils, std::span<con
                                 std::span<Vec3> positions, std::span<Vec3> velocities,
                                 const ProximityOptions& options);
 
+/// Options of the contact forces of a projective step (`update_contact_forces`).
+struct ContactForceOptions {
+  Scalar thickness = 0;    ///< h: a pair's force grows while its gap is below h, shrinks above
+  Scalar relaxation = 0.5; ///< ω in (0, 1]: the share of the diagonal estimate each update takes
+};
+/// The contacts' part of a projective step's local step (docs/simulation.md, "Contacts in the
+/// projective step"): one update of each stencil's multiplier λ ≥ 0 — the force λ cᵢ n on its
+/// vertex i — at the iterate `x`, then the forces into `force` (added; #V entries). A stencil
+/// acts when its gap g = (Σ cᵢxᵢ)·n is below h or its λ is positive. Its proposed change is
+/// Δλ = ω (h − g) / Σ cᵢ² nᵢ / Dᵢ (clamped so that λ stays ≥ 0), with Dᵢ the system's diagonal
+/// at vertex i (`diagonal`, 0 for a pinned vertex, which takes no force) and nᵢ the number of
+/// acting stencils at vertex i: what would close ω of the shortfall if the global step moved
+/// each vertex by its own force over its diagonal. That estimate is low for forces that push a
+/// whole patch one way (the springs do not resist a patch's translation: up to 1 + 4 (ωh)²
+/// times as far), so the proposed changes' response is measured — `solve` gives the global
+/// step's displacements A⁻¹ f for their forces f — and each Δλ whose pair would move by more
+/// than it asked is scaled down to what it asked. So λ grows while a pair stays closer than h,
+/// shrinks when it is farther and reaches 0 when it separates. `lambda` has one entry per
+/// stencil, kept by the caller between calls (the warm start of the next iteration and step).
+void update_contact_forces(std::span<const Stencil> stencils, std::span<const Vec3> x,
+                           std::span<const Scalar> diagonal,
+                           const std::function<void(std::span<const Vec3>, std::span<Vec3>)>& solve,
+                           const ContactForceOptions& options, std::span<Scalar> lambda, std::span<Vec3> force);
 }  // namespace crumple::response

@@ -500,8 +500,19 @@ class Projective final : public Integrator {
                   "projective max iterations must be >= projective iterations");
     CRUMPLE_CHECK(options.threads >= 0, "threads must be >= 0");
     threads_ = std::min(2, resolve_threads(options.threads));
+    response_ = [this](std::span<const Vec3> force, std::span<Vec3> displacement) {
+      const auto& p = solver_.permutationP().indices();
+      solve_.resize(free_.size());
+      for (std::size_t r = 0; r < free_.size(); ++r) solve_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(r)])] = force[free_[r]];
+      supernodal_.solve(solve_, threads_);
+      std::fill(displacement.begin(), displacement.end(), Vec3::Zero());
+      for (std::size_t r = 0; r < free_.size(); ++r) displacement[free_[r]] = solve_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(r)])];
+    };
   }
   IntegratorKind kind() const override { return IntegratorKind::Projective; }
+  bool takes_contact_forces() const override { return true; }
+  Projective(const Projective&) = delete;
+  Projective& operator=(const Projective&) = delete;
 
   void step(const Model& model, const ForceField& field, State& s, Scalar h) override {
     check_step(model, s, h);
@@ -567,9 +578,15 @@ class Projective final : public Integrator {
       parallel_for_chunks(springs.size(), threads_, spring_grain, [&](std::size_t begin, std::size_t end) {
         spring_pulls(springs, next_, pull_, begin, end);
       });
+      // The contacts' part of the local step: forces on the right-hand side, matrix unchanged.
+      if (contact_forces_) {
+        contact_force_.assign(n, Vec3::Zero());
+        contact_forces_(next_, diagonal_, response_, contact_force_);
+      }
       parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
         for (std::size_t r = begin; r < end; ++r) {
           Vec3 b = base_[r];
+          if (contact_forces_) b += contact_force_[free_[r]];
           for (int e = incident_start_[r]; e < incident_start_[r + 1]; ++e) {
             const int k = incident_[static_cast<std::size_t>(e)];
             if (k >= 0) {
@@ -717,6 +734,11 @@ class Projective final : public Integrator {
     const auto m = static_cast<Eigen::Index>(free_.size());
     Sparse a(m, m);
     a.setFromTriplets(t.begin(), t.end());
+    diagonal_.assign(n, 0);
+    {
+      const Eigen::VectorXd d = a.diagonal();
+      for (std::size_t r = 0; r < free_.size(); ++r) diagonal_[free_[r]] = d[static_cast<Eigen::Index>(r)];
+    }
     {
       const Eigen::SparseMatrix<Scalar, Eigen::RowMajor> rows = a;
       a_rows_.clear();
@@ -802,6 +824,10 @@ class Projective final : public Integrator {
   Rows a_rows_;                // A by free rows, each entry at its column's particle
   std::vector<Vec3> origin_;    // per free row: the inertial prediction y the solves start from
   std::vector<Vec3> next_, older_, tmp_, base_, pull_;
+  std::vector<Scalar> diagonal_;    // per particle: A's diagonal entry, 0 for a pinned one
+  std::vector<Vec3> contact_force_;  // per particle: the contact forces of the iteration
+  std::vector<Vec3> solve_;          // per permuted free row: the contact response's solve
+  ContactSolve response_;            // A⁻¹ over the free particles, for the contact forces
 };
 
 }  // namespace

@@ -34,12 +34,15 @@
 ///    `projective_iterations` local/global iterations (more, up to a cap, until the iterates
 ///    settle within `projective_tolerance` when it is set), v₁ = (x₁ − x₀)/h. Unconditionally stable and dissipative; the springs' own
 ///    damping (along the spring) is not modelled, the hinges' is. Pinned particles move by h v₀.
+///    With contact forces installed (`set_contact_forces`), every local step adds them to the
+///    right-hand side.
 /// Every integrator is deterministic (same input, same bits, whatever the thread count);
 /// projective dynamics' triangular solves run on up to two threads, the rest on one.
 
 #include <crumple/sim/forces.hpp>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -75,9 +78,26 @@ struct IntegratorOptions {
   int threads = 0;
 };
 
+/// The global step's response to forces: displacement = A⁻¹ force over the free particles (#V
+/// entries each; 0 at a pinned particle), A the step's constant system matrix.
+using ContactSolve = std::function<void(std::span<const Vec3> force, std::span<Vec3> displacement)>;
+/// Contact forces inside a projective step: called at every local step with the iterate (#V
+/// positions), the diagonal of the step's constant system matrix per particle (0 for a pinned
+/// one) and the global step's response (`ContactSolve`, one more triangular solve per call);
+/// writes a force per particle (#V, zero where there is none), which the global step adds to
+/// its right-hand side. The factored matrix does not change: the forces are the contacts' share
+/// of the local step (docs/simulation.md, "Contacts in the projective step").
+using ContactForces = std::function<void(std::span<const Vec3> iterate, std::span<const Scalar> diagonal,
+                                         const ContactSolve& solve, std::span<Vec3> force)>;
+
 class Integrator {
  public:
   virtual ~Integrator() = default;
+  /// Whether `set_contact_forces` acts (projective dynamics only).
+  virtual bool takes_contact_forces() const { return false; }
+  /// Installs (or, empty, removes) the contact forces of the following steps; only an
+  /// integrator that `takes_contact_forces` uses them.
+  void set_contact_forces(ContactForces forces) { contact_forces_ = std::move(forces); }
   virtual IntegratorKind kind() const = 0;
   /// Advances `state` (x, v, time) by `dt` seconds (> 0).
   virtual void step(const Model& model, const ForceField& field, State& state, Scalar dt) = 0;
@@ -91,6 +111,7 @@ class Integrator {
  protected:
   int last_iterations_ = 0;
   std::int64_t factorizations_ = 0;
+  ContactForces contact_forces_;
 };
 
 /// The largest step h (s) at which `kind` keeps the linearized motion of `model` at shape `x`

@@ -343,6 +343,27 @@ std::size_t Simulation::retry_search(PositionsView frame_start, std::vector<resp
 }
 
 void Simulation::proximity_steps(const response::ProximityOptions& options) {
+  const bool forces = settings_.contact_forces && integrator_->takes_contact_forces();
+  if (forces) {
+    // The multipliers start at 0 with the frame's contacts and carry over its steps.
+    contact_lambda_.assign(stencils_.size(), 0);
+    response::ContactForceOptions force_options;
+    force_options.thickness = options.thickness;
+    force_options.relaxation = options.relaxation;
+    integrator_->set_contact_forces([this, force_options](std::span<const Vec3> x, std::span<const Scalar> diagonal,
+                                                          const ContactSolve& solve, std::span<Vec3> force) {
+      response::update_contact_forces(stencils_, x, diagonal, solve, force_options, contact_lambda_, force);
+    });
+  }
+  // The integrator keeps no reference to this frame's stencils once the steps are done (or one
+  // of them threw).
+  struct Unset {
+    Integrator* integrator;
+    bool on;
+    ~Unset() {
+      if (on) integrator->set_contact_forces({});
+    }
+  } unset{integrator_.get(), forces};
   for (int k = 0; k < settings_.substeps; ++k) {
     integrate_step();
     const auto start = Clock::now();

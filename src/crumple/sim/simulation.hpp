@@ -145,6 +145,13 @@ struct Settings {
   /// returns into the contacts: at n = 100 that exchange grew from frame ~850 until the pile
   /// heated up (docs/simulation.md, "Energy under contact").
   Scalar proximity_relaxation = 1;
+  /// Proximity model with the projective integrator: the frame's contacts also act inside every
+  /// step, as forces of the local step (`response::update_contact_forces`, relaxation
+  /// `proximity_relaxation`; their multipliers kept through the frame's steps), so the springs
+  /// and the contacts reach a compromise within the step instead of trading the push-outs that
+  /// follow it (docs/simulation.md, "Contacts in the projective step"). The push-outs still run
+  /// after each step. On in the `crumple` scene.
+  bool contact_forces = false;
   /// Largest spread of the particles, as a multiple of the initial one, before the run counts
   /// as diverged (see `DivergenceError`). A cloth's springs keep it near its own size.
   Scalar max_spread_growth = 10;
@@ -318,6 +325,7 @@ class Simulation {
   std::size_t untangle_pulls_ = 0;
   double untangle_ms_ = 0;
   std::vector<response::Stencil> stencils_;
+  std::vector<Scalar> contact_lambda_;  ///< `Settings::contact_forces`: one per stencil
   /// `Settings::motion_search` (Proximity model with response on): its query over the
   /// predicted motion, its scratch, and its counts of the current frame.
   std::unique_ptr<ContinuousQuery> motion_query_;
