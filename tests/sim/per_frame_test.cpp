@@ -289,10 +289,21 @@ TEST(PerFrame, MotionRetryLeavesACoveredFrameAlone) {
 // projective step it stays near its resting energy (a mean of 2.1 J, at most 4.6 J; the flat
 // cloth's jitter holds ~46 J at frame 0, released over the first frames). Intersection-free
 // both ways.
+TEST(PerFrame, CrumpleHasContactForcesAboveOneHundredQuads) {
+  const auto forces = [](const char* spec) { return make_scene(SceneSpec::parse(spec), 1).settings.contact_forces; };
+  EXPECT_FALSE(forces("crumple:n=16"));
+  EXPECT_FALSE(forces("crumple:n=100"));
+  EXPECT_TRUE(forces("crumple:n=101"));
+  EXPECT_TRUE(forces("crumple:n=16,contact-forces=on"));
+  EXPECT_FALSE(forces("crumple:n=101,contact-forces=off"));
+  EXPECT_THROW(forces("crumple:n=16,contact-forces=maybe"), InputError);
+  EXPECT_FALSE(make_scene(SceneSpec::parse("cloth-on-sphere:n=16"), 1).settings.contact_forces);
+}
+
 TEST(PerFrame, ContactForcesKeepAStiffPileCalm) {
   const auto mean_energy = [](bool forces) {
-    Scene s = make_scene(SceneSpec::parse("crumple:n=16,stretch=62500,push-time=2"), 1);
-    EXPECT_TRUE(s.settings.contact_forces) << "the scene's default";
+    Scene s = make_scene(SceneSpec::parse("crumple:n=16,stretch=62500,push-time=2,contact-forces=on"), 1);
+    EXPECT_TRUE(s.settings.contact_forces) << "the scene key";
     s.settings.detector.threads = 1;
     s.settings.contact_forces = forces;
     Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),

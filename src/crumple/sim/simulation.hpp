@@ -150,7 +150,7 @@ struct Settings {
   /// `proximity_relaxation`; their multipliers kept through the frame's steps), so the springs
   /// and the contacts reach a compromise within the step instead of trading the push-outs that
   /// follow it (docs/simulation.md, "Contacts in the projective step"). The push-outs still run
-  /// after each step. On in the `crumple` scene.
+  /// after each step. On in the `crumple` scene above n = 100 (its key `contact-forces`).
   bool contact_forces = false;
   /// Largest spread of the particles, as a multiple of the initial one, before the run counts
   /// as diverged (see `DivergenceError`). A cloth's springs keep it near its own size.
