@@ -431,10 +431,12 @@ int check_frames(int argc, char** argv) {
     step += buffer;
   }
   {
-    char buffer[192];
-    std::snprintf(buffer, sizeof buffer, ", %d steps of %.4g s, search %.3g h_c, motion search %s, motion retries %d, push relaxation %.3g",
+    char buffer[224];
+    std::snprintf(buffer, sizeof buffer,
+                  ", %d steps of %.4g s, search %.3g h_c, motion search %s, motion retries %d, push relaxation %.3g, "
+                  "contact forces %s",
                   settings.substeps, settings.dt, settings.search_factor, settings.motion_search ? "on" : "off",
-                  settings.motion_retries, settings.proximity_relaxation);
+                  settings.motion_retries, settings.proximity_relaxation, settings.contact_forces ? "on" : "off");
     step += buffer;
   }
   std::printf("%s: %d vertices, response %s, fail-safe %s, %s, start: %zu intersecting pairs\n", spec.c_str(),
