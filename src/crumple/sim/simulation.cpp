@@ -352,7 +352,8 @@ void Simulation::proximity_steps(const response::ProximityOptions& options) {
     force_options.relaxation = options.relaxation;
     integrator_->set_contact_forces([this, force_options](std::span<const Vec3> x, std::span<const Scalar> diagonal,
                                                           const ContactSolve& solve, std::span<Vec3> force) {
-      response::update_contact_forces(stencils_, x, diagonal, solve, force_options, contact_lambda_, force);
+      response::update_contact_forces(stencils_, x, diagonal, solve, force_options, contact_lambda_, force,
+                                      contact_scratch_);
     });
   }
   // The integrator keeps no reference to this frame's stencils once the steps are done (or one

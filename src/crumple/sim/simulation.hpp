@@ -326,6 +326,7 @@ class Simulation {
   double untangle_ms_ = 0;
   std::vector<response::Stencil> stencils_;
   std::vector<Scalar> contact_lambda_;  ///< `Settings::contact_forces`: one per stencil
+  response::ContactForceScratch contact_scratch_;  ///< `update_contact_forces`' buffers
   /// `Settings::motion_search` (Proximity model with response on): its query over the
   /// predicted motion, its scratch, and its counts of the current frame.
   std::unique_ptr<ContinuousQuery> motion_query_;
