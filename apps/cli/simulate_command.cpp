@@ -69,7 +69,8 @@ constexpr const char* kDefaultOut = "crumple-out";
 constexpr const char* kStatsHeader =
     "frame,time,integrate_ms,detect_ms,response_ms,vf,ee,tt,collision_share,min_distance,"
     "obstacle_penetration,cg_iterations,corrections,energy,max_speed,min_x,min_y,min_z,max_x,"
-    "max_y,max_z,ccd_ms,ccd_impacts,ccd_frozen,intersecting_pairs,contours,untangle_pulls,pinches";
+    "max_y,max_z,ccd_ms,ccd_impacts,ccd_frozen,intersecting_pairs,contours,untangle_pulls,pinches,"
+    "ccd_zone_vertices,longest_spring";
 
 std::string scenes_help() {
   std::string out = "Built-in scene SPEC, NAME[:key=value,...], or a file (.x3d .obj .ply .off). Scenes:";
@@ -522,7 +523,8 @@ int run_simulate(const SimulateArgs& args) {
         csv_number(s.bounds.max.x()) + "," + csv_number(s.bounds.max.y()) + "," +
         csv_number(s.bounds.max.z()) + "," + csv_number(s.ccd_ms) + "," + std::to_string(s.ccd_impacts) + "," +
         std::to_string(s.ccd_frozen) + "," + std::to_string(s.intersecting_pairs) + "," +
-        std::to_string(s.contours) + "," + std::to_string(s.untangle_pulls) + "," + std::to_string(s.pinches) + "\n";
+        std::to_string(s.contours) + "," + std::to_string(s.untangle_pulls) + "," + std::to_string(s.pinches) + "," +
+        std::to_string(s.ccd_zone_vertices) + "," + csv_number(s.longest_spring) + "\n";
     write_csv(line);
     if (!args.quiet && s.intersecting_pairs == 0 && s.pinches == 0 && summary.last_pairs > 0 &&
         summary.clean_frame < 0) {

@@ -551,6 +551,7 @@ FrameStats Simulation::frame_stats() {
   s.corrections = corrections_;
   s.energy = compute_energy(model_, field_, state_).total();
   for (const Vec3& v : state_.v) s.max_speed = std::max(s.max_speed, v.norm());
+  s.longest_spring = longest_spring_ratio(model_, state_.x);
   if (!state_.x.empty()) s.bounds = compute_bounds(state_.x);
   clear_frame_figures();
   detections_ = 0;

@@ -209,6 +209,8 @@ struct FrameStats {
   std::size_t corrections = 0;      ///< response corrections applied over the frame's steps
   Scalar energy = 0;     ///< total mechanical energy at the frame's end (`compute_energy`, J)
   Scalar max_speed = 0;  ///< largest particle speed at the frame's end (m/s)
+  /// Longest spring at the frame's end, as a multiple of its rest length (`longest_spring_ratio`).
+  Scalar longest_spring = 0;
   Bounds bounds{Vec3::Zero(), Vec3::Zero()};  ///< box of the particles at the frame's end
   /// Intersecting triangle pairs (sharing no vertex) at the frame's end, by the exact `kdop`
   /// detector; -1 when not measured (response or `Settings::untangle` off). After a frame that
