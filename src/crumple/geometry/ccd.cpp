@@ -1324,13 +1324,7 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
 
 namespace detail {
 
-bool ccd_has_avx2() {
-  static const bool yes = [] {
-    __builtin_cpu_init();  // in case the first call comes before libgcc's own initialisation
-    return __builtin_cpu_supports("avx2") != 0;
-  }();
-  return yes;
-}
+bool ccd_has_avx2() { return has_avx2(); }
 
 namespace {
 
