@@ -171,6 +171,7 @@ std::string csv_number(double v) {
 
 struct Summary {
   long long frames = 0;
+  long long written = 0;  // frame files written by this run (`--every`)
   double integrate_ms = 0, detect_ms = 0, response_ms = 0, ccd_ms = 0;
   double share_min = 1, share_max = 0;
   bool hit0 = false, hit30 = false, hit50 = false, hit80 = false;
@@ -273,7 +274,7 @@ void print_summary(const Summary& summary, const sim::Simulation& simulation,
                    bool append, const std::filesystem::path& out) {
   const double n = static_cast<double>(std::max<long long>(summary.frames - 1, 1));
   const auto yes = [](bool b) { return b ? "yes" : "no"; };
-  std::printf("\n  %-28s %lld (%lld written to %s)\n", "frames simulated", summary.frames - 1, summary.frames,
+  std::printf("\n  %-28s %lld (%lld written to %s)\n", "frames simulated", summary.frames - 1, summary.written,
               frames_dir.string().c_str());
   std::printf("  %-28s %.4g s\n", "simulated time", simulation.state().time);
   std::printf("  %-28s %.3f / %.3f / %.3f / %.3f\n", "ms per frame: integrate/detect/response/ccd",
@@ -534,6 +535,7 @@ int run_simulate(const SimulateArgs& args) {
     }
     if ((s.frame - start.frame) % args.every == 0) {
       io::write_mesh(frames_dir / frame_name(s.frame, args.format), simulation->state().x, faces);
+      ++summary.written;
     }
     summary.add(s, settings.detector.thickness);
   };

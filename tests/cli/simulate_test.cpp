@@ -39,6 +39,7 @@ TEST(Simulate, WritesFramesStatsAndState) {
   const auto r = run_cli("simulate hanging-cloth:nx=4,ny=4 --frames 5 -o " + dir.path().string());
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("collision share"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" 5 (6 written to "), std::string::npos) << r.out;
   for (int f = 0; f <= 5; ++f) {
     EXPECT_TRUE(std::filesystem::exists(dir / "frames" / ("00000" + std::to_string(f) + ".obj"))) << f;
   }
@@ -262,6 +263,8 @@ TEST(Simulate, ResponseFromUntanglesAndCountsIntersectingPairs) {
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("response off until frame 200, then on"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("0 intersecting triangle pairs at frame"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" 240 (3 written to "), std::string::npos) << "--every 100: frames 0, 100, 200\n" << r.out;
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir / "on" / "frames"), {}), 3);
   auto lines = read_lines(dir / "on" / "stats.csv");
   ASSERT_EQ(lines.size(), 242u);
   const std::size_t at = lines[0].find(",intersecting_pairs,contours,untangle_pulls,pinches,");
