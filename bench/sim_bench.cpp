@@ -266,18 +266,6 @@ namespace {
 volatile std::sig_atomic_t g_stop_signal = 0;
 extern "C" void on_stop_signal(int signal) { g_stop_signal = signal; }
 
-/// Longest spring of `model` at positions `x`, as a multiple of its rest length (0 without
-/// springs): the stretch that position corrections leave behind.
-double longest_spring_ratio(const Model& model, PositionsView x) {
-  double most = 0;
-  for (const Spring& s : model.springs()) {
-    if (!(s.rest_length > 0)) continue;
-    const double length = (x[static_cast<std::size_t>(s.a)] - x[static_cast<std::size_t>(s.b)]).norm();
-    most = std::max(most, length / s.rest_length);
-  }
-  return most;
-}
-
 /// Seconds between progress lines of `--check-frames`: CRUMPLE_PROGRESS_SECONDS (as for the
 /// `crumple` program) or 10.
 double progress_period() {
@@ -509,7 +497,7 @@ int check_frames(int argc, char** argv) {
     energy = st.energy;
     fastest = std::max(fastest, speed);
     most_energy = std::max(most_energy, energy);
-    stretch = longest_spring_ratio(sim.model(), sim.state().x);
+    stretch = st.longest_spring;
     if (stretch > most_stretch) {
       most_stretch = stretch;
       most_stretch_frame = f;

@@ -69,7 +69,8 @@ constexpr const char* kDefaultOut = "crumple-out";
 constexpr const char* kStatsHeader =
     "frame,time,integrate_ms,detect_ms,response_ms,vf,ee,tt,collision_share,min_distance,"
     "obstacle_penetration,cg_iterations,corrections,energy,max_speed,min_x,min_y,min_z,max_x,"
-    "max_y,max_z,ccd_ms,ccd_impacts,ccd_frozen,intersecting_pairs,contours,untangle_pulls,pinches";
+    "max_y,max_z,ccd_ms,ccd_impacts,ccd_frozen,intersecting_pairs,contours,untangle_pulls,pinches,"
+    "ccd_zone_vertices,longest_spring";
 
 std::string scenes_help() {
   std::string out = "Built-in scene SPEC, NAME[:key=value,...], or a file (.x3d .obj .ply .off). Scenes:";
@@ -170,6 +171,7 @@ std::string csv_number(double v) {
 
 struct Summary {
   long long frames = 0;
+  long long written = 0;  // frame files written by this run (`--every`)
   double integrate_ms = 0, detect_ms = 0, response_ms = 0, ccd_ms = 0;
   double share_min = 1, share_max = 0;
   bool hit0 = false, hit30 = false, hit50 = false, hit80 = false;
@@ -272,7 +274,7 @@ void print_summary(const Summary& summary, const sim::Simulation& simulation,
                    bool append, const std::filesystem::path& out) {
   const double n = static_cast<double>(std::max<long long>(summary.frames - 1, 1));
   const auto yes = [](bool b) { return b ? "yes" : "no"; };
-  std::printf("\n  %-28s %lld (%lld written to %s)\n", "frames simulated", summary.frames - 1, summary.frames,
+  std::printf("\n  %-28s %lld (%lld written to %s)\n", "frames simulated", summary.frames - 1, summary.written,
               frames_dir.string().c_str());
   std::printf("  %-28s %.4g s\n", "simulated time", simulation.state().time);
   std::printf("  %-28s %.3f / %.3f / %.3f / %.3f\n", "ms per frame: integrate/detect/response/ccd",
@@ -522,7 +524,8 @@ int run_simulate(const SimulateArgs& args) {
         csv_number(s.bounds.max.x()) + "," + csv_number(s.bounds.max.y()) + "," +
         csv_number(s.bounds.max.z()) + "," + csv_number(s.ccd_ms) + "," + std::to_string(s.ccd_impacts) + "," +
         std::to_string(s.ccd_frozen) + "," + std::to_string(s.intersecting_pairs) + "," +
-        std::to_string(s.contours) + "," + std::to_string(s.untangle_pulls) + "," + std::to_string(s.pinches) + "\n";
+        std::to_string(s.contours) + "," + std::to_string(s.untangle_pulls) + "," + std::to_string(s.pinches) + "," +
+        std::to_string(s.ccd_zone_vertices) + "," + csv_number(s.longest_spring) + "\n";
     write_csv(line);
     if (!args.quiet && s.intersecting_pairs == 0 && s.pinches == 0 && summary.last_pairs > 0 &&
         summary.clean_frame < 0) {
@@ -532,6 +535,7 @@ int run_simulate(const SimulateArgs& args) {
     }
     if ((s.frame - start.frame) % args.every == 0) {
       io::write_mesh(frames_dir / frame_name(s.frame, args.format), simulation->state().x, faces);
+      ++summary.written;
     }
     summary.add(s, settings.detector.thickness);
   };

@@ -329,7 +329,7 @@ class Simulation:
         """frame, time, integrate_ms, detect_ms, response_ms, ccd_ms, ccd_impacts, ccd_queries,
         ccd_zone_vertices, ccd_frozen, vf, ee, tt, collision_share,
         min_distance, obstacle_penetration, cg_iterations, corrections, energy, max_speed,
-        intersecting_pairs (-1 when not measured), contours, untangle_pulls, untangle_ms."""
+        longest_spring, intersecting_pairs (-1 when not measured), contours, untangle_pulls, untangle_ms."""
     @property
     def positions(self) -> npt.NDArray[np.float64]:
         """(n, 3) copy."""

@@ -23,25 +23,6 @@ namespace {
 
 using SetPtr = std::shared_ptr<const ContactSet>;
 
-/// Byte distance from `a` to `b` (fields of one record).
-py::ssize_t gap(const void* a, const void* b) {
-  return static_cast<const char*>(b) - static_cast<const char*>(a);
-}
-
-/// A column of records: `k` rows of `field`'s type at a stride of the record's size (a view
-/// over the records, no copy). `inner` adds trailing dimensions (shape, byte strides).
-template <class T, class Record>
-py::array column(const std::vector<Record>& records, const T* field,
-                 std::vector<py::ssize_t> inner_shape, std::vector<py::ssize_t> inner_strides,
-                 py::handle owner) {
-  static const T kEmpty[4] = {};
-  std::vector<py::ssize_t> shape{static_cast<py::ssize_t>(records.size())};
-  std::vector<py::ssize_t> strides{static_cast<py::ssize_t>(sizeof(Record))};
-  shape.insert(shape.end(), inner_shape.begin(), inner_shape.end());
-  strides.insert(strides.end(), inner_strides.begin(), inner_strides.end());
-  return readonly_view<T>(records.empty() ? kEmpty : field, std::move(shape), std::move(strides), owner);
-}
-
 /// One kind of contacts of one `Contacts` result; arrays keep the records alive.
 struct VfView {
   SetPtr set;

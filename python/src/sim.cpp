@@ -162,6 +162,7 @@ py::dict stats_dict(const sim::FrameStats& s) {
   d["corrections"] = s.corrections;
   d["energy"] = s.energy;
   d["max_speed"] = s.max_speed;
+  d["longest_spring"] = s.longest_spring;
   d["intersecting_pairs"] = s.intersecting_pairs;
   d["pinches"] = s.pinches;
   d["contours"] = s.contours;
@@ -439,6 +440,7 @@ On divergence raises crumple.DivergenceError; the frames before it stay done.
           "flat_pairs (pairs of one flat patch left out beyond 2 h_c), retries (times the frame ran again: "
           "its own motion brought far pairs within the fail-safe's reach), vf, ee, tt (contacts), collision_share (edges in contact, 0..1), min_distance, "
           "obstacle_penetration (m), cg_iterations, corrections, energy (J), max_speed (m/s), "
+          "longest_spring (the longest spring over its rest length), "
           "intersecting_pairs (intersecting triangle pairs at the frame's end, -1 when not measured: "
           "response or untangle off), pinches (intersecting pairs sharing one vertex, likewise), "
           "contours (intersection contours), untangle_pulls (the "

@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <csignal>
 #include <filesystem>
 #include <fstream>
@@ -24,11 +25,21 @@ using testing::run_cli;
 
 std::size_t count_fields(const std::string& line) { return static_cast<std::size_t>(std::count(line.begin(), line.end(), ',')) + 1; }
 
+/// The field `column` (0-based) of a stats.csv line.
+std::string field(const std::string& line, std::size_t column) {
+  std::stringstream in(line);
+  std::string item;
+  for (std::size_t k = 0; k <= column && std::getline(in, item, ','); ++k) {
+  }
+  return item;
+}
+
 TEST(Simulate, WritesFramesStatsAndState) {
   const testing::TempDir dir;
   const auto r = run_cli("simulate hanging-cloth:nx=4,ny=4 --frames 5 -o " + dir.path().string());
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("collision share"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" 5 (6 written to "), std::string::npos) << r.out;
   for (int f = 0; f <= 5; ++f) {
     EXPECT_TRUE(std::filesystem::exists(dir / "frames" / ("00000" + std::to_string(f) + ".obj"))) << f;
   }
@@ -45,6 +56,21 @@ TEST(Simulate, WritesFramesStatsAndState) {
   const TriMesh last = io::read_mesh(dir / "frames" / "000005.obj");
   EXPECT_EQ(last.positions(), state.positions) << "the last frame is the saved state";
   EXPECT_TRUE(std::filesystem::exists(dir / "state.json"));
+  // The last columns: the fail-safe's zone vertices (no response here: 0) and the longest
+  // spring over its rest length, here that of the saved state.
+  const std::string tail = ",ccd_zone_vertices,longest_spring";
+  ASSERT_GT(lines[0].size(), tail.size());
+  EXPECT_EQ(lines[0].substr(lines[0].size() - tail.size()), tail) << lines[0];
+  Scalar longest = 0;
+  for (std::size_t s = 0; s < state.springs.size(); ++s) {
+    const Vec3 d = state.positions[static_cast<std::size_t>(state.springs[s][0])] -
+                   state.positions[static_cast<std::size_t>(state.springs[s][1])];
+    longest = std::max(longest, d.norm() / state.rest_length[s]);
+  }
+  EXPECT_GT(longest, 1) << "the hanging cloth stretches";
+  const std::size_t columns = count_fields(lines[0]);
+  EXPECT_EQ(field(lines[6], columns - 2), "0") << lines[6];
+  EXPECT_NEAR(std::stod(field(lines[6], columns - 1)), longest, 1e-8 * longest) << lines[6];
 }
 
 /// Simulating N + M frames equals simulating N, then resuming from the saved state for M.
@@ -226,15 +252,6 @@ TEST(Simulate, MotionSettingsAreSavedAndKept) {
   EXPECT_NE(r.out.find("key 'push_relaxation' expects a number in (0, 1], got '2'"), std::string::npos) << r.out;
 }
 
-/// The field `column` (0-based) of a stats.csv line.
-std::string field(const std::string& line, std::size_t column) {
-  std::stringstream in(line);
-  std::string item;
-  for (std::size_t k = 0; k <= column && std::getline(in, item, ','); ++k) {
-  }
-  return item;
-}
-
 // --response-from: the 8x8 hanging cloth falls through itself for 200 frames, then untangles;
 // the column intersecting_pairs counts the pairs (-1 while not measured) down to 0, the column
 // pinches the pairs sharing a vertex (likewise), and the run says when both reach 0. With
@@ -246,11 +263,14 @@ TEST(Simulate, ResponseFromUntanglesAndCountsIntersectingPairs) {
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("response off until frame 200, then on"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("0 intersecting triangle pairs at frame"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" 240 (3 written to "), std::string::npos) << "--every 100: frames 0, 100, 200\n" << r.out;
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir / "on" / "frames"), {}), 3);
   auto lines = read_lines(dir / "on" / "stats.csv");
   ASSERT_EQ(lines.size(), 242u);
-  const std::string header = ",intersecting_pairs,contours,untangle_pulls,pinches";
-  ASSERT_EQ(lines[0].substr(lines[0].size() - header.size()), header) << lines[0];
-  const std::size_t column = count_fields(lines[0]) - 4;
+  const std::size_t at = lines[0].find(",intersecting_pairs,contours,untangle_pulls,pinches,");
+  ASSERT_NE(at, std::string::npos) << lines[0];
+  const auto column =  // intersecting_pairs': the commas before it
+      static_cast<std::size_t>(std::count(lines[0].begin(), lines[0].begin() + static_cast<std::ptrdiff_t>(at) + 1, ','));
   const std::size_t pinches = column + 3;
   EXPECT_EQ(field(lines[200], column), "-1") << "frame 199: no response, not measured";
   EXPECT_EQ(field(lines[201], column), "-1") << "frame 200: the last without response";

@@ -186,5 +186,38 @@ TEST(CcdAdvanceLanes, EveryLaneGivesTheScalarResult) {
   }
 }
 
+TEST(CcdAdvanceLanes, ANonFiniteCoordinateIsNeverAdvancedApart) {
+  // Far apart at both times, so that the lanes' hull test would mark the query apart; with a
+  // NaN or an infinity in any of its 24 coordinates it must leave the lanes for the scalar
+  // path, which reports it a conservative hit (out of range). The finite query beside it in
+  // the lanes keeps its own result.
+  if (!detail::ccd_has_avx2()) GTEST_SKIP() << "no AVX2: the lanes do not run";
+  for (const CcdPair pair : {CcdPair::kVertexFace, CcdPair::kEdgeEdge}) {
+    CcdQuery apart;
+    if (pair == CcdPair::kVertexFace) {
+      apart.start = {Vec3(0.2, 0.2, 5), Vec3(-1, -1, 0), Vec3(1, -1, 0), Vec3(0, 1, 0)};
+      apart.end = {Vec3(0.3, 0.1, 5), Vec3(-1, -1, 0), Vec3(1, -1, 0), Vec3(0, 1, 0)};
+    } else {
+      apart.start = {Vec3(-1, 0, 5), Vec3(1, 0, 5), Vec3(0, -1, 0), Vec3(0, 1, 0)};
+      apart.end = {Vec3(-1, 0.1, 5), Vec3(1, 0.1, 5), Vec3(0, -1, 0), Vec3(0, 1, 0)};
+    }
+    CcdResult finite[1];
+    detail::ccd_after_direction(pair, {&apart, 1}, CcdOptions{}, finite, true);
+    ASSERT_EQ(finite[0].outcome, CcdOutcome::kSeparatedHull) << "the finite query is not a case for the hull test";
+    for (const Scalar bad : {std::nan(""), Scalar(INFINITY), -Scalar(INFINITY)}) {
+      for (int slot = 0; slot < 24; ++slot) {
+        CcdQuery q = apart;
+        (slot < 12 ? q.start : q.end)[(slot % 12) / 3][slot % 3] = bad;
+        const CcdQuery batch[2] = {q, apart};
+        CcdResult out[2];
+        detail::ccd_after_direction(pair, batch, CcdOptions{}, out, true);
+        EXPECT_TRUE(out[0].hit) << "slot " << slot << " value " << bad;
+        EXPECT_EQ(out[0].outcome, CcdOutcome::kHitOutOfRange) << "slot " << slot << " value " << bad;
+        EXPECT_EQ(out[1].outcome, CcdOutcome::kSeparatedHull) << "slot " << slot;
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace crumple::geometry

@@ -35,9 +35,11 @@ def test_scene_run_same_positions_as_cli_simulate(tmp_path, cli):
     header = csv[0].split(",")
     last = dict(zip(header, csv[-1].split(",")))
     assert int(last["frame"]) == 3
-    for key in ("vf", "ee", "cg_iterations", "corrections", "ccd_impacts", "ccd_frozen"):
+    for key in ("vf", "ee", "cg_iterations", "corrections", "ccd_impacts", "ccd_frozen", "ccd_zone_vertices"):
         assert int(last[key]) == stats[key][-1], key
-    assert float(last["energy"]) == pytest.approx(stats["energy"][-1], rel=1e-8)  # 9 digits
+    for key in ("energy", "longest_spring"):
+        assert float(last[key]) == pytest.approx(stats[key][-1], rel=1e-8), key  # 9 digits
+    assert stats["longest_spring"].dtype == np.float64 and (stats["longest_spring"] > 0).all()
 
 
 def test_arrays_and_settings():

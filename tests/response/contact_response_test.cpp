@@ -237,12 +237,13 @@ TEST(ContactForces, GrowWhileClosePushApartAndReleaseWhenFar) {
   // The global step's response: each vertex by its force over its diagonal, times `spread`
   // (a patch moving as one goes farther than its diagonal says).
   Scalar spread = 1;
+  ContactForceScratch scratch;  // reused by every update, as the simulation does
   const auto update = [&](std::span<const Scalar> diagonal) {
     std::vector<Vec3> force(x.size(), Vec3::Zero());
     const auto solve = [&](std::span<const Vec3> f, std::span<Vec3> moved) {
       for (std::size_t i = 0; i < f.size(); ++i) moved[i] = diagonal[i] > 0 ? Vec3((spread / diagonal[i]) * f[i]) : Vec3::Zero();
     };
-    update_contact_forces(stencils, x, diagonal, solve, options, lambda, force);
+    update_contact_forces(stencils, x, diagonal, solve, options, lambda, force, scratch);
     return force;
   };
   const std::vector<Scalar> held{0, 0, 0, 200};

@@ -423,6 +423,18 @@ using LaneMask = long long __attribute__((vector_size(32)));
 #define CRUMPLE_CCD_LANES inline __attribute__((always_inline))
 
 CRUMPLE_CCD_LANES Lanes splat(Scalar x) { return Lanes{x, x, x, x}; }
+
+/// The one range test of both lane paths (the filters' `load_lanes`, the advancement's
+/// `set_up_lanes`), lane by lane on an input coordinate's magnitude |x|: clears the lanes of
+/// `in_range` where |x| > 2^300 (kMaxSignFilterMagnitude) or x is not finite (NaN compares
+/// false, ∞ exceeds the bound). A lane runs its query only while all 24 coordinates pass; any
+/// other query is left to the scalar path, whose own range test (`in_range`) makes a non-finite
+/// input a conservative hit. So a non-finite coordinate can never make a pair be marked apart.
+/// (By reference and target-neutral: it inlines into the AVX2 functions too.)
+CRUMPLE_CCD_LANES void keep_in_range(LaneMask& in_range, const Lanes& magnitude) {
+  in_range &= magnitude <= Lanes{kMaxSignFilterMagnitude, kMaxSignFilterMagnitude, kMaxSignFilterMagnitude,
+                                 kMaxSignFilterMagnitude};
+}
 CRUMPLE_CCD_LANES Lanes abs(Lanes x) {
   const LaneMask sign = reinterpret_cast<LaneMask>(splat(-0.0));
   return reinterpret_cast<Lanes>(reinterpret_cast<LaneMask>(x) & ~sign);
@@ -456,10 +468,12 @@ CRUMPLE_CCD_LANES void certified_sign(const DetLanes* d, int n, LaneMask& pos, L
 }
 
 /// The points of queries q[index[0..3]] (lanes past `count` repeat the first), x[τ][point][axis],
-/// and per axis their largest |coordinate| (max_abs_coordinates).
+/// per axis their largest |coordinate| (max_abs_coordinates), and the lanes whose every
+/// coordinate passes `keep_in_range`.
 struct QueryLanes {
   Lanes x[2][4][3];
   Lanes m[3];
+  LaneMask in_range;
 };
 
 CRUMPLE_CCD_LANES void load_lanes(const detail::CcdQuery* q, const std::uint8_t* index, std::size_t count,
@@ -472,26 +486,27 @@ CRUMPLE_CCD_LANES void load_lanes(const detail::CcdQuery* q, const std::uint8_t*
       out.x[1][i][k] = Lanes{l[0]->end[i][k], l[1]->end[i][k], l[2]->end[i][k], l[3]->end[i][k]};
     }
   }
+  out.in_range = ~LaneMask{};
   for (int k = 0; k < 3; ++k) {
-    // The select drops a NaN unless it comes last; `poison` (x·0 summed: NaN for a NaN or
-    // infinite x) makes m NaN then, so unscaled_lanes leaves the lane to the scalar path.
-    Lanes m = splat(0), poison = splat(0);
+    Lanes m = splat(0);  // the lanes out of range may drop a NaN here: their m is not used
     for (int tau = 0; tau < 2; ++tau) {
       for (int i = 0; i < 4; ++i) {
-        m = m > abs(out.x[tau][i][k]) ? m : abs(out.x[tau][i][k]);
-        poison += out.x[tau][i][k] * splat(0);
+        const Lanes a = abs(out.x[tau][i][k]);
+        m = m > a ? m : a;
+        keep_in_range(out.in_range, a);
       }
     }
-    out.m[k] = m + poison;
+    out.m[k] = m;
   }
 }
 
-/// Lanes whose query `ccd` computes unscaled, with every filter: largest |coordinate| in
-/// [2^-300, 2^300] (0, where no filter rejects, is left out too). NaN compares false.
+/// Lanes whose query `ccd` computes unscaled, with every filter: every coordinate in range
+/// (`keep_in_range`), the largest |coordinate| ≥ 2^-300 (0, where no filter rejects, is left
+/// out too).
 CRUMPLE_CCD_LANES LaneMask unscaled_lanes(const QueryLanes& q) {
   Lanes m = q.m[0] > q.m[1] ? q.m[0] : q.m[1];
   m = m > q.m[2] ? m : q.m[2];
-  return (m >= splat(kMinUnscaledMagnitude)) & (m <= splat(kMaxSignFilterMagnitude));
+  return q.in_range & (m >= splat(kMinUnscaledMagnitude));
 }
 
 CRUMPLE_CCD_LANES unsigned lane_bits(LaneMask yes, std::size_t count) {
@@ -1036,7 +1051,7 @@ CRUMPLE_ADVANCE_LANES LaneMask above_at(Lanes time, const Lanes (&s0)[Half], con
 
 /// What `set_up_lanes` finds, bit l for lane l.
 struct LaneSetup {
-  unsigned unscaled = 0;  ///< every coordinate within 2^300 (NaN fails), the largest ≥ 2^-300
+  unsigned unscaled = 0;  ///< every coordinate in range (`keep_in_range`), the largest ≥ 2^-300
   unsigned apart = 0;     ///< the hull filter rejects
   Lanes extent;           ///< the hull points' largest |coordinate|
 };
@@ -1052,14 +1067,15 @@ template <bool Face>
 CRUMPLE_ADVANCE_LANES LaneSetup set_up_lanes(AdvanceLanes& L, Scalar delta) {
   constexpr int half = Face ? 3 : 4;
   const Lanes zero = lane_splat(0);
-  LaneMask finite = ~LaneMask{};
+  LaneMask in_range = ~LaneMask{};
   Lanes m[3], largest = zero;
   for (int k = 0; k < 3; ++k) {
     m[k] = zero;
     for (int i = 0; i < 4; ++i) {
       L.dx[i][k] = L.x1[i][k] - L.x0[i][k];
       const Lanes a0 = lane_abs(L.x0[i][k]), a1 = lane_abs(L.x1[i][k]);
-      finite &= (a0 <= lane_splat(kMaxSignFilterMagnitude)) & (a1 <= lane_splat(kMaxSignFilterMagnitude));
+      keep_in_range(in_range, a0);
+      keep_in_range(in_range, a1);
       m[k] = m[k] < a0 ? a0 : m[k];
       m[k] = m[k] < a1 ? a1 : m[k];
     }
@@ -1106,7 +1122,7 @@ CRUMPLE_ADVANCE_LANES LaneSetup set_up_lanes(AdvanceLanes& L, Scalar delta) {
     extent = extent < h ? h : extent;
   }
   LaneSetup out;
-  out.unscaled = mask_bits(finite & (largest >= lane_splat(kMinUnscaledMagnitude)));
+  out.unscaled = mask_bits(in_range & (largest >= lane_splat(kMinUnscaledMagnitude)));
   out.apart = mask_bits(apart);
   out.extent = extent;
   return out;
@@ -1308,13 +1324,7 @@ CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const 
 
 namespace detail {
 
-bool ccd_has_avx2() {
-  static const bool yes = [] {
-    __builtin_cpu_init();  // in case the first call comes before libgcc's own initialisation
-    return __builtin_cpu_supports("avx2") != 0;
-  }();
-  return yes;
-}
+bool ccd_has_avx2() { return has_avx2(); }
 
 namespace {
 

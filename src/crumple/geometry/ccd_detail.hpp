@@ -20,7 +20,7 @@ struct CcdQuery {
   CcdPoints start, end;
 };
 
-/// Whether the four-lane AVX2 kernel runs on this processor.
+/// Whether the four-lane AVX2 kernel runs on this processor (`has_avx2`, kernel_batch.hpp).
 bool ccd_has_avx2();
 
 /// `out[i]` = 1 when `ccd` at δ = 0 on `queries[i]` (either pair type: the test does not depend

@@ -290,14 +290,20 @@ ResponseStats resolve_proximity(std::span<const Stencil> stencils, std::span<con
 void update_contact_forces(std::span<const Stencil> stencils, std::span<const Vec3> x,
                            std::span<const Scalar> diagonal,
                            const std::function<void(std::span<const Vec3>, std::span<Vec3>)>& solve,
-                           const ContactForceOptions& options, std::span<Scalar> lambda, std::span<Vec3> force) {
+                           const ContactForceOptions& options, std::span<Scalar> lambda, std::span<Vec3> force,
+                           ContactForceScratch& scratch) {
   CRUMPLE_CHECK(options.relaxation > 0 && options.relaxation <= 1, "contact force relaxation must be in (0, 1]");
   CRUMPLE_CHECK(lambda.size() == stencils.size(), "contact forces need one multiplier per stencil");
   CRUMPLE_CHECK(diagonal.size() == x.size() && force.size() == x.size(), "contact force arrays must have #V entries");
   const Scalar h = options.thickness;
-  std::vector<Scalar> change(stencils.size(), 0), asked(stencils.size(), 0);
-  std::vector<int> count(x.size(), 0);
-  std::vector<char> acting(stencils.size(), 0);
+  std::vector<Scalar>& change = scratch.change;
+  std::vector<Scalar>& asked = scratch.asked;
+  std::vector<int>& count = scratch.count;
+  std::vector<char>& acting = scratch.acting;
+  change.assign(stencils.size(), 0);
+  asked.assign(stencils.size(), 0);
+  count.assign(x.size(), 0);
+  acting.assign(stencils.size(), 0);
   for (std::size_t k = 0; k < stencils.size(); ++k) {
     const Stencil& s = stencils[k];
     asked[k] = relative_normal(s, x);  // the gap, for now
@@ -308,7 +314,8 @@ void update_contact_forces(std::span<const Stencil> stencils, std::span<const Ve
     }
   }
   // The proposed changes, and the gap change each asks for.
-  std::vector<Vec3> proposed(x.size(), Vec3::Zero());
+  std::vector<Vec3>& proposed = scratch.proposed;
+  proposed.assign(x.size(), Vec3::Zero());
   bool any = false;
   for (std::size_t k = 0; k < stencils.size(); ++k) {
     if (!acting[k]) continue;
@@ -333,7 +340,8 @@ void update_contact_forces(std::span<const Stencil> stencils, std::span<const Ve
   }
   if (any) {
     // Their response in the global step; a pair moved farther than it asked takes its share.
-    std::vector<Vec3> moved(x.size(), Vec3::Zero());
+    std::vector<Vec3>& moved = scratch.moved;
+    moved.assign(x.size(), Vec3::Zero());
     solve(proposed, moved);
     for (std::size_t k = 0; k < stencils.size(); ++k) {
       if (change[k] == 0 || asked[k] == 0) continue;

@@ -158,6 +158,15 @@ struct ContactForceOptions {
   Scalar thickness = 0;    ///< h: a pair's force grows while its gap is below h, shrinks above
   Scalar relaxation = 0.5; ///< ω in (0, 1]: the share of the diagonal estimate each update takes
 };
+/// Buffers of `update_contact_forces`, kept by its caller between calls (it runs at every
+/// iteration of every step; each call sizes and clears them, so what they hold between calls
+/// does not matter).
+struct ContactForceScratch {
+  std::vector<Scalar> change, asked;  ///< per stencil: its Δλ, and the gap change it asks for
+  std::vector<char> acting;           ///< per stencil
+  std::vector<int> count;             ///< per vertex: nᵢ
+  std::vector<Vec3> proposed, moved;  ///< per vertex: the proposed forces, their displacements
+};
 /// The contacts' part of a projective step's local step (docs/simulation.md, "Contacts in the
 /// projective step"): one update of each stencil's multiplier λ ≥ 0 — the force λ cᵢ n on its
 /// vertex i — at the iterate `x`, then the forces into `force` (added; #V entries). A stencil
@@ -175,5 +184,6 @@ struct ContactForceOptions {
 void update_contact_forces(std::span<const Stencil> stencils, std::span<const Vec3> x,
                            std::span<const Scalar> diagonal,
                            const std::function<void(std::span<const Vec3>, std::span<Vec3>)>& solve,
-                           const ContactForceOptions& options, std::span<Scalar> lambda, std::span<Vec3> force);
+                           const ContactForceOptions& options, std::span<Scalar> lambda, std::span<Vec3> force,
+                           ContactForceScratch& scratch);
 }  // namespace crumple::response

@@ -149,4 +149,13 @@ Vec3 linear_momentum(const Model& model, std::span<const Vec3> v) {
   return p;
 }
 
+Scalar longest_spring_ratio(const Model& model, std::span<const Vec3> x) {
+  Scalar most = 0;
+  for (const Spring& s : model.springs()) {
+    if (!(s.rest_length > 0)) continue;
+    most = std::max(most, (x[at(s.a)] - x[at(s.b)]).norm() / s.rest_length);
+  }
+  return most;
+}
+
 }  // namespace crumple::sim

@@ -69,4 +69,9 @@ Energy compute_energy(const Model& model, const ForceField& field, const State& 
 /// Linear momentum Σ m v of the free particles (kg·m/s).
 Vec3 linear_momentum(const Model& model, std::span<const Vec3> v);
 
+/// The longest spring at positions `x` (#V), as a multiple of its rest length: the largest
+/// |x_a − x_b| / L over the springs with L > 0 (0 without such springs). The stretch that the
+/// position corrections leave behind.
+Scalar longest_spring_ratio(const Model& model, std::span<const Vec3> x);
+
 }  // namespace crumple::sim

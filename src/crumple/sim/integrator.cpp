@@ -1,5 +1,6 @@
 #include <crumple/core/error.hpp>
 #include <crumple/core/parallel.hpp>
+#include <crumple/geometry/kernel_batch.hpp>
 #include <crumple/sim/integrator.hpp>
 #include <crumple/sim/supernodal_detail.hpp>
 
@@ -359,8 +360,7 @@ __attribute__((target("avx2"))) void spring_pulls_avx2(std::span<const Spring> s
 void spring_pulls(std::span<const Spring> springs, const std::vector<Vec3>& x, std::vector<Vec3>& pull,
                   std::size_t begin, std::size_t end) {
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(CRUMPLE_SANITIZED)
-  static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2) {
+  if (geometry::has_avx2()) {
     spring_pulls_avx2(springs, x, pull, begin, end);
     return;
   }

@@ -352,7 +352,8 @@ void Simulation::proximity_steps(const response::ProximityOptions& options) {
     force_options.relaxation = options.relaxation;
     integrator_->set_contact_forces([this, force_options](std::span<const Vec3> x, std::span<const Scalar> diagonal,
                                                           const ContactSolve& solve, std::span<Vec3> force) {
-      response::update_contact_forces(stencils_, x, diagonal, solve, force_options, contact_lambda_, force);
+      response::update_contact_forces(stencils_, x, diagonal, solve, force_options, contact_lambda_, force,
+                                      contact_scratch_);
     });
   }
   // The integrator keeps no reference to this frame's stencils once the steps are done (or one
@@ -550,6 +551,7 @@ FrameStats Simulation::frame_stats() {
   s.corrections = corrections_;
   s.energy = compute_energy(model_, field_, state_).total();
   for (const Vec3& v : state_.v) s.max_speed = std::max(s.max_speed, v.norm());
+  s.longest_spring = longest_spring_ratio(model_, state_.x);
   if (!state_.x.empty()) s.bounds = compute_bounds(state_.x);
   clear_frame_figures();
   detections_ = 0;

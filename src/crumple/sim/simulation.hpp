@@ -209,6 +209,8 @@ struct FrameStats {
   std::size_t corrections = 0;      ///< response corrections applied over the frame's steps
   Scalar energy = 0;     ///< total mechanical energy at the frame's end (`compute_energy`, J)
   Scalar max_speed = 0;  ///< largest particle speed at the frame's end (m/s)
+  /// Longest spring at the frame's end, as a multiple of its rest length (`longest_spring_ratio`).
+  Scalar longest_spring = 0;
   Bounds bounds{Vec3::Zero(), Vec3::Zero()};  ///< box of the particles at the frame's end
   /// Intersecting triangle pairs (sharing no vertex) at the frame's end, by the exact `kdop`
   /// detector; -1 when not measured (response or `Settings::untangle` off). After a frame that
@@ -326,6 +328,7 @@ class Simulation {
   double untangle_ms_ = 0;
   std::vector<response::Stencil> stencils_;
   std::vector<Scalar> contact_lambda_;  ///< `Settings::contact_forces`: one per stencil
+  response::ContactForceScratch contact_scratch_;  ///< `update_contact_forces`' buffers
   /// `Settings::motion_search` (Proximity model with response on): its query over the
   /// predicted motion, its scratch, and its counts of the current frame.
   std::unique_ptr<ContinuousQuery> motion_query_;
