@@ -1,10 +1,14 @@
 #include <crumple/core/error.hpp>
+#include <crumple/core/parallel.hpp>
 #include <crumple/response/obstacle.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
+#include <utility>
 #include <variant>
+#include <vector>
 
 namespace crumple::response {
 
@@ -106,34 +110,80 @@ FarTest far_test(const Shape& shape, Scalar reach) {
 }
 }  // namespace
 
+namespace {
+/// One obstacle at one time: what every vertex's test and push-out reads.
+struct Posed {
+  Shape shape;
+  Vec3 velocity;
+  FarTest test;
+  Scalar margin, friction;
+};
+
+Posed pose(const Obstacle& obstacle, Scalar t) {
+  Shape shape = obstacle.at_time(t);
+  const FarTest test = far_test(shape, obstacle.margin);
+  return {std::move(shape), obstacle.velocity_at(t), test, obstacle.margin, obstacle.friction};
+}
+
+/// The response of one vertex to one posed obstacle (the file comment of the header); true when
+/// it was corrected.
+template <class S>
+bool push_out(const Posed& o, const S& typed, Vec3& x, Vec3& v) {
+  if (o.test.far(x)) return false;
+  const SurfaceQuery q = query(typed, x);
+  if (!(q.distance < o.margin)) return false;
+  x += (o.margin - q.distance) * q.normal;
+  const Vec3 vr = v - o.velocity;
+  const Scalar vn = vr.dot(q.normal);
+  if (vn < 0) {
+    Vec3 vt = vr - vn * q.normal;
+    const Scalar vt_len = vt.norm();
+    const Scalar reduced = std::max<Scalar>(0, vt_len - o.friction * (-vn));
+    vt = vt_len > 0 ? Vec3(vt * (reduced / vt_len)) : Vec3::Zero();
+    v = o.velocity + vt;
+  }
+  return true;
+}
+
+bool push_out(const Posed& o, Vec3& x, Vec3& v) {
+  return std::visit([&](const auto& typed) { return push_out(o, typed, x, v); }, o.shape);
+}
+}  // namespace
+
 std::size_t resolve_obstacle(const Obstacle& obstacle, Scalar t, std::span<const Scalar> inv_mass,
                              std::span<Vec3> x, std::span<Vec3> v) {
   CRUMPLE_CHECK(x.size() == inv_mass.size() && v.size() == inv_mass.size(),
                 "obstacle response arrays must have #V entries");
-  const Shape shape = obstacle.at_time(t);
-  const Vec3 vo = obstacle.velocity_at(t);
-  const FarTest test = far_test(shape, obstacle.margin);
+  const Posed o = pose(obstacle, t);
   std::size_t count = 0;
   std::visit(
       [&](const auto& typed) {
         for (std::size_t i = 0; i < x.size(); ++i) {
-          if (inv_mass[i] == 0 || test.far(x[i])) continue;
-          const SurfaceQuery q = query(typed, x[i]);
-          if (!(q.distance < obstacle.margin)) continue;
-          ++count;
-          x[i] += (obstacle.margin - q.distance) * q.normal;
-          const Vec3 vr = v[i] - vo;
-          const Scalar vn = vr.dot(q.normal);
-          if (vn < 0) {
-            Vec3 vt = vr - vn * q.normal;
-            const Scalar vt_len = vt.norm();
-            const Scalar reduced = std::max<Scalar>(0, vt_len - obstacle.friction * (-vn));
-            vt = vt_len > 0 ? Vec3(vt * (reduced / vt_len)) : Vec3::Zero();
-            v[i] = vo + vt;
-          }
+          if (inv_mass[i] != 0 && push_out(o, typed, x[i], v[i])) ++count;
         }
       },
-      shape);
+      o.shape);
+  return count;
+}
+
+std::size_t resolve_obstacles(std::span<const Obstacle> obstacles, Scalar t, std::span<const Scalar> inv_mass,
+                              std::span<Vec3> x, std::span<Vec3> v, int threads) {
+  CRUMPLE_CHECK(x.size() == inv_mass.size() && v.size() == inv_mass.size(),
+                "obstacle response arrays must have #V entries");
+  if (obstacles.empty()) return 0;
+  std::vector<Posed> posed;
+  posed.reserve(obstacles.size());
+  for (const Obstacle& o : obstacles) posed.push_back(pose(o, t));
+  std::atomic<std::size_t> count{0};
+  parallel_for_chunks(x.size(), threads, balanced_grain(x.size(), resolve_threads(threads), 1024, 1 << 14),
+                      [&](std::size_t begin, std::size_t end) {
+                        std::size_t corrected = 0;
+                        for (std::size_t i = begin; i < end; ++i) {
+                          if (inv_mass[i] == 0) continue;
+                          for (const Posed& o : posed) corrected += push_out(o, x[i], v[i]) ? 1 : 0;
+                        }
+                        count += corrected;
+                      });
   return count;
 }
 
