@@ -575,8 +575,8 @@ class Projective final : public Integrator {
       for (std::size_t r = begin; r < end; ++r) {
         Vec3 b = base_[r];
         for (int e = hinge_incident_start_[r]; e < hinge_incident_start_[r + 1]; ++e) {
-          const auto k = static_cast<std::size_t>(hinge_incident_[static_cast<std::size_t>(e)]);
-          b += hinges[k / 4].weight[k % 4] * hinge_term_[k / 4];
+          const auto at = static_cast<std::size_t>(e);
+          b += hinge_weight_[at] * hinge_term_[static_cast<std::size_t>(hinge_incident_[at])];
         }
         origin_[r] = next_[free_[r]];
         base_[r] = a_rows_.reduce(r, b, next_);
@@ -715,12 +715,15 @@ class Projective final : public Integrator {
     }
     for (std::size_t r = 0; r < free_.size(); ++r) hinge_incident_start_[r + 1] += hinge_incident_start_[r];
     hinge_incident_.resize(static_cast<std::size_t>(hinge_incident_start_.back()));
+    hinge_weight_.resize(hinge_incident_.size());
     {
       std::vector<int> at(hinge_incident_start_.begin(), hinge_incident_start_.end() - 1);
       for (std::size_t k = 0; k < hinges.size(); ++k) {
         for (std::size_t c = 0; c < 4; ++c) {
           if (const int r = hinge_rows_[k][c]; r >= 0) {
-            hinge_incident_[static_cast<std::size_t>(at[static_cast<std::size_t>(r)]++)] = static_cast<int>(4 * k + c);
+            const auto e = static_cast<std::size_t>(at[static_cast<std::size_t>(r)]++);
+            hinge_incident_[e] = static_cast<int>(k);
+            hinge_weight_[e] = hinges[k].weight[c];
           }
         }
       }
@@ -859,7 +862,8 @@ class Projective final : public Integrator {
   std::vector<Boundary> boundary_;                 // in the springs' order
   std::vector<std::array<int, 4>> hinge_rows_;     // per hinge: its vertices' free rows, -1 pinned
   std::vector<Scalar> hinge_rate_, hinge_hold_;    // per hinge: c / h and s + c / h
-  std::vector<int> hinge_incident_start_, hinge_incident_;  // per free row: 4 k + c of its hinges, k increasing
+  std::vector<int> hinge_incident_start_, hinge_incident_;  // per free row: its hinges k, increasing
+  std::vector<Scalar> hinge_weight_;               // per entry of hinge_incident_: the row's weight w_c
   std::vector<Vec3> hinge_term_;                   // per hinge: the step's g
   std::vector<int> incident_start_, incident_;  // per free row: its springs, ~k where it is end b
   Rows a_rows_;                // A by free rows, each entry at its column's particle
