@@ -527,17 +527,15 @@ class Projective final : public Integrator {
     const std::size_t m = free_.size();
     const std::size_t spring_grain = balanced_grain(springs.size(), threads_, 1024, 1 << 16);
     const std::size_t row_grain = balanced_grain(m, threads_, 512, 1 << 15);
-    const std::size_t particle_grain = balanced_grain(n, threads_, 512, 1 << 15);
-    // Pinned particles move by h v₀; free ones start from the inertial prediction.
+    // Pinned particles move by h v₀; free ones start from the inertial prediction, and their
+    // rows' constant part of the right-hand side (pinned ends of springs included) from it.
     next_.resize(n);
-    parallel_for_chunks(n, threads_, particle_grain, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t i = begin; i < end; ++i) next_[i] = s.x[i] + h * s.v[i];
-    });
-    // The constant part of the right-hand side (pinned ends of springs included).
+    for (const std::size_t i : pinned_) next_[i] = s.x[i] + h * s.v[i];
     base_.resize(m);
     parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
       for (std::size_t r = begin; r < end; ++r) {
         const std::size_t i = free_[r];
+        next_[i] = s.x[i] + h * s.v[i];
         base_[r] = mass[i] * (inv_h2 * next_[i] + (field.air_damping / h) * s.x[i] + field.gravity);
       }
     });
@@ -646,9 +644,10 @@ class Projective final : public Integrator {
       for (std::size_t r = begin; r < end; ++r) {
         const std::size_t i = free_[r];
         s.v[i] = (next_[i] - s.x[i]) / h;
+        s.x[i] = next_[i];
       }
     });
-    std::copy(next_.begin(), next_.end(), s.x.begin());
+    for (const std::size_t i : pinned_) s.x[i] = next_[i];
     s.time += h;
   }
 
@@ -684,10 +683,13 @@ class Projective final : public Integrator {
     const std::size_t n = static_cast<std::size_t>(model.num_particles());
     row_.assign(n, -1);
     free_.clear();
+    pinned_.clear();
     for (std::size_t i = 0; i < n; ++i) {
       if (!model.pinned(static_cast<Index>(i))) {
         row_[i] = static_cast<Eigen::Index>(free_.size());
         free_.push_back(i);
+      } else {
+        pinned_.push_back(i);
       }
     }
     const auto springs = model.springs();
@@ -851,6 +853,7 @@ class Projective final : public Integrator {
   bool factored_ = false;
   std::vector<Eigen::Index> row_;  // free row of each particle, -1 when pinned
   std::vector<std::size_t> free_;  // particle of each free row
+  std::vector<std::size_t> pinned_;  // the pinned particles
   Eigen::SimplicialLDLT<Sparse, Eigen::Lower, NestedDissection> solver_;
   detail::SupernodalSolve supernodal_;  // the factor's triangular solves
   /// A spring with one pinned end: its free end's row, the pinned particle, its stiffness.
