@@ -25,6 +25,8 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <cstdint>
 #include <limits>
 #include <map>
 #include <memory>
@@ -288,6 +290,25 @@ double number_option(const std::string& arg, std::size_t prefix) {
   return v;
 }
 
+/// FNV-1a over the bits of every position and velocity: equal digests mean the same state bit
+/// for bit (up to a 64-bit collision), so `--verbose` logs of two builds compare exactly.
+std::uint64_t state_digest(const State& s) {
+  std::uint64_t h = 0xcbf29ce484222325ULL;
+  const auto mix = [&h](const std::vector<Vec3>& v) {
+    for (const Vec3& p : v) {
+      for (int c = 0; c < 3; ++c) {
+        std::uint64_t bits;
+        const Scalar x = p[c];
+        std::memcpy(&bits, &x, sizeof bits);
+        for (int b = 0; b < 8; ++b) h = (h ^ ((bits >> (8 * b)) & 0xff)) * 0x100000001b3ULL;
+      }
+    }
+  };
+  mix(s.x);
+  mix(s.v);
+  return h;
+}
+
 }  // namespace
 
 /// `--check-frames=SPEC [--frames=N] [--fail-safe=off] [--response=on] [--search-factor=F]
@@ -306,8 +327,8 @@ double number_option(const std::string& arg, std::size_t prefix) {
 /// h_c, as the ribbon's `settle` key); `--substeps` the steps per frame (the frame's length kept);
 /// `--threads` the detector's and the integrator's threads (0: all); `--flat-rings` sets
 /// `Settings::flat_neighbour_rings` (0 keeps the flat neighbours' pairs).
-/// Prints every frame with intersections (`--verbose`: every frame), a progress line every 10 s
-/// (CRUMPLE_PROGRESS_SECONDS sets the period) and a summary line, also when the run stops early:
+/// Prints every frame with intersections (`--verbose`: every frame, with a digest of the state's
+/// bits), a progress line every 10 s (CRUMPLE_PROGRESS_SECONDS sets the period) and a summary line, also when the run stops early:
 /// on a divergence, or on SIGINT / SIGTERM (after the current frame). Output is line-buffered,
 /// so a log of a killed run keeps every line printed. Exit status: 0 when every frame of the N
 /// ran clean, 1 when a frame intersects or the run diverged, 3 when stopped by a signal first.
@@ -507,10 +528,10 @@ int check_frames(int argc, char** argv) {
     if (verbose) {
       std::printf("frame %d: %.1f ms, CCD %.1f ms, %zu live impacts, %d queries, %zu zone vertices, %zu frozen, "
                   "%zu contacts, %zu flat-neighbour pairs left out, fastest %.3g m/s, longest spring %.3gx rest, "
-                  "energy %.4g J, %zu intersecting pairs\n",
+                  "energy %.4g J, %zu intersecting pairs, state %016llx\n",
                   f, st.integrate_ms + st.detect_ms + st.response_ms + st.ccd_ms, st.ccd_ms, st.ccd_impacts,
                   st.ccd_queries, st.ccd_zone_vertices, st.ccd_frozen, st.vf + st.ee, st.flat_pairs, speed, stretch,
-                  energy, pairs);
+                  energy, pairs, static_cast<unsigned long long>(state_digest(sim.state())));
     }
     if (pairs > 0) {
       ++bad;

@@ -139,5 +139,45 @@ TEST(Obstacle, SkippingFarVerticesChangesNothing) {
   }
 }
 
+// `resolve_obstacles` sweeps the vertices once with every obstacle, on threads: the result must
+// be that of `resolve_obstacle` for each obstacle in turn over all vertices, bit for bit, where
+// the obstacles overlap (a vertex pushed by one into the next) and on any thread count.
+TEST(Obstacle, AllObstaclesInOneSweepEqualOneAfterTheOther) {
+  Box box{Vec3(0.3, -0.2, 0.1), Vec3(0.2, 0.4, 1.0)};
+  box.rotation = Eigen::AngleAxis<Scalar>(0.3, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  std::vector<Obstacle> obstacles{
+      Obstacle{Shape{box}, Vec3(0.2, 0, 0), 1.0, 0.3, 0.02},
+      Obstacle{Shape{Sphere{Vec3(0.1, 0.2, -0.3), 0.6}}, Vec3(0, -0.4, 0), 0.25, 0.1, 0.01},
+      Obstacle{Shape{Plane{Vec3(0, -0.3, 0), Vec3::UnitY()}}, Vec3::Zero(), 1.0, 0.5, 0.01},
+      Obstacle{Shape{Box{Vec3(0.2, 0, 0), Vec3(0.1, 1.0, 0.3)}}, Vec3(-0.1, 0, 0), 1.0, 0.0, 0.03}};
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<Scalar> coord(-1.2, 1.2), unit(-1, 1);
+  std::vector<Vec3> x, v;
+  std::vector<Scalar> inv_mass;
+  for (int i = 0; i < 20000; ++i) {
+    x.emplace_back(coord(rng), coord(rng), coord(rng));
+    v.emplace_back(unit(rng), unit(rng), unit(rng));
+    inv_mass.push_back(i % 13 == 0 ? 0 : 1);
+  }
+  for (const Scalar t : {0.1, 0.5}) {
+    std::vector<Vec3> x_ref = x, v_ref = v;
+    std::size_t count = 0;
+    std::vector<std::size_t> each;
+    for (const Obstacle& o : obstacles) {
+      each.push_back(resolve_obstacle(o, t, inv_mass, x_ref, v_ref));
+      count += each.back();
+    }
+    for (const std::size_t c : each) EXPECT_GT(c, 200u) << "every obstacle must push vertices out";
+    for (const int threads : {1, 2, 4}) {
+      std::vector<Vec3> xs = x, vs = v;
+      EXPECT_EQ(resolve_obstacles(obstacles, t, inv_mass, xs, vs, threads), count) << threads;
+      for (std::size_t i = 0; i < x.size(); ++i) {
+        ASSERT_EQ(xs[i], x_ref[i]) << "threads " << threads << ", vertex " << i;
+        ASSERT_EQ(vs[i], v_ref[i]) << "threads " << threads << ", vertex " << i;
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace crumple::response

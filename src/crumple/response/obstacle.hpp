@@ -68,6 +68,13 @@ struct Obstacle {
 std::size_t resolve_obstacle(const Obstacle& obstacle, Scalar t, std::span<const Scalar> inv_mass,
                              std::span<Vec3> positions, std::span<Vec3> velocities);
 
+/// `resolve_obstacle` for each obstacle in turn, vertex by vertex: a vertex's response reads and
+/// writes only its own position and velocity, so this gives the bits of the obstacles applied one
+/// after the other over all vertices, on any number of `threads` (0: all), in one sweep over the
+/// vertices. Returns the sum of the obstacles' counts.
+std::size_t resolve_obstacles(std::span<const Obstacle> obstacles, Scalar t, std::span<const Scalar> inv_mass,
+                              std::span<Vec3> positions, std::span<Vec3> velocities, int threads);
+
 /// Deepest penetration of any vertex into the obstacle at time t: max(0, −min φ) (m), ignoring
 /// the margin.
 Scalar max_penetration(const Obstacle& obstacle, Scalar t, std::span<const Vec3> positions);

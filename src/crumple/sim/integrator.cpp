@@ -522,49 +522,62 @@ class Projective final : public Integrator {
     const auto springs = model.springs();
     const auto hinges = model.hinges();
     const Scalar inv_h2 = 1 / (h * h);
-    // Pinned particles move by h v₀; free ones start from the inertial prediction.
-    next_.resize(n);
-    for (std::size_t i = 0; i < n; ++i) next_[i] = s.x[i] + h * s.v[i];
-    // The constant part of the right-hand side (pinned ends of springs included).
+    // Every loop below writes each row (or particle, or hinge) from reads of others only, each
+    // row's sums in a fixed order: the same bits on any thread count.
     const std::size_t m = free_.size();
+    const std::size_t spring_grain = balanced_grain(springs.size(), threads_, 1024, 1 << 16);
+    const std::size_t row_grain = balanced_grain(m, threads_, 512, 1 << 15);
+    // Pinned particles move by h v₀; free ones start from the inertial prediction, and their
+    // rows' constant part of the right-hand side (pinned ends of springs included) from it.
+    next_.resize(n);
+    for (const std::size_t i : pinned_) next_[i] = s.x[i] + h * s.v[i];
     base_.resize(m);
-    for (std::size_t r = 0; r < m; ++r) {
-      const std::size_t i = free_[r];
-      base_[r] = mass[i] * (inv_h2 * next_[i] + (field.air_damping / h) * s.x[i] + field.gravity);
-    }
+    parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t r = begin; r < end; ++r) {
+        const std::size_t i = free_[r];
+        next_[i] = s.x[i] + h * s.v[i];
+        base_[r] = mass[i] * (inv_h2 * next_[i] + (field.air_damping / h) * s.x[i] + field.gravity);
+      }
+    });
     if (field.drag && row_[static_cast<std::size_t>(field.drag->vertex)] >= 0) {
       const auto i = static_cast<std::size_t>(field.drag->vertex);
       base_[static_cast<std::size_t>(row_[i])] += field.drag->stiffness * field.drag->target + (field.drag->damping / h) * s.x[i];
     }
     for (const Boundary& e : boundary_) base_[static_cast<std::size_t>(e.row)] += e.stiffness * next_[static_cast<std::size_t>(e.pinned)];
-    for (std::size_t k = 0; k < hinges.size(); ++k) {
-      const Hinge& hg = hinges[k];
-      const std::array<int, 4>& rows = hinge_rows_[k];
-      Vec3 rest = Vec3::Zero(), fixed = Vec3::Zero();
-      for (std::size_t c = 0; c < 4; ++c) {
-        const auto v = static_cast<std::size_t>(hg.vertex[c]);
-        rest += hg.weight[c] * s.x[v];
-        if (rows[c] < 0) fixed += hg.weight[c] * next_[v];
-      }
-      const Vec3 g = (hg.damping / h) * rest - (hg.stiffness + hg.damping / h) * fixed;
-      for (std::size_t c = 0; c < 4; ++c) {
-        if (rows[c] >= 0) base_[static_cast<std::size_t>(rows[c])] += hg.weight[c] * g;
-      }
-    }
+    // Each hinge's term g = (c/h) Σ w_c x_c − (s + c/h) Σ_pinned w_c y_c, then each row gathers
+    // w_c g over its hinges in increasing order (the order of a scatter hinge by hinge).
+    hinge_term_.resize(hinges.size());
+    parallel_for_chunks(hinges.size(), threads_, balanced_grain(hinges.size(), threads_, 1024, 1 << 16),
+                        [&](std::size_t begin, std::size_t end) {
+                          for (std::size_t k = begin; k < end; ++k) {
+                            const Hinge& hg = hinges[k];
+                            const std::array<int, 4>& rows = hinge_rows_[k];
+                            Vec3 rest = Vec3::Zero(), fixed = Vec3::Zero();
+                            for (std::size_t c = 0; c < 4; ++c) {
+                              const auto v = static_cast<std::size_t>(hg.vertex[c]);
+                              rest += hg.weight[c] * s.x[v];
+                              if (rows[c] < 0) fixed += hg.weight[c] * next_[v];
+                            }
+                            hinge_term_[k] = hinge_rate_[k] * rest - hinge_hold_[k] * fixed;
+                          }
+                        });
     const auto& p = solver_.permutationP().indices();
     pull_.resize(springs.size());
     tmp_.resize(m);
     older_.resize(n);
-    const std::size_t spring_grain = balanced_grain(springs.size(), threads_, 1024, 1 << 16);
-    const std::size_t row_grain = balanced_grain(m, threads_, 512, 1 << 15);
     // The global steps solve for x̂ − y, y the inertial prediction: the right-hand side's
     // constant part becomes base − A y (in double), so the factor's single-precision rounding
     // scales with the step's displacement from y, not with the coordinates.
     origin_.resize(m);
     parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
       for (std::size_t r = begin; r < end; ++r) {
+        Vec3 b = base_[r];
+        for (int e = hinge_incident_start_[r]; e < hinge_incident_start_[r + 1]; ++e) {
+          const auto at = static_cast<std::size_t>(e);
+          b += hinge_weight_[at] * hinge_term_[static_cast<std::size_t>(hinge_incident_[at])];
+        }
         origin_[r] = next_[free_[r]];
-        base_[r] = a_rows_.reduce(r, base_[r], next_);
+        base_[r] = a_rows_.reduce(r, b, next_);
       }
     });
     Scalar omega = 1;
@@ -627,11 +640,14 @@ class Projective final : public Integrator {
       }
     }
     last_iterations_ = it;
-    for (std::size_t r = 0; r < free_.size(); ++r) {
-      const std::size_t i = free_[r];
-      s.v[i] = (next_[i] - s.x[i]) / h;
-    }
-    for (std::size_t i = 0; i < n; ++i) s.x[i] = next_[i];
+    parallel_for_chunks(m, threads_, row_grain, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t r = begin; r < end; ++r) {
+        const std::size_t i = free_[r];
+        s.v[i] = (next_[i] - s.x[i]) / h;
+        s.x[i] = next_[i];
+      }
+    });
+    for (const std::size_t i : pinned_) s.x[i] = next_[i];
     s.time += h;
   }
 
@@ -667,10 +683,13 @@ class Projective final : public Integrator {
     const std::size_t n = static_cast<std::size_t>(model.num_particles());
     row_.assign(n, -1);
     free_.clear();
+    pinned_.clear();
     for (std::size_t i = 0; i < n; ++i) {
       if (!model.pinned(static_cast<Index>(i))) {
         row_[i] = static_cast<Eigen::Index>(free_.size());
         free_.push_back(i);
+      } else {
+        pinned_.push_back(i);
       }
     }
     const auto springs = model.springs();
@@ -684,8 +703,32 @@ class Projective final : public Integrator {
     }
     const auto hinges = model.hinges();
     hinge_rows_.resize(hinges.size());
+    hinge_rate_.resize(hinges.size());
+    hinge_hold_.resize(hinges.size());
+    hinge_incident_start_.assign(free_.size() + 1, 0);
     for (std::size_t k = 0; k < hinges.size(); ++k) {
-      for (std::size_t c = 0; c < 4; ++c) hinge_rows_[k][c] = static_cast<int>(row_[static_cast<std::size_t>(hinges[k].vertex[c])]);
+      for (std::size_t c = 0; c < 4; ++c) {
+        const auto r = static_cast<int>(row_[static_cast<std::size_t>(hinges[k].vertex[c])]);
+        hinge_rows_[k][c] = r;
+        if (r >= 0) ++hinge_incident_start_[static_cast<std::size_t>(r) + 1];
+      }
+      hinge_rate_[k] = hinges[k].damping / h;
+      hinge_hold_[k] = hinges[k].stiffness + hinges[k].damping / h;
+    }
+    for (std::size_t r = 0; r < free_.size(); ++r) hinge_incident_start_[r + 1] += hinge_incident_start_[r];
+    hinge_incident_.resize(static_cast<std::size_t>(hinge_incident_start_.back()));
+    hinge_weight_.resize(hinge_incident_.size());
+    {
+      std::vector<int> at(hinge_incident_start_.begin(), hinge_incident_start_.end() - 1);
+      for (std::size_t k = 0; k < hinges.size(); ++k) {
+        for (std::size_t c = 0; c < 4; ++c) {
+          if (const int r = hinge_rows_[k][c]; r >= 0) {
+            const auto e = static_cast<std::size_t>(at[static_cast<std::size_t>(r)]++);
+            hinge_incident_[e] = static_cast<int>(k);
+            hinge_weight_[e] = hinges[k].weight[c];
+          }
+        }
+      }
     }
     incident_start_.assign(free_.size() + 1, 0);
     for (const Spring& sp : springs) {
@@ -810,6 +853,7 @@ class Projective final : public Integrator {
   bool factored_ = false;
   std::vector<Eigen::Index> row_;  // free row of each particle, -1 when pinned
   std::vector<std::size_t> free_;  // particle of each free row
+  std::vector<std::size_t> pinned_;  // the pinned particles
   Eigen::SimplicialLDLT<Sparse, Eigen::Lower, NestedDissection> solver_;
   detail::SupernodalSolve supernodal_;  // the factor's triangular solves
   /// A spring with one pinned end: its free end's row, the pinned particle, its stiffness.
@@ -820,6 +864,10 @@ class Projective final : public Integrator {
   };
   std::vector<Boundary> boundary_;                 // in the springs' order
   std::vector<std::array<int, 4>> hinge_rows_;     // per hinge: its vertices' free rows, -1 pinned
+  std::vector<Scalar> hinge_rate_, hinge_hold_;    // per hinge: c / h and s + c / h
+  std::vector<int> hinge_incident_start_, hinge_incident_;  // per free row: its hinges k, increasing
+  std::vector<Scalar> hinge_weight_;               // per entry of hinge_incident_: the row's weight w_c
+  std::vector<Vec3> hinge_term_;                   // per hinge: the step's g
   std::vector<int> incident_start_, incident_;  // per free row: its springs, ~k where it is end b
   Rows a_rows_;                // A by free rows, each entry at its column's particle
   std::vector<Vec3> origin_;    // per free row: the inertial prediction y the solves start from

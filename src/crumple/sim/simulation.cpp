@@ -293,9 +293,8 @@ void Simulation::motion_search() {
   for (std::size_t i = 0; i < n; ++i) predicted_[i] = state_.x[i] + duration * state_.v[i];
   if (!obstacles_.empty()) {
     predicted_velocity_.assign(state_.v.begin(), state_.v.end());
-    for (const auto& o : obstacles_) {
-      response::resolve_obstacle(o, state_.time + duration, inv_mass, predicted_, predicted_velocity_);
-    }
+    response::resolve_obstacles(obstacles_, state_.time + duration, inv_mass, predicted_, predicted_velocity_,
+                                settings_.detector.threads);
   }
   const std::size_t count = flag_far_vertices(PositionsView(state_.x.data(), n), PositionsView(predicted_.data(), n),
                                               inv_mass, 0.5 * (radius - h), fast_);
@@ -446,9 +445,8 @@ const ContactSet& Simulation::contacts() {
 }
 
 void Simulation::obstacles_pass() {
-  for (const auto& o : obstacles_) {
-    response::resolve_obstacle(o, state_.time, model_.inv_mass(), state_.x, state_.v);
-  }
+  response::resolve_obstacles(obstacles_, state_.time, model_.inv_mass(), state_.x, state_.v,
+                              settings_.detector.threads);
 }
 
 void Simulation::integrate_step() {
