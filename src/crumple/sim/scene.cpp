@@ -36,6 +36,15 @@ namespace {
       {"air", air, "air damping (1/s): force -air * m * v"},                                            \
       {"thickness", thickness, "contact thickness, as a fraction of the mean edge length"}
 
+// The key of `Settings::contact_forces` and its rule (`contact_forces_key`), shared by the scenes
+// whose n = 200 ran warm on the push-outs alone.
+#define CRUMPLE_CONTACT_FORCES_KEY(what)                                                                    \
+  {"contact-forces", "auto",                                                                               \
+   "on | off | auto: the contacts also act as forces inside the projective step, so the springs and the " \
+   "contacts reach a compromise within the step (auto: on above n = 100, where the push-outs after the " \
+   "steps alone let " what " heat up; at n <= 100 they keep it calm, and the forces' second solve per "  \
+   "iteration costs more)"}
+
 constexpr std::array<SceneParamInfo, 17> kHanging{{
     {"nx", "10", "quads along x"},
     {"ny", "10", "quads along z"},
@@ -52,7 +61,7 @@ constexpr std::array<SceneParamInfo, 17> kHanging{{
     {"tau", "0.01", "with material=on: Kelvin-Voigt relaxation time (s)"},
 }};
 
-constexpr std::array<SceneParamInfo, 18> kSphere{{
+constexpr std::array<SceneParamInfo, 19> kSphere{{
     {"n", "16", "quads along each side"},
     {"size", "1.5", "side of the square cloth (m)"},
     {"height", "0.7", "initial height of the cloth (m)"},
@@ -68,6 +77,7 @@ constexpr std::array<SceneParamInfo, 18> kSphere{{
     {"search", "0.01",
      "radius (m) of the frame's proximity search, at least 2 thicknesses: it must cover the relative "
      "motion of a frame, which does not shrink with the edges (2 thicknesses up to n = 100, 3.9 at 200)"},
+    CRUMPLE_CONTACT_FORCES_KEY("the cloth"),
 }};
 
 constexpr std::array<SceneParamInfo, 18> kRibbon{{
@@ -102,11 +112,7 @@ constexpr std::array<SceneParamInfo, 19> kCrumple{{
     {"search", "0.0068",
      "radius (m) of the frame's proximity search, at least 2 thicknesses: it must cover the relative "
      "motion of a frame, which does not shrink with the edges (2 thicknesses up to n = 100, 4 at 200)"},
-    {"contact-forces", "auto",
-     "on | off | auto: the contacts also act as forces inside the projective step, so the springs and "
-     "the contacts reach a compromise within the step (auto: on above n = 100, where the push-outs "
-     "alone leave the pile warm; at n <= 100 the pile stays calm without them and they cost about a "
-     "third more per frame)"},
+    CRUMPLE_CONTACT_FORCES_KEY("the pile"),
 }};
 
 constexpr std::array<SceneParamInfo, 8> kFile{{
@@ -115,6 +121,7 @@ constexpr std::array<SceneParamInfo, 8> kFile{{
 }};
 #undef CRUMPLE_CLOTH_KEYS
 #undef CRUMPLE_MATERIAL_KEYS
+#undef CRUMPLE_CONTACT_FORCES_KEY
 
 constexpr std::array<SceneInfo, 5> kScenes{{
     {"hanging-cloth",
@@ -252,6 +259,19 @@ void search_radius(Scene& s, const SceneSpec& spec) {
   s.settings.search_factor = std::max<Scalar>(2, search / s.settings.detector.thickness);
 }
 
+/// The scene key `contact-forces` (`CRUMPLE_CONTACT_FORCES_KEY`): on, off, or auto = on above
+/// n = 100 quads a side. The push-outs after the steps store energy that grows with the steps'
+/// ωh (√(k/m) h: a vertex's mass falls as the edge squared), and at n = 200 it ran the pile and
+/// the sweep away; at n <= 100 the push-outs alone stay calm, and the forces' second solve per
+/// iteration costs about a third more per frame (docs/simulation.md, "Contacts in the projective
+/// step").
+bool contact_forces_key(const SceneSpec& spec, Index n) {
+  const std::string value = spec.get_string("contact-forces");
+  if (value == "auto") return n > 100;
+  if (const auto on = parse_switch(value)) return *on;
+  throw InputError("scene '" + spec.name() + "': key 'contact-forces' expects on, off or auto, got '" + value + "'");
+}
+
 /// The fast default of the scenes with a per-area material: detection once per frame with
 /// proximity impulses and friction (`ResponseModel::Proximity`), projective dynamics, 4 steps of
 /// 1/240 s per frame of 1/60 s, 5 local/global iterations each, Chebyshev-accelerated with
@@ -318,6 +338,9 @@ Scene cloth_on_sphere(const SceneSpec& spec, std::uint64_t seed) {
   // (energy +10-20 % a frame, 150,000 live impacts by frame 56; docs/simulation.md, "Energy
   // under contact"). A radius fixed in metres keeps n = 200 as calm as n = 100.
   search_radius(s, spec);
+  // As in `crumple` (below): at n = 200 the push-outs after the steps alone let the 5 m/s sweep
+  // run away (3,210 J by frame 227; docs/simulation.md, "Contacts in the projective step").
+  s.settings.contact_forces = contact_forces_key(spec, n);
   return s;
 }
 
@@ -428,8 +451,7 @@ Scene crumple_scene(const SceneSpec& spec, std::uint64_t seed) {
   // (docs/simulation.md, "Contacts in the projective step"). Up to n = 100 the half pushes keep
   // the pile calm over 1,000 frames without them, and their second solve per iteration costs
   // about a third more per landing frame: `auto` keeps them for the finer cloths.
-  const std::string forces = spec.get_string("contact-forces");
-  s.settings.contact_forces = forces == "auto" ? n > 100 : spec.get_bool("contact-forces");
+  s.settings.contact_forces = contact_forces_key(spec, n);
   return s;
 }
 
