@@ -284,52 +284,6 @@ struct Tally {
   std::map<std::string, int> outcomes;
 };
 
-/// A small, slowly moving triangle (VF) or edge a (EE) and a vertex (edge b, short and rigid)
-/// sweeping a long way past it in one step: the whole step's difference hull is large, each
-/// quarter's much smaller, so the pieces filter decides many of them. `contact`: the sweep goes
-/// through a dyadic point of the triangle (edge a) at a dyadic t*; else through the point
-/// (u, v) = (-1/2 .. -1/8, 0) beside it (EE: u = 1 + 1/8 .. 1/2), a miss by a fraction of its size.
-Case sweep(Gen& g, bool face, bool contact) {
-  Case c;
-  c.pair = face ? CcdPair::kVertexFace : CcdPair::kEdgeEdge;
-  c.constructed_contact = contact;
-  const Vec3 center = g.point();
-  const int first = face ? 1 : 0, last = face ? 3 : 1;  // the slow feature's points
-  for (int i = first; i <= last; ++i) {
-    c.start[i] = center + g.small();
-    c.end[i] = c.start[i] + g.small(12);
-  }
-  const Scalar t = g.dyadic_time();
-  Scalar u = g.eighth(), v = face ? g.eighth() : 0;
-  if (u + v > 1) {
-    u = 1 - u;
-    v = 1 - v;
-  }
-  if (!contact) {
-    u = face ? -g.integer(1, 4) / 8.0 : 1 + g.integer(1, 4) / 8.0;
-    v = 0;
-  }
-  Vec3 q;
-  if (face) {
-    const Vec3 f0 = at(c.start[1], c.end[1], t), f1 = at(c.start[2], c.end[2], t), f2 = at(c.start[3], c.end[3], t);
-    q = f0 + u * (f1 - f0) + v * (f2 - f0);
-  } else {
-    const Vec3 a0 = at(c.start[0], c.end[0], t), a1 = at(c.start[1], c.end[1], t);
-    q = a0 + u * (a1 - a0);
-  }
-  // x(t) = q: x0 = q - t d, x1 = q + (1 - t) d, with d a long dyadic motion (exact).
-  const Vec3 d = 4 * g.point();
-  const int mover = face ? 0 : 2;
-  c.start[mover] = q - t * d;
-  c.end[mover] = q + (1 - t) * d;
-  if (!face) {
-    c.start[3] = c.start[2] + g.small();
-    c.end[3] = c.end[2] + (c.start[3] - c.start[2]);
-  }
-  if (contact) c.witness = {t, u, v};
-  return c;
-}
-
 Scalar lipschitz(const Case& c) {
   const auto disp = [&](int i) { return (c.end[i] - c.start[i]).norm(); };
   if (c.pair == CcdPair::kVertexFace) return disp(0) + std::max({disp(1), disp(2), disp(3)});
@@ -455,8 +409,8 @@ void print(const char* name, const Tally& t) {
   std::printf("\n");
 }
 
-Tally run(const char* name, int n, std::uint64_t seed, const std::function<Case(Gen&)>& make,
-          Scalar delta_rel = 0, std::int64_t oracle_budget = 300) {
+void run(const char* name, int n, std::uint64_t seed, const std::function<Case(Gen&)>& make,
+         Scalar delta_rel = 0, std::int64_t oracle_budget = 300) {
   Tally tally;
 #ifdef CRUMPLE_SANITIZED
   n = (n + 2) / 3;  // the oracle dominates and gains nothing from the sanitizers: a third of the draws
@@ -475,7 +429,6 @@ Tally run(const char* name, int n, std::uint64_t seed, const std::function<Case(
   EXPECT_EQ(tally.toi_late, 0);
   EXPECT_EQ(tally.tolerance_failures, 0);
   EXPECT_EQ(tally.constructed_not_yes, 0);
-  return tally;
 }
 
 TEST(CcdOracle, VertexFaceContacts) { run("vf-contact", 600, 1, vf_contact); }
@@ -508,24 +461,6 @@ TEST(CcdOracle, VertexFaceNearMissesJustInsideDelta) { vf_near_misses_delta(kJus
 TEST(CcdOracle, VertexFaceNearMissesJustOutsideDelta) { vf_near_misses_delta(kJustOutside); }
 TEST(CcdOracle, EdgeEdgeNearMissesJustInsideDelta) { ee_near_misses_delta(kJustInside); }
 TEST(CcdOracle, EdgeEdgeNearMissesJustOutsideDelta) { ee_near_misses_delta(kJustOutside); }
-
-// Long sweeps past a small feature (the pieces filter's cases): contacts and misses, VF and EE,
-// δ = 0 and 2^-10. The misses must reach that filter.
-TEST(CcdOracle, LongSweepsPastASmallFeature) {
-  int pieces = 0;
-  for (const bool face : {true, false}) {
-    for (const bool contact : {true, false}) {
-      for (const Scalar delta : {0.0, 0x1p-10}) {
-        const char* name = face ? (contact ? "vf-sweep-contact" : "vf-sweep-miss")
-                                : (contact ? "ee-sweep-contact" : "ee-sweep-miss");
-        const Tally t = run(name, 60, 50 + 4 * face + 2 * contact + (delta > 0),
-                            [face, contact](Gen& g) { return sweep(g, face, contact); }, delta);
-        if (t.outcomes.count("separated-pieces") != 0) pieces += t.outcomes.at("separated-pieces");
-      }
-    }
-  }
-  EXPECT_GT(pieces, 0);
-}
 
 TEST(CcdOracle, GrazingAndParallelSliding) {
   for (const Scalar h : {0.0, 1e-10, -1e-12}) {

@@ -297,38 +297,6 @@ bool separated_along(const Vec3& n, const Hull& hull, const Vec3& err, Scalar de
   return lo > bound || hi < -bound;
 }
 
-/// Filter 4: the difference hull on pieces of the step. On [t_j, t_{j+1}] (t_j = j / 4), F lies
-/// in the hull of the difference points at t_j and t_{j+1} (F is affine in t for fixed (u, v)),
-/// and those points are (1 − t) d_i⁰ + t d_i¹ of the hull's points at t = 0 and 1 (t, 1 − t
-/// exact). Computed from the rounded d_i^τ (error ≤ 2 u M_k each), with two products and a sum
-/// rounded, each within 6 u M_k (+ underflow) of the exact value ≤ err_k: if on every quarter
-/// some axis puts all of them beyond `bound` on one side, ‖F‖ > δ over the whole step. The
-/// hull's points are stored t = 0 first, then t = 1 in the same order.
-constexpr int kHullPieces = 4;
-bool separated_in_pieces(const Hull& hull, const Vec3& bound) {
-  const int half = hull.count / 2;
-  Vec3 lo_prev = Vec3::Zero(), hi_prev = Vec3::Zero();  // set at j = 0, read from j = 1
-  for (int j = 0; j <= kHullPieces; ++j) {
-    const Scalar t = Scalar(j) / kHullPieces, w = 1 - t;
-    Vec3 lo = Vec3::Constant(INFINITY), hi = Vec3::Constant(-INFINITY);
-    for (int i = 0; i < half; ++i) {
-      const Vec3 d = w * hull.points[i] + t * hull.points[half + i];
-      lo = lo.cwiseMin(d);
-      hi = hi.cwiseMax(d);
-    }
-    if (j > 0) {
-      bool apart = false;
-      for (int k = 0; k < 3; ++k) {
-        apart = apart || std::min(lo[k], lo_prev[k]) > bound[k] || std::max(hi[k], hi_prev[k]) < -bound[k];
-      }
-      if (!apart) return false;
-    }
-    lo_prev = lo;
-    hi_prev = hi;
-  }
-  return true;
-}
-
 /// Directions worth trying: the triangle's normals (VF), the edges' common normals and the
 /// perpendicular from edge a's line to b0 (EE, for near-parallel edges), at t = 0 and t = 1.
 /// The differences are taken times `square` (Prepared::square), so that the products that
@@ -924,7 +892,6 @@ std::string_view to_string(CcdOutcome outcome) {
     case CcdOutcome::kSeparatedDirection: return "separated-direction";
     case CcdOutcome::kSeparatedBisection: return "separated-bisection";
     case CcdOutcome::kSeparatedAdvancement: return "separated-advancement";
-    case CcdOutcome::kSeparatedPieces: return "separated-pieces";
     case CcdOutcome::kHitTolerance: return "hit-tolerance";
     case CcdOutcome::kHitPrecision: return "hit-precision";
     case CcdOutcome::kHitBudget: return "hit-budget";
@@ -1016,10 +983,6 @@ bool ccd_filters(CcdPair pair, const CcdPoints& start, const CcdPoints& end, con
   }
   if ((done & kDirectionDone) == 0 && separated_by_a_direction(pair, start, end, hull, p.err, delta, p.square)) {
     result.outcome = CcdOutcome::kSeparatedDirection;
-    return true;
-  }
-  if (separated_in_pieces(hull, p.bound)) {
-    result.outcome = CcdOutcome::kSeparatedPieces;
     return true;
   }
   s.reach2 = reach_squared(p.err, p.square, extent, options);
@@ -1575,34 +1538,11 @@ void ccd_after_direction(CcdPair pair, std::span<const CcdQuery> queries, const 
   // The lanes count steps in doubles: exact far beyond any budget that can be spent.
   // Without steps (max_advance_steps = 0) every query goes to the bisection: one at a time.
   if (lanes && ccd_has_avx2() && options.max_advance_steps > 0 && options.max_advance_steps <= (std::int64_t{1} << 40)) {
-    // The lanes' set-up has no pieces filter (the last of ccd_filters): the queries that
-    // ccd_checked computes unscaled get ccd_filters here, which answers those it rejects
-    // (hull, pieces) exactly as ccd_checked would; the rest go to the lanes.
-    std::vector<CcdQuery> rest;
-    std::vector<std::size_t> where;
-    rest.reserve(queries.size());
-    where.reserve(queries.size());
-    for (std::size_t i = 0; i < queries.size(); ++i) {
-      const CcdQuery& q = queries[i];
-      const Vec3 m = max_abs_coordinates(q.start, q.end);
-      if (m.maxCoeff() >= kMinUnscaledMagnitude && m.maxCoeff() <= kMaxSignFilterMagnitude) {
-        Setup setup;
-        CcdResult r;
-        if (ccd_filters(pair, q.start, q.end, options, kCoplanarityDone | kDirectionDone, m, r, setup)) {
-          out[i] = r;
-          continue;
-        }
-      }
-      rest.push_back(q);
-      where.push_back(i);
-    }
-    std::vector<CcdResult> rest_out(rest.size());
     if (pair == CcdPair::kVertexFace) {
-      after_direction_lanes<true>(rest, options, rest_out.data());
+      after_direction_lanes<true>(queries, options, out);
     } else {
-      after_direction_lanes<false>(rest, options, rest_out.data());
+      after_direction_lanes<false>(queries, options, out);
     }
-    for (std::size_t j = 0; j < rest.size(); ++j) out[where[j]] = rest_out[j];
     return;
   }
   for (std::size_t i = 0; i < queries.size(); ++i) {

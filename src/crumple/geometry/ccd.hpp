@@ -52,14 +52,13 @@ namespace crumple::geometry {
 /// endpoints then edge b's.
 enum class CcdPair : std::uint8_t { kVertexFace, kEdgeEdge };
 
-/// How a query was decided; the first six are "no hit".
+/// How a query was decided; the first five are "no hit".
 enum class CcdOutcome : std::uint8_t {
   kSeparatedHull,         ///< the difference points' hull misses the δ box on some axis
   kSeparatedCoplanarity,  ///< δ = 0 and the 4 points are never coplanar (Bernstein signs)
   kSeparatedDirection,    ///< the difference points project beyond δ along a normal direction
   kSeparatedBisection,    ///< every box of the bisection was rejected
   kSeparatedAdvancement,  ///< conservative advancement along directions reached t = 1
-  kSeparatedPieces,       ///< on each quarter of the step, that quarter's hull misses the δ box
   kHitTolerance,          ///< a box corner at t ≤ t0 + time_tolerance is within δ(1+σ) + ε + 2‖err‖
   kHitPrecision,          ///< a box could not be split further (dyadic depth limit)
   kHitBudget,             ///< `max_boxes` reached; reported at the earliest live time
@@ -67,7 +66,7 @@ enum class CcdOutcome : std::uint8_t {
 };
 
 /// Number of `CcdOutcome` values (for per-outcome counters).
-inline constexpr int kCcdOutcomeCount = 10;
+inline constexpr int kCcdOutcomeCount = 9;
 
 /// Name of an outcome, e.g. "separated-hull".
 std::string_view to_string(CcdOutcome outcome);
