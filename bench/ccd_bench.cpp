@@ -8,7 +8,7 @@
 //
 //   ccd_bench [--data DIR] [--max-queries N] [--oracle-sample K] [--scene NAME] [--json]
 //             [--threads 1,2] [--max-boxes N] [--max-advance-steps N] [--profile]
-//             [--vs-tight-inclusion [--rounds R]]
+//             [--vs-tight-inclusion [--rounds R] [--breakdown]] [--deltas 0,1e-3]
 //
 // Threads claim chunks of 1024 queries dynamically. --max-advance-steps 0 runs bisection alone
 // (the narrow phase before conservative advancement). --profile times each query alone on the
@@ -16,12 +16,19 @@
 //
 // --vs-tight-inclusion prints another table: the narrow phase against an independent port of
 // Tight-Inclusion (bench/tight_inclusion_ref.hpp, ipc-toolkit's default settings) on the same
-// queries and thread counts, R rounds alternating which goes first, each pass timed in thread
-// CPU time (CLOCK_THREAD_CPUTIME_ID, summed over the threads). Queries on which the two
+// queries and thread counts, R rounds rotating the order of three passes (the narrow phase on
+// spans of queries, `geometry::ccd` on each chunk's VF and EE queries gathered; the narrow
+// phase one query at a time; Tight-Inclusion one query at a time), each pass timed in thread
+// CPU time (CLOCK_THREAD_CPUTIME_ID, summed over the threads, the gathers of the points
+// included). The two narrow-phase passes must give the same hits. Queries on which the two
 // disagree are sent to the exact oracle (at most K of each kind): a certified contact that
 // either misses is a false negative, and the program fails.
 //
-// δ is 0 and 1e-3 × the first frame's bounding-box diagonal.
+// --breakdown (with --vs-tight-inclusion, one thread) instead groups the queries by the narrow
+// phase's outcome and times both methods on each group alone: the cost split by outcome, with
+// the distributions of advancement steps and of Tight-Inclusion's boxes.
+//
+// δ is each of --deltas (default 0 and 1e-3) × the first frame's bounding-box diagonal.
 #include <crumple/geometry/ccd.hpp>
 #include <crumple/io/mesh_io.hpp>
 #include <crumple/mesh/mesh.hpp>
@@ -237,6 +244,50 @@ double cpu_pass(std::size_t n, int threads, const Solve& solve) {
   return static_cast<double>(total.load());
 }
 
+/// Thread CPU ns of one pass of the batched narrow phase (`geometry::ccd` on a span) over all
+/// queries with `threads` threads: each chunk of 1024 claimed is gathered into one batch per pair
+/// type (the gather is timed, as the one-query-at-a-time passes time theirs); `hit[i]` receives
+/// query i's answer.
+double batch_pass(const std::vector<Query>& queries, const Positions& x0, const Positions& x1, int threads,
+                  const geometry::CcdOptions& options, std::vector<std::uint8_t>& hit) {
+  const std::size_t n = queries.size();
+  std::atomic<std::size_t> next{0};
+  std::atomic<long long> total{0};
+  const auto work = [&] {
+    timespec a{}, b{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
+    std::vector<geometry::CcdQuery> batch[2];
+    std::vector<std::size_t> ids[2];
+    std::vector<geometry::CcdResult> out;
+    for (std::size_t begin; (begin = next.fetch_add(1024)) < n;) {
+      const std::size_t end = std::min(n, begin + 1024);
+      for (int k = 0; k < 2; ++k) {
+        batch[k].clear();
+        ids[k].clear();
+      }
+      for (std::size_t i = begin; i < end; ++i) {
+        const Query& q = queries[i];
+        const int k = q.pair == CcdPair::kVertexFace ? 0 : 1;
+        batch[k].push_back({{x0[q.v[0]], x0[q.v[1]], x0[q.v[2]], x0[q.v[3]]},
+                            {x1[q.v[0]], x1[q.v[1]], x1[q.v[2]], x1[q.v[3]]}});
+        ids[k].push_back(i);
+      }
+      for (int k = 0; k < 2; ++k) {
+        out.resize(batch[k].size());
+        geometry::ccd(k == 0 ? CcdPair::kVertexFace : CcdPair::kEdgeEdge, batch[k], options, out);
+        for (std::size_t j = 0; j < out.size(); ++j) hit[ids[k][j]] = out[j].hit;
+      }
+    }
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
+    total += (b.tv_sec - a.tv_sec) * 1000000000LL + (b.tv_nsec - a.tv_nsec);
+  };
+  std::vector<std::thread> pool;
+  for (int k = 1; k < threads; ++k) pool.emplace_back(work);
+  work();
+  for (std::thread& t : pool) t.join();
+  return static_cast<double>(total.load());
+}
+
 /// Oracle verdicts on a sample of queries: certified no contact / certified contact / undecided.
 struct Verdicts {
   std::size_t count = 0;
@@ -269,6 +320,152 @@ Verdicts oracle_verdicts(const std::vector<std::size_t>& ids, std::size_t cap, c
   return v;
 }
 
+/// --breakdown: the queries grouped by the narrow phase's outcome, and per group the count, both
+/// methods' thread CPU ns a query (each group timed alone as one pass, the fastest of `rounds`,
+/// alternating which goes first), the advancement steps (mean and distribution) and
+/// Tight-Inclusion's boxes (mean and distribution). Printed as a markdown table on stdout.
+void breakdown(const char* scene, const std::vector<Query>& queries, const Positions& x0, const Positions& x1,
+               Scalar delta, int rounds, const geometry::CcdOptions& base) {
+  geometry::CcdOptions options = base;
+  options.min_separation = delta;
+  const ti_ref::Settings ti_settings;
+  std::array<std::vector<std::size_t>, geometry::kCcdOutcomeCount> groups;
+  std::vector<std::int64_t> steps(queries.size()), boxes(queries.size());
+  const auto points = [&](std::size_t i, CcdPoints& s, CcdPoints& e) {
+    const Query& q = queries[i];
+    s = {x0[q.v[0]], x0[q.v[1]], x0[q.v[2]], x0[q.v[3]]};
+    e = {x1[q.v[0]], x1[q.v[1]], x1[q.v[2]], x1[q.v[3]]};
+  };
+  const auto ti = [&](std::size_t i) {
+    CcdPoints s, e;
+    points(i, s, e);
+    return queries[i].pair == CcdPair::kVertexFace ? ti_ref::vertex_face_ccd(s, e, delta, ti_settings)
+                                                  : ti_ref::edge_edge_ccd(s, e, delta, ti_settings);
+  };
+  for (std::size_t i = 0; i < queries.size(); ++i) {
+    CcdPoints s, e;
+    points(i, s, e);
+    const geometry::CcdResult r = geometry::ccd(queries[i].pair, s, e, options);
+    groups[static_cast<std::size_t>(r.outcome)].push_back(i);
+    steps[i] = r.advance_steps;
+    boxes[i] = ti(i).boxes;
+  }
+  // Distribution as "1:n 2:n 3-4:n 5-8:n ..." (power-of-two bins).
+  const auto histogram = [](const std::vector<std::size_t>& ids, const std::vector<std::int64_t>& value) {
+    std::array<long long, 40> bins{};
+    for (std::size_t i : ids) {
+      const std::int64_t v = value[i];
+      int b = 0;
+      while (b < 39 && (std::int64_t{1} << b) <= v) ++b;  // bin b holds [2^(b-1), 2^b)
+      ++bins[static_cast<std::size_t>(b)];
+    }
+    std::string out;
+    for (int b = 0; b < 40; ++b) {
+      if (bins[static_cast<std::size_t>(b)] == 0) continue;
+      const long long lo = b == 0 ? 0 : (1LL << (b - 1)), hi = b == 0 ? 0 : (1LL << b) - 1;
+      char item[64];
+      if (lo == hi) {
+        std::snprintf(item, sizeof item, "%s%lld:%lld", out.empty() ? "" : " ", lo, bins[static_cast<std::size_t>(b)]);
+      } else {
+        std::snprintf(item, sizeof item, "%s%lld-%lld:%lld", out.empty() ? "" : " ", lo, hi,
+                      bins[static_cast<std::size_t>(b)]);
+      }
+      out += item;
+    }
+    return out;
+  };
+  // Would the difference hull on N pieces of the step (the axis test on [j/N, (j+1)/N], the
+  // points at the piece's ends interpolated; err doubled for the interpolation) have rejected
+  // the queries that reach the advancement? Measurement only (stderr).
+  for (const int pieces : {2, 4, 8, 16}) {
+    long long rejected = 0, total = 0;
+    for (int k : {static_cast<int>(CcdOutcome::kSeparatedAdvancement), static_cast<int>(CcdOutcome::kHitTolerance)}) {
+      for (std::size_t i : groups[static_cast<std::size_t>(k)]) {
+        CcdPoints s, e;
+        points(i, s, e);
+        const bool vf = queries[i].pair == CcdPair::kVertexFace;
+        Scalar m = 0;
+        for (int a = 0; a < 4; ++a) m = std::max({m, s[a].cwiseAbs().maxCoeff(), e[a].cwiseAbs().maxCoeff()});
+        const Scalar bound = 2 * (64 * 0x1p-53 * m) + delta;
+        const auto diffs = [&](Scalar t, std::array<Vec3, 4>& d) {
+          std::array<Vec3, 4> x;
+          for (int a = 0; a < 4; ++a) x[a] = (1 - t) * s[a] + t * e[a];
+          if (vf) d = {x[0] - x[1], x[0] - x[2], x[0] - x[3], x[0] - x[3]};
+          else d = {x[0] - x[2], x[0] - x[3], x[1] - x[2], x[1] - x[3]};
+        };
+        bool all_apart = true;
+        for (int j = 0; j < pieces && all_apart; ++j) {
+          std::array<Vec3, 4> d0, d1;
+          diffs(Scalar(j) / pieces, d0);
+          diffs(Scalar(j + 1) / pieces, d1);
+          Vec3 lo = d0[0], hi = d0[0];
+          for (int a = 0; a < 4; ++a) {
+            lo = lo.cwiseMin(d0[a]).cwiseMin(d1[a]);
+            hi = hi.cwiseMax(d0[a]).cwiseMax(d1[a]);
+          }
+          bool apart = false;
+          for (int a = 0; a < 3; ++a) apart = apart || lo[a] > bound || hi[a] < -bound;
+          all_apart = apart;
+        }
+        rejected += all_apart;
+        ++total;
+      }
+    }
+    std::fprintf(stderr, "ccd_bench: %s delta %.3g: the hull on %d pieces of the step rejects %lld of the %lld "
+                 "queries that reach the advancement\n", scene, delta, pieces, rejected, total);
+  }
+  std::array<double, geometry::kCcdOutcomeCount> ours_ns{}, theirs_ns{};
+  for (int k = 0; k < geometry::kCcdOutcomeCount; ++k) {
+    const std::vector<std::size_t>& ids = groups[static_cast<std::size_t>(k)];
+    if (ids.empty()) continue;
+    double ours = INFINITY, theirs = INFINITY;
+    for (int round = 0; round < rounds; ++round) {
+      const auto a = [&] {
+        ours = std::min(ours, cpu_pass(ids.size(), 1, [&](std::size_t j) {
+          CcdPoints s, e;
+          points(ids[j], s, e);
+          volatile bool hit = geometry::ccd(queries[ids[j]].pair, s, e, options).hit;
+          (void)hit;
+        }));
+      };
+      const auto b = [&] {
+        theirs = std::min(theirs, cpu_pass(ids.size(), 1, [&](std::size_t j) {
+          volatile bool hit = ti(ids[j]).hit;
+          (void)hit;
+        }));
+      };
+      if (round % 2 == 0) {
+        a();
+        b();
+      } else {
+        b();
+        a();
+      }
+    }
+    ours_ns[static_cast<std::size_t>(k)] = ours;
+    theirs_ns[static_cast<std::size_t>(k)] = theirs;
+  }
+  const double ours_total = std::accumulate(ours_ns.begin(), ours_ns.end(), 0.0);
+  const double theirs_total = std::accumulate(theirs_ns.begin(), theirs_ns.end(), 0.0);
+  for (int k = 0; k < geometry::kCcdOutcomeCount; ++k) {
+    const std::vector<std::size_t>& ids = groups[static_cast<std::size_t>(k)];
+    if (ids.empty()) continue;
+    const double ours = ours_ns[static_cast<std::size_t>(k)], theirs = theirs_ns[static_cast<std::size_t>(k)];
+    long long step_sum = 0, box_sum = 0;
+    for (std::size_t i : ids) {
+      step_sum += steps[i];
+      box_sum += boxes[i];
+    }
+    const double n = static_cast<double>(ids.size());
+    std::printf("| %s | %.3g | %s | %zu | %.1f | %.1f | %.1f%% | %.1f%% | %.2f | %s | %.2f | %s |\n", scene, delta,
+                std::string(geometry::to_string(static_cast<CcdOutcome>(k))).c_str(), ids.size(), ours / n, theirs / n,
+                100.0 * ours / std::max(1.0, ours_total), 100.0 * theirs / std::max(1.0, theirs_total),
+                static_cast<double>(step_sum) / n, histogram(ids, steps).c_str(),
+                static_cast<double>(box_sum) / n, histogram(ids, boxes).c_str());
+    std::fflush(stdout);
+  }
+}
+
 /// One row of the comparison with Tight-Inclusion; false when the oracle certifies a contact
 /// that one of the two misses.
 bool compare_tight_inclusion(const char* scene, const std::vector<Query>& queries, const Positions& x0,
@@ -278,7 +475,7 @@ bool compare_tight_inclusion(const char* scene, const std::vector<Query>& querie
   options.min_separation = delta;
   const ti_ref::Settings ti_settings;  // ipc-toolkit's defaults: δ_tol 1e-6, max_itr 1e7, err per query
   const std::size_t n = queries.size();
-  std::vector<std::uint8_t> ours(n), theirs(n);
+  std::vector<std::uint8_t> ours(n), theirs(n), single(n);
   std::vector<std::int64_t> ti_boxes(n);
   std::vector<std::uint8_t> ti_capped(n);
   const auto points = [&](std::size_t i, CcdPoints& s, CcdPoints& e) {
@@ -286,11 +483,12 @@ bool compare_tight_inclusion(const char* scene, const std::vector<Query>& querie
     s = {x0[q.v[0]], x0[q.v[1]], x0[q.v[2]], x0[q.v[3]]};
     e = {x1[q.v[0]], x1[q.v[1]], x1[q.v[2]], x1[q.v[3]]};
   };
-  const auto run_ours = [&] {
+  const auto run_ours = [&] { return batch_pass(queries, x0, x1, threads, options, ours); };
+  const auto run_single = [&] {
     return cpu_pass(n, threads, [&](std::size_t i) {
       CcdPoints s, e;
       points(i, s, e);
-      ours[i] = geometry::ccd(queries[i].pair, s, e, options).hit;
+      single[i] = geometry::ccd(queries[i].pair, s, e, options).hit;
     });
   };
   const auto run_theirs = [&] {
@@ -304,22 +502,31 @@ bool compare_tight_inclusion(const char* scene, const std::vector<Query>& querie
       ti_capped[i] = r.output_tolerance > ti_settings.tolerance;
     });
   };
-  std::vector<double> ns_ours, ns_theirs, ratios;
+  std::vector<double> ns_ours, ns_theirs, ns_single, ratios, single_ratios;
   for (int round = 0; round < rounds; ++round) {
-    double a, b;
-    if (round % 2 == 0) {
-      a = run_ours();
-      b = run_theirs();
-    } else {
-      b = run_theirs();
-      a = run_ours();
+    // The three passes in a rotating order: batch, one at a time, Tight-Inclusion.
+    double a = 0, b = 0, c = 0;
+    for (int k = 0; k < 3; ++k) {
+      switch ((round + k) % 3) {
+        case 0: a = run_ours(); break;
+        case 1: c = run_single(); break;
+        default: b = run_theirs(); break;
+      }
     }
     const double q = std::max<double>(1, static_cast<double>(n));
     ns_ours.push_back(a / q);
     ns_theirs.push_back(b / q);
+    ns_single.push_back(c / q);
     ratios.push_back(b / std::max(a, 1.0));
-    std::fprintf(stderr, "ccd_bench: %s delta %.3g threads %d round %d: %.1f / %.1f ns a query (TI / ours %.1fx)\n",
-                 scene, delta, threads, round + 1, a / q, b / q, ratios.back());
+    single_ratios.push_back(b / std::max(c, 1.0));
+    std::fprintf(stderr,
+                 "ccd_bench: %s delta %.3g threads %d round %d: batch %.1f, one at a time %.1f, TI %.1f ns a query "
+                 "(TI / batch %.1fx, TI / one at a time %.1fx)\n",
+                 scene, delta, threads, round + 1, a / q, c / q, b / q, ratios.back(), single_ratios.back());
+  }
+  if (ours != single) {
+    std::fprintf(stderr, "ccd_bench: %s: the batched and one-at-a-time narrow phase disagree\n", scene);
+    return false;
   }
   const auto median = [](std::vector<double> v) {
     std::sort(v.begin(), v.end());
@@ -340,9 +547,10 @@ bool compare_tight_inclusion(const char* scene, const std::vector<Query>& querie
   const Verdicts vt = oracle_verdicts(theirs_only, cap, queries, x0, x1, delta);
   const double ratio = median(ratios);
   const auto [lo, hi] = std::minmax_element(ratios.begin(), ratios.end());
-  std::printf("| %s | %.3g | %zu | %d | %d | %.0f | %.0f | %.1f (%.1f–%.1f) | %s | %lld | %lld | %.1f | %lld | %s | %s |\n",
-              scene, delta, n, threads, rounds, median(ns_ours), median(ns_theirs), ratio, ratios.empty() ? 0 : *lo,
-              ratios.empty() ? 0 : *hi, ratio >= 10 ? "met" : "not met", ours_hits, theirs_hits,
+  std::printf("| %s | %.3g | %zu | %d | %d | %.0f | %.0f | %.0f | %.1f (%.1f–%.1f) | %s | %.1f | %lld | %lld | %.1f | %lld | %s | %s |\n",
+              scene, delta, n, threads, rounds, median(ns_ours), median(ns_single), median(ns_theirs), ratio,
+              ratios.empty() ? 0 : *lo, ratios.empty() ? 0 : *hi, ratio >= 10 ? "met" : "not met",
+              median(single_ratios), ours_hits, theirs_hits,
               static_cast<double>(boxes) / std::max<double>(1, static_cast<double>(n)), capped, vo.str().c_str(),
               vt.str().c_str());
   std::fflush(stdout);
@@ -358,7 +566,8 @@ int main(int argc, char** argv) {
   std::size_t max_queries = 1000000;
   int oracle_sample = 100;
   std::string only;
-  bool json = false, profile = false, vs_ti = false;
+  bool json = false, profile = false, vs_ti = false, by_outcome = false;
+  std::vector<double> relative_deltas{0, 1e-3};
   int rounds = 3;
   std::vector<int> thread_counts{1, 2};
   geometry::CcdOptions base;
@@ -378,6 +587,12 @@ int main(int argc, char** argv) {
     else if (a == "--json") json = true;
     else if (a == "--profile") profile = true;
     else if (a == "--vs-tight-inclusion") vs_ti = true;
+    else if (a == "--breakdown") by_outcome = true;
+    else if (a == "--deltas") {
+      relative_deltas.clear();
+      std::stringstream list(value());
+      for (std::string item; std::getline(list, item, ',');) relative_deltas.push_back(std::stod(item));
+    }
     else if (a == "--rounds") rounds = std::max(1, std::stoi(value()));
     else if (a == "--max-boxes") base.max_boxes = std::stoll(value());
     else if (a == "--max-advance-steps") base.max_advance_steps = std::stoll(value());
@@ -389,15 +604,20 @@ int main(int argc, char** argv) {
       std::fprintf(stderr,
                    "usage: ccd_bench [--data DIR] [--max-queries N] [--oracle-sample K] [--scene NAME] [--json]\n"
                    "                 [--threads 1,2] [--max-boxes N] [--max-advance-steps N] [--profile]\n"
-                   "                 [--vs-tight-inclusion [--rounds R]]\n");
+                   "                 [--vs-tight-inclusion [--rounds R] [--breakdown]] [--deltas 0,1e-3]\n");
       return 2;
     }
   }
-  if (vs_ti) {
-    std::printf("| scene | delta | queries | threads | rounds | crumple CPU ns/query | Tight-Inclusion port CPU ns/query "
-                "| ratio, median (min–max) | ≥ 10× | crumple hits | TI hits | TI boxes/query | TI at max_itr "
+  if (vs_ti && by_outcome) {
+    std::printf("| scene | delta | crumple outcome | queries | crumple CPU ns/query | TI port CPU ns/query "
+                "| crumple share | TI share | crumple steps/query | crumple steps (distribution) | TI boxes/query "
+                "| TI boxes (distribution) |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  } else if (vs_ti) {
+    std::printf("| scene | delta | queries | threads | rounds | crumple batched CPU ns/query "
+                "| crumple one at a time CPU ns/query | Tight-Inclusion port CPU ns/query "
+                "| ratio to batched, median (min–max) | ≥ 10× | ratio to one at a time, median | crumple hits | TI hits | TI boxes/query | TI at max_itr "
                 "| crumple-only hits (oracle no / yes / undecided) | TI-only hits (oracle no / yes / undecided) |\n");
-    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   } else if (!json) {
     std::printf("| scene | delta | queries | threads | ns/query | hull | coplanar | direction | advancement-no | bisection-no "
                 "| hits | budget hits | steps/query | boxes/query | oracle sample: FP / yes / undecided |\n");
@@ -426,8 +646,13 @@ int main(int argc, char** argv) {
     std::sort(edges.begin(), edges.end());
     edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
     const Scalar diag = compute_bounds(m0.positions).diagonal();
-    for (const Scalar delta : {0.0, 1e-3 * diag}) {
+    for (const double relative : relative_deltas) {
+      const Scalar delta = relative * diag;
       const std::vector<Query> queries = candidates(m0.positions, m1.positions, m0.faces, edges, delta, max_queries);
+      if (vs_ti && by_outcome) {
+        breakdown(scene.name, queries, m0.positions, m1.positions, delta, rounds, base);
+        continue;
+      }
       if (vs_ti) {
         for (const int threads : thread_counts) {
           if (!compare_tight_inclusion(scene.name, queries, m0.positions, m1.positions, delta, threads, rounds, base,

@@ -15,7 +15,9 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <random>
+#include <span>
 #include <vector>
 
 namespace crumple::geometry {
@@ -241,6 +243,88 @@ TEST(CcdBatch, AfterCoplanarityMatchesCcdAtEveryDelta) {
       }
     }
   }
+}
+
+/// Queries placed at the hull filter's boundary: from a query of `make_queries`, the first
+/// feature (the vertex, edge a) moved along one axis so that its smallest difference on that axis
+/// at both times is the filter's bound err + δ times (1 ± 2^-20), 1/2, 2, or δ itself (err from
+/// the moved query's own magnitude, so the gap lands on either side of the bound); plus queries
+/// with a NaN, an infinite or a 2^301 coordinate.
+std::vector<CcdQuery> hull_boundary_queries(std::uint32_t seed, CcdPair pair, Scalar delta) {
+  std::mt19937_64 rng(seed);
+  std::vector<CcdQuery> out;
+  const int first_end = pair == CcdPair::kVertexFace ? 1 : 2;  // points [0, first_end) move
+  const Scalar factors[] = {1 - 0x1p-20, 1, 1 + 0x1p-20, 0.5, 2, 0};
+  for (CcdQuery q : make_queries(seed)) {
+    const int k = static_cast<int>(rng() % 3);
+    const Scalar factor = factors[rng() % 6];
+    for (int round = 0; round < 2; ++round) {  // the move changes the magnitude: settle it
+      const Scalar err = ccd_rounding_bound(q.start, q.end)[k];
+      Scalar lo = INFINITY;
+      for (const CcdPoints* x : {&q.start, &q.end}) {
+        for (int i = 0; i < first_end; ++i) {
+          for (int j = first_end; j < 4; ++j) lo = std::min(lo, (*x)[i][k] - (*x)[j][k]);
+        }
+      }
+      const Scalar shift = (factor == 0 ? delta : (err + delta) * factor) - lo;
+      if (!std::isfinite(shift)) break;
+      for (CcdPoints* x : {&q.start, &q.end}) {
+        for (int i = 0; i < first_end; ++i) (*x)[i][k] += shift;
+      }
+    }
+    out.push_back(q);
+  }
+  for (const Scalar bad : {Scalar(NAN), Scalar(INFINITY), Scalar(0x1p301)}) {
+    for (int i = 0; i < 24; ++i) {
+      CcdQuery q = out[static_cast<std::size_t>(i) * 7 % out.size()];
+      (i < 12 ? q.start : q.end)[static_cast<std::size_t>(i % 12 / 3)][i % 3] = bad;
+      out.push_back(q);
+    }
+  }
+  return out;
+}
+
+void expect_same(const CcdResult& a, const CcdResult& b, std::size_t i) {
+  EXPECT_EQ(a.hit, b.hit) << i;
+  EXPECT_EQ(std::memcmp(&a.toi, &b.toi, sizeof a.toi), 0) << i << ": " << a.toi << " " << b.toi;
+  EXPECT_EQ(a.outcome, b.outcome) << i << ": " << to_string(a.outcome) << " " << to_string(b.outcome);
+  EXPECT_EQ(a.boxes, b.boxes) << i;
+  EXPECT_EQ(a.advance_steps, b.advance_steps) << i;
+}
+
+// `ccd` one query at a time (its hull filter decided in vector registers first) and `ccd` on a
+// span (the hull four queries at a time, then the batched filters and the advancement in lanes)
+// give the scalar narrow phase's result field for field, on queries at the hull filter's
+// boundary and around the coplanarity boundary, for both pair types and three δ, as one span
+// and in spans of 1 to 9 and of 300 (tails shorter than four lanes, blocks of 256).
+TEST(CcdBatch, ManyQueriesAtOnceGiveTheScalarResults) {
+  int hull_apart = 0, hull_kept = 0;
+  for (const CcdPair pair : {CcdPair::kVertexFace, CcdPair::kEdgeEdge}) {
+    for (const Scalar delta : {0.0, 1e-9, 1e-4}) {
+      const std::vector<CcdQuery> queries = hull_boundary_queries(pair == CcdPair::kVertexFace ? 5 : 6, pair, delta);
+      CcdOptions options;
+      options.min_separation = delta;
+      std::vector<CcdResult> reference(queries.size());
+      for (std::size_t i = 0; i < queries.size(); ++i) {
+        reference[i] = detail::ccd_scalar(pair, queries[i].start, queries[i].end, options);
+        expect_same(ccd(pair, queries[i].start, queries[i].end, options), reference[i], i);
+        const bool at_bound = i < queries.size() - 72;
+        hull_apart += at_bound && reference[i].outcome == CcdOutcome::kSeparatedHull;
+        hull_kept += at_bound && reference[i].outcome != CcdOutcome::kSeparatedHull;
+      }
+      for (const std::size_t piece : {queries.size(), std::size_t{1}, std::size_t{3}, std::size_t{9}, std::size_t{300}}) {
+        std::vector<CcdResult> out(queries.size());
+        for (std::size_t begin = 0; begin < queries.size(); begin += piece) {
+          const std::size_t n = std::min(piece, queries.size() - begin);
+          ccd(pair, std::span<const CcdQuery>(queries).subspan(begin, n), options, std::span<CcdResult>(out).subspan(begin, n));
+        }
+        for (std::size_t i = 0; i < queries.size(); ++i) expect_same(out[i], reference[i], i);
+      }
+    }
+  }
+  std::printf("[ ccd many ] hull filter at its bound: %d apart, %d kept\n", hull_apart, hull_kept);
+  EXPECT_GT(hull_apart, 100);
+  EXPECT_GT(hull_kept, 100);
 }
 
 }  // namespace

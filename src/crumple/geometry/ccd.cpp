@@ -164,6 +164,118 @@ bool hull_may_touch(CcdPair pair, const CcdPoints& start, const CcdPoints& end, 
   return true;
 }
 
+/// `hull_may_touch`'s rejection, decided with one four-double vector per point (x, y, z, and a
+/// spare lane holding another coordinate of the query): true only for a query whose every
+/// |coordinate| is at most 2^300 (NaN fails the comparison) and whose largest is at least
+/// 2^-300, so that `ccd_checked` neither scales it nor answers it out of range, and only when
+/// `hull_may_touch` on it returns false. Its values are the scalar ones bit for bit: the
+/// per-axis maxima of |coordinate| and the minima and maxima of the differences are extremes of
+/// finite values (independent of the order they are taken in), the differences are the same
+/// single roundings, and err and the bound are the same expressions (set_bounds: a multiply and
+/// an add each, no contraction). The spare lane never decides.
+__attribute__((target("avx2"))) bool hull_apart_avx2(CcdPair pair, const CcdPoints& start, const CcdPoints& end,
+                                                     Scalar delta) {
+  static_assert(sizeof(CcdPoints) == 12 * sizeof(Scalar), "CcdPoints: 12 contiguous doubles");
+  __m256d x[8];
+  for (int tau = 0; tau < 2; ++tau) {
+    const Scalar* d = reinterpret_cast<const Scalar*>((tau == 0 ? start : end).data());
+    __m256d* q = x + 4 * tau;
+    q[0] = _mm256_loadu_pd(d);      // x0 y0 z0 | x1
+    q[1] = _mm256_loadu_pd(d + 3);  // x1 y1 z1 | x2
+    q[2] = _mm256_loadu_pd(d + 6);  // x2 y2 z2 | x3
+    q[3] = _mm256_permute4x64_pd(_mm256_loadu_pd(d + 8), 0x39);  // z2 x3 y3 z3 -> x3 y3 z3 | z2
+  }
+  const __m256d sign = _mm256_set1_pd(-0.0);
+  const __m256d limit = _mm256_set1_pd(kMaxUnscaledMagnitude);
+  __m256d m = _mm256_andnot_pd(sign, x[0]);
+  __m256d in = _mm256_cmp_pd(m, limit, _CMP_LE_OQ);
+  for (int i = 1; i < 8; ++i) {
+    const __m256d a = _mm256_andnot_pd(sign, x[i]);
+    m = _mm256_max_pd(m, a);
+    in = _mm256_and_pd(in, _mm256_cmp_pd(a, limit, _CMP_LE_OQ));
+  }
+  // Every lane holds coordinates of the query only, so the largest lane is its largest |coordinate|.
+  if (_mm256_movemask_pd(in) != 0xF ||
+      _mm256_movemask_pd(_mm256_cmp_pd(m, _mm256_set1_pd(kMinUnscaledMagnitude), _CMP_GE_OQ)) == 0) {
+    return false;
+  }
+  const __m256d err = _mm256_add_pd(_mm256_mul_pd(_mm256_set1_pd(kCornerErrorFactor), m), _mm256_set1_pd(kUnderflowSlack));
+  const __m256d bound = _mm256_add_pd(_mm256_mul_pd(_mm256_add_pd(err, _mm256_set1_pd(delta)), _mm256_set1_pd(1 + 0x1p-50)),
+                                      _mm256_set1_pd(kUnderflowSlack));
+  // The differences: VF p - f_i (points 0 - 1, 2, 3), EE a_i - b_j (0, 1 - 2, 3), per time.
+  const bool face = pair == CcdPair::kVertexFace;
+  __m256d lo = _mm256_sub_pd(x[0], x[face ? 1 : 2]);
+  __m256d hi = lo;
+  for (int tau = 0; tau < 2; ++tau) {
+    const __m256d* q = x + 4 * tau;
+    const __m256d d[4] = {_mm256_sub_pd(q[0], q[face ? 1 : 2]), _mm256_sub_pd(q[0], q[face ? 2 : 3]),
+                          _mm256_sub_pd(q[face ? 0 : 1], q[face ? 3 : 2]), _mm256_sub_pd(q[1], q[3])};
+    for (int i = 0; i < (face ? 3 : 4); ++i) {
+      lo = _mm256_min_pd(lo, d[i]);
+      hi = _mm256_max_pd(hi, d[i]);
+    }
+  }
+  const __m256d apart = _mm256_or_pd(_mm256_cmp_pd(lo, bound, _CMP_GT_OQ),
+                                     _mm256_cmp_pd(hi, _mm256_xor_pd(bound, sign), _CMP_LT_OQ));
+  return (_mm256_movemask_pd(apart) & 0x7) != 0;
+}
+
+/// hull_apart_avx2 for four queries at once, one per lane (bit l of the result for
+/// `q[l]`): the same values per lane (the maxima and minima of finite values in another order,
+/// the same differences and bound expressions), so the same answers.
+__attribute__((target("avx2"))) unsigned hull_apart_x4(CcdPair pair, const CcdQuery* q, Scalar delta) {
+  static_assert(sizeof(CcdQuery) == 24 * sizeof(Scalar), "CcdQuery: 24 contiguous doubles");
+  // c[12 τ + 3 i + k]: coordinate k of point i at time τ, one query per lane (4 × 4 transposes).
+  __m256d c[24];
+  for (int j = 0; j < 6; ++j) {
+    const __m256d r0 = _mm256_loadu_pd(reinterpret_cast<const Scalar*>(q + 0) + 4 * j);
+    const __m256d r1 = _mm256_loadu_pd(reinterpret_cast<const Scalar*>(q + 1) + 4 * j);
+    const __m256d r2 = _mm256_loadu_pd(reinterpret_cast<const Scalar*>(q + 2) + 4 * j);
+    const __m256d r3 = _mm256_loadu_pd(reinterpret_cast<const Scalar*>(q + 3) + 4 * j);
+    const __m256d a = _mm256_unpacklo_pd(r0, r1), b = _mm256_unpackhi_pd(r0, r1);  // r0[0] r1[0] r0[2] r1[2] ...
+    const __m256d e = _mm256_unpacklo_pd(r2, r3), f = _mm256_unpackhi_pd(r2, r3);
+    c[4 * j + 0] = _mm256_permute2f128_pd(a, e, 0x20);
+    c[4 * j + 1] = _mm256_permute2f128_pd(b, f, 0x20);
+    c[4 * j + 2] = _mm256_permute2f128_pd(a, e, 0x31);
+    c[4 * j + 3] = _mm256_permute2f128_pd(b, f, 0x31);
+  }
+  const __m256d sign = _mm256_set1_pd(-0.0);
+  const __m256d limit = _mm256_set1_pd(kMaxUnscaledMagnitude);
+  __m256d in = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+  __m256d m[3];
+  for (int k = 0; k < 3; ++k) {
+    m[k] = _mm256_setzero_pd();
+    for (int i = 0; i < 8; ++i) {
+      const __m256d a = _mm256_andnot_pd(sign, c[3 * i + k]);
+      m[k] = _mm256_max_pd(m[k], a);
+      in = _mm256_and_pd(in, _mm256_cmp_pd(a, limit, _CMP_LE_OQ));  // false for NaN
+    }
+  }
+  const __m256d largest = _mm256_max_pd(_mm256_max_pd(m[0], m[1]), m[2]);
+  in = _mm256_and_pd(in, _mm256_cmp_pd(largest, _mm256_set1_pd(kMinUnscaledMagnitude), _CMP_GE_OQ));
+  const bool face = pair == CcdPair::kVertexFace;
+  __m256d apart = _mm256_setzero_pd();
+  for (int k = 0; k < 3; ++k) {
+    const __m256d err = _mm256_add_pd(_mm256_mul_pd(_mm256_set1_pd(kCornerErrorFactor), m[k]), _mm256_set1_pd(kUnderflowSlack));
+    const __m256d bound = _mm256_add_pd(
+        _mm256_mul_pd(_mm256_add_pd(err, _mm256_set1_pd(delta)), _mm256_set1_pd(1 + 0x1p-50)), _mm256_set1_pd(kUnderflowSlack));
+    __m256d lo = _mm256_sub_pd(c[k], c[3 * (face ? 1 : 2) + k]);
+    __m256d hi = lo;
+    for (int tau = 0; tau < 2; ++tau) {
+      const __m256d* x = c + 12 * tau + k;  // x[3 i]: point i
+      const __m256d d[4] = {_mm256_sub_pd(x[0], x[3 * (face ? 1 : 2)]), _mm256_sub_pd(x[0], x[3 * (face ? 2 : 3)]),
+                            _mm256_sub_pd(x[3 * (face ? 0 : 1)], x[3 * (face ? 3 : 2)]), _mm256_sub_pd(x[3], x[9])};
+      for (int i = 0; i < (face ? 3 : 4); ++i) {
+        lo = _mm256_min_pd(lo, d[i]);
+        hi = _mm256_max_pd(hi, d[i]);
+      }
+    }
+    apart = _mm256_or_pd(apart, _mm256_or_pd(_mm256_cmp_pd(lo, bound, _CMP_GT_OQ),
+                                             _mm256_cmp_pd(hi, _mm256_xor_pd(bound, sign), _CMP_LT_OQ)));
+  }
+  return static_cast<unsigned>(_mm256_movemask_pd(_mm256_and_pd(apart, in)));
+}
+
 /// Filter 3: a separating direction. For any vector n, F·n over the domain lies in the hull of
 /// the difference points' projections. The computed projection of a point errs from the exact
 /// one by at most Σ|n_k| err_k (the point's own rounding) + γ_3 Σ|d_k n_k| (the dot product);
@@ -1319,7 +1431,69 @@ __attribute__((target("avx2"))) CRUMPLE_CCD_FLATTEN void after_direction_lanes(s
 
 CcdResult ccd(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {
   check_options(options);
+  // Most queries end at the hull filter: decided first in vector registers (the same answer).
+  if (detail::ccd_has_avx2() && hull_apart_avx2(pair, start, end, options.min_separation)) return CcdResult{};
   return ccd_checked(pair, start, end, options, 0);
+}
+
+void ccd(CcdPair pair, std::span<const CcdQuery> queries, const CcdOptions& options, std::span<CcdResult> out) {
+  check_options(options);
+  CRUMPLE_CHECK(out.size() == queries.size(), "ccd: one result per query");
+  const bool lanes = detail::ccd_has_avx2();
+  if (!lanes) {
+    for (std::size_t i = 0; i < queries.size(); ++i) out[i] = ccd_checked(pair, queries[i].start, queries[i].end, options, 0);
+    return;
+  }
+  // Blocks of at most 256 queries (the filters take one-byte indices). Each stage answers the
+  // queries its filter rejects, with the outcome `ccd` gives them, and passes the others on:
+  // the hull (hull_apart_avx2: exactly hull_may_touch's rejections), at δ = 0 the coplanarity
+  // signs, the separating directions (both vouch only for unscaled queries, on which the hull
+  // test before them is exactly `ccd`'s), then ccd_after_direction's advancement in lanes.
+  constexpr std::size_t kBlock = 256;
+  const Scalar delta = options.min_separation;
+  std::array<std::uint8_t, kBlock> open{}, verdict{};
+  std::vector<CcdQuery> kept(std::min(kBlock, queries.size()));
+  std::vector<CcdResult> kept_out(kept.size());
+  for (std::size_t base = 0; base < queries.size(); base += kBlock) {
+    const std::span<const CcdQuery> block = queries.subspan(base, std::min(kBlock, queries.size() - base));
+    std::size_t count = 0;
+    std::size_t i = 0;
+    for (; i + 4 <= block.size(); i += 4) {
+      const unsigned apart = hull_apart_x4(pair, &block[i], delta);
+      for (std::size_t l = 0; l < 4; ++l) {
+        if ((apart >> l & 1u) != 0) {
+          out[base + i + l] = CcdResult{};  // kSeparatedHull
+        } else {
+          open[count++] = static_cast<std::uint8_t>(i + l);
+        }
+      }
+    }
+    for (; i < block.size(); ++i) {
+      if (hull_apart_avx2(pair, block[i].start, block[i].end, delta)) {
+        out[base + i] = CcdResult{};
+      } else {
+        open[count++] = static_cast<std::uint8_t>(i);
+      }
+    }
+    for (const bool coplanarity : {true, false}) {
+      if (count == 0 || (coplanarity && delta != 0)) continue;
+      filter_avx2(block, open.data(), count, coplanarity, pair, delta, verdict.data());
+      CcdResult apart;
+      apart.outcome = coplanarity ? CcdOutcome::kSeparatedCoplanarity : CcdOutcome::kSeparatedDirection;
+      std::size_t left = 0;
+      for (std::size_t j = 0; j < count; ++j) {
+        if (verdict[j] != 0) {
+          out[base + open[j]] = apart;
+        } else {
+          open[left++] = open[j];
+        }
+      }
+      count = left;
+    }
+    for (std::size_t j = 0; j < count; ++j) kept[j] = block[open[j]];
+    detail::ccd_after_direction(pair, std::span<const CcdQuery>(kept.data(), count), options, kept_out.data(), true);
+    for (std::size_t j = 0; j < count; ++j) out[base + open[j]] = kept_out[j];
+  }
 }
 
 namespace detail {
@@ -1350,6 +1524,11 @@ void ccd_never_coplanar(std::span<const CcdQuery> queries, std::uint8_t* out, bo
 void ccd_separated_by_a_direction(CcdPair pair, std::span<const CcdQuery> queries,
                                   std::span<const std::uint8_t> index, Scalar delta, std::uint8_t* out, bool avx2) {
   run_filter(queries, index.data(), index.size(), false, pair, delta, out, avx2);
+}
+
+CcdResult ccd_scalar(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options) {
+  check_options(options);
+  return ccd_checked(pair, start, end, options, 0);
 }
 
 CcdResult ccd_after_coplanarity(CcdPair pair, const CcdPoints& start, const CcdPoints& end,

@@ -15,10 +15,11 @@
 
 namespace crumple::geometry::detail {
 
-/// One query's 4 points at t = 0 and t = 1, in the order of `CcdPair`.
-struct CcdQuery {
-  CcdPoints start, end;
-};
+using geometry::CcdQuery;
+
+/// `ccd` computed without its vector shortcut for the hull filter (the scalar filters one after
+/// another): the reference against which the tests check `ccd` and the batched `ccd` on a span.
+CcdResult ccd_scalar(CcdPair pair, const CcdPoints& start, const CcdPoints& end, const CcdOptions& options);
 
 /// Whether the four-lane AVX2 kernel runs on this processor (`has_avx2`, kernel_batch.hpp).
 bool ccd_has_avx2();
