@@ -221,27 +221,36 @@ Run run(const std::vector<Query>& queries, const Positions& x0, const Positions&
   return total;
 }
 
+/// Thread CPU ns of `work()` run once on each of `threads` threads (the caller's among them),
+/// summed over the threads.
+template <class Work>
+double thread_cpu_ns(int threads, const Work& work) {
+  std::atomic<long long> total{0};
+  const auto timed = [&] {
+    timespec a{}, b{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
+    work();
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
+    total += (b.tv_sec - a.tv_sec) * 1000000000LL + (b.tv_nsec - a.tv_nsec);
+  };
+  std::vector<std::thread> pool;
+  for (int k = 1; k < threads; ++k) pool.emplace_back(timed);
+  timed();
+  for (std::thread& t : pool) t.join();
+  return static_cast<double>(total.load());
+}
+
 /// Thread CPU ns of one pass of `solve(i)` over queries [0, n) with `threads` threads (chunks of
 /// 1024 claimed dynamically), summed over the threads.
 template <class Solve>
 double cpu_pass(std::size_t n, int threads, const Solve& solve) {
   std::atomic<std::size_t> next{0};
-  std::atomic<long long> total{0};
-  const auto work = [&] {
-    timespec a{}, b{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
+  return thread_cpu_ns(threads, [&] {
     for (std::size_t begin; (begin = next.fetch_add(1024)) < n;) {
       const std::size_t end = std::min(n, begin + 1024);
       for (std::size_t i = begin; i < end; ++i) solve(i);
     }
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
-    total += (b.tv_sec - a.tv_sec) * 1000000000LL + (b.tv_nsec - a.tv_nsec);
-  };
-  std::vector<std::thread> pool;
-  for (int k = 1; k < threads; ++k) pool.emplace_back(work);
-  work();
-  for (std::thread& t : pool) t.join();
-  return static_cast<double>(total.load());
+  });
 }
 
 /// Thread CPU ns of one pass of the batched narrow phase (`geometry::ccd` on a span) over all
@@ -252,10 +261,7 @@ double batch_pass(const std::vector<Query>& queries, const Positions& x0, const 
                   const geometry::CcdOptions& options, std::vector<std::uint8_t>& hit) {
   const std::size_t n = queries.size();
   std::atomic<std::size_t> next{0};
-  std::atomic<long long> total{0};
-  const auto work = [&] {
-    timespec a{}, b{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
+  return thread_cpu_ns(threads, [&] {
     std::vector<geometry::CcdQuery> batch[2];
     std::vector<std::size_t> ids[2];
     std::vector<geometry::CcdResult> out;
@@ -278,14 +284,7 @@ double batch_pass(const std::vector<Query>& queries, const Positions& x0, const 
         for (std::size_t j = 0; j < out.size(); ++j) hit[ids[k][j]] = out[j].hit;
       }
     }
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
-    total += (b.tv_sec - a.tv_sec) * 1000000000LL + (b.tv_nsec - a.tv_nsec);
-  };
-  std::vector<std::thread> pool;
-  for (int k = 1; k < threads; ++k) pool.emplace_back(work);
-  work();
-  for (std::thread& t : pool) t.join();
-  return static_cast<double>(total.load());
+  });
 }
 
 /// Oracle verdicts on a sample of queries: certified no contact / certified contact / undecided.

@@ -302,6 +302,17 @@ TEST(PerFrame, ScenesHaveContactForcesAboveOneHundredQuads) {
   }
 }
 
+// The scene of `spec`, whose key turns the contact forces on, on one thread with
+// `Settings::contact_forces` = `forces`.
+Simulation one_thread_simulation(const char* spec, bool forces) {
+  Scene s = make_scene(SceneSpec::parse(spec), 1);
+  EXPECT_TRUE(s.settings.contact_forces) << "the scene key";
+  s.settings.detector.threads = 1;
+  s.settings.contact_forces = forces;
+  return Simulation(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
+                    s.settings);
+}
+
 // `crumple:n=16` with the stiffness scaled by (200/16)², so that its steps have the ωh of
 // `crumple:n=200` (ω² = k/m: a spring's stiffness stays `stretch` while a vertex's mass falls
 // as the edge squared), squeezed by walls that close in 2 s. With the contacts only pushed out
@@ -313,12 +324,7 @@ TEST(PerFrame, ScenesHaveContactForcesAboveOneHundredQuads) {
 
 TEST(PerFrame, ContactForcesKeepAStiffPileCalm) {
   const auto mean_energy = [](bool forces) {
-    Scene s = make_scene(SceneSpec::parse("crumple:n=16,stretch=62500,push-time=2,contact-forces=on"), 1);
-    EXPECT_TRUE(s.settings.contact_forces) << "the scene key";
-    s.settings.detector.threads = 1;
-    s.settings.contact_forces = forces;
-    Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
-                   s.settings);
+    Simulation sim = one_thread_simulation("crumple:n=16,stretch=62500,push-time=2,contact-forces=on", forces);
     Scalar sum = 0;
     int frames = 0;
     for (int f = 0; f < 120; ++f) {
@@ -345,12 +351,8 @@ TEST(PerFrame, ContactForcesKeepAStiffPileCalm) {
 TEST(PerFrame, ContactForcesKeepAStiffSweepCalm) {
   // The largest energy over frames 70-100; a run past 1e4 J stops there (it ran away).
   const auto late_energy = [](bool forces) {
-    Scene s = make_scene(SceneSpec::parse("cloth-on-sphere:n=16,sweep-speed=5,stretch=62500,contact-forces=on"), 1);
-    EXPECT_TRUE(s.settings.contact_forces) << "the scene key";
-    s.settings.detector.threads = 1;
-    s.settings.contact_forces = forces;
-    Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
-                   s.settings);
+    Simulation sim =
+        one_thread_simulation("cloth-on-sphere:n=16,sweep-speed=5,stretch=62500,contact-forces=on", forces);
     Scalar most = 0;
     for (int f = 0; f < 100; ++f) {
       FrameStats st;
