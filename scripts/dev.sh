@@ -92,9 +92,9 @@ EOF
     phase "build release" build release
     phase "build asan" build asan
     echo "== Release tests"
-    phase "ctest release" ctest --preset release -j "$JOBS" --timeout 900
+    phase "ctest release" ctest --preset release -j "$JOBS" --timeout 900 --output-on-failure
     echo "== AddressSanitizer + UBSan tests"
-    phase "ctest asan" ctest --preset asan -j "$JOBS" --timeout 1500
+    phase "ctest asan" ctest --preset asan -j "$JOBS" --timeout 1500 --output-on-failure
     echo "== Python tests (module in build/release/python, Debian's /usr/bin/python3)"
     [ -d build/release/python/crumple ] || { echo "no Python module: reconfigure build/release with -DCRUMPLE_BUILD_PYTHON=ON" >&2; exit 1; }
     PYTHONPATH="$PWD/build/release/python" PYTHONDONTWRITEBYTECODE=1 \
