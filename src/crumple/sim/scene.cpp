@@ -61,7 +61,7 @@ constexpr std::array<SceneParamInfo, 17> kHanging{{
     {"tau", "0.01", "with material=on: Kelvin-Voigt relaxation time (s)"},
 }};
 
-constexpr std::array<SceneParamInfo, 19> kSphere{{
+constexpr std::array<SceneParamInfo, 20> kSphere{{
     {"n", "16", "quads along each side"},
     {"size", "1.5", "side of the square cloth (m)"},
     {"height", "0.7", "initial height of the cloth (m)"},
@@ -78,6 +78,10 @@ constexpr std::array<SceneParamInfo, 19> kSphere{{
      "radius (m) of the frame's proximity search, at least 2 thicknesses: it must cover the relative "
      "motion of a frame, which does not shrink with the edges (2 thicknesses up to n = 100, 3.9 at 200)"},
     CRUMPLE_CONTACT_FORCES_KEY("the cloth"),
+    {"motion-retries", "auto",
+     "auto or a count: how many times a frame may run again with the pairs that its own motion brings together "
+     "from beyond the search radius among its contacts (auto: 1 above n = 100, where the fail-safe's stops of "
+     "the landing's folds at the frame's end stretched springs up to 20x their rest length; 0 at n <= 100)"},
 }};
 
 constexpr std::array<SceneParamInfo, 18> kRibbon{{
@@ -272,6 +276,25 @@ bool contact_forces_key(const SceneSpec& spec, Index n) {
   throw InputError("scene '" + spec.name() + "': key 'contact-forces' expects on, off or auto, got '" + value + "'");
 }
 
+/// The scene key `motion-retries` of `cloth-on-sphere`: a count, or auto = 1 above n = 100 quads
+/// a side (as `contact-forces`), 0 otherwise. Its landing brings folds onto the cloth on the
+/// floor from farther than the search radius within a frame (~3 m/s, 5 cm a frame); left to the
+/// fail-safe, they are stopped at the frame's end against springs the steps did not see, and at
+/// n = 200 (ωh twice n = 100's) the next frame's release of that stretch moved the cloth farther
+/// still (a spring 20x its rest length, 94 J); a retried frame answers them with proximity
+/// contacts at every step (docs/simulation.md, "Energy under contact"). At n <= 100 the landing
+/// cools without them, and a retried frame pays its steps twice.
+int motion_retries_key(const SceneSpec& spec, Index n) {
+  const std::string value = spec.get_string("motion-retries");
+  if (value == "auto") return n > 100 ? 1 : 0;
+  const auto count = parse_integer(value);
+  if (!count || *count < 0 || *count > 100) {
+    throw InputError("scene '" + spec.name() + "': key 'motion-retries' expects auto or an integer in [0, 100], got '" +
+                     value + "'");
+  }
+  return static_cast<int>(*count);
+}
+
 /// The fast default of the scenes with a per-area material: detection once per frame with
 /// proximity impulses and friction (`ResponseModel::Proximity`), projective dynamics, 4 steps of
 /// 1/240 s per frame of 1/60 s, 5 local/global iterations each, Chebyshev-accelerated with
@@ -341,6 +364,10 @@ Scene cloth_on_sphere(const SceneSpec& spec, std::uint64_t seed) {
   // As in `crumple` (below): at n = 200 the push-outs after the steps alone let the 5 m/s sweep
   // run away (3,210 J by frame 227; docs/simulation.md, "Contacts in the projective step").
   s.settings.contact_forces = contact_forces_key(spec, n);
+  // The landing's folds that close in from beyond the radius within a frame: at n = 200 the
+  // fail-safe's stops of them stretched springs 20x (94 J at frame 31); one retry keeps the
+  // landing near 1 J (docs/simulation.md, "Energy under contact").
+  s.settings.motion_retries = motion_retries_key(spec, n);
   return s;
 }
 
