@@ -10,8 +10,9 @@
 namespace crumple::detail {
 
 /// A face's box at t = 0 and at t = 1, each bound rounded outwards to float, indexed
-/// [3 τ + axis]: the lows, then the highs.
-struct FaceBoxes {
+/// [3 τ + axis]: the lows, then the highs. (16-byte aligned: the kernels' two-float loads at
+/// lo[4] and hi[4] are then 8-byte aligned.)
+struct alignas(16) FaceBoxes {
   std::array<float, 6> lo, hi;
 };
 
