@@ -8,6 +8,8 @@
 #include <crumple/detect/broad_phase/kdop_tree.hpp>
 #include <crumple/detect/broad_phase/sweep_prune.hpp>
 #include <crumple/detect/continuous.hpp>
+#include <crumple/detect/continuous_detail.hpp>
+#include <crumple/geometry/ccd_detail.hpp>
 #include <crumple/io/mesh_io.hpp>
 #include <crumple/mesh/shapes.hpp>
 #include <support/meshes.hpp>
@@ -22,6 +24,7 @@
 #include <memory>
 #include <mutex>
 #include <numbers>
+#include <random>
 #include <sstream>
 #include <string>
 #include <tuple>
@@ -523,6 +526,62 @@ TEST(Continuous, FunnelStepAtZeroSeparationIsPositive) {
   EXPECT_EQ(query.collision_free_step(m0.positions(), m1.positions()), step);
   for (const auto& i : impacts.vf) EXPECT_GT(i.toi, 0) << "vf " << i.vertex << ' ' << i.face;
   for (const auto& i : impacts.ee) EXPECT_GT(i.toi, 0) << "ee " << i.edge0 << ' ' << i.edge1;
+}
+
+TEST(Continuous, FaceBoxKernelsGiveTheScalarSlabTest) {
+  // Both kernels of the face-level test against the test one difference at a time, on boxes
+  // whose twelve differences lo − hi are each drawn exactly at the bound (not apart: the test
+  // is strict), one float step above or below it, far on either side, or with an infinite
+  // bound (∞ − ∞ is NaN: not apart), in every combination of sides, axes and times.
+  const auto reference = [](const detail::FaceBoxes& a, const detail::FaceBoxes& b, Scalar bound) {
+    bool apart = false;
+    for (std::size_t k = 0; k < 3; ++k) {
+      const auto above = [&](const detail::FaceBoxes& f, const detail::FaceBoxes& g, std::size_t j) {
+        return Scalar(f.lo[j]) - Scalar(g.hi[j]) > bound;
+      };
+      apart = apart || (above(a, b, k) && above(a, b, k + 3)) || (above(b, a, k) && above(b, a, k + 3));
+    }
+    return apart;
+  };
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  std::mt19937 rng(42);
+  std::uniform_int_distribution<int> grid(-256, 256), pick(0, 8);
+  std::size_t apart = 0, draws = 0, mismatches = 0;
+  for (const Scalar bound : {0.25, 0x1p-20}) {
+    const auto bound_f = static_cast<float>(bound);
+    // lo − hi for one difference, hi on the 1/64 grid (lo − hi then exact in float and double).
+    const auto draw = [&](float& lo, float& hi) {
+      hi = static_cast<float>(grid(rng)) / 64;
+      switch (pick(rng)) {
+        case 0: lo = hi + bound_f; break;                                // at the bound: not apart
+        case 1: lo = std::nextafter(hi + bound_f, kInf); break;         // just above
+        case 2: lo = std::nextafter(hi + bound_f, -kInf); break;        // just below
+        case 3: lo = hi + 4; break;                                      // far above
+        case 4: lo = hi - 4; break;                                      // far below (overlap)
+        case 5: lo = kInf; hi = kInf; break;                             // NaN difference
+        case 6: lo = kInf; break;                                        // +∞
+        case 7: hi = -kInf; break;                                       // +∞
+        default: lo = -kInf; break;                                      // −∞
+      }
+    };
+    for (int n = 0; n < 20000; ++n) {
+      detail::FaceBoxes a, b;
+      for (std::size_t j = 0; j < 6; ++j) {
+        draw(a.lo[j], b.hi[j]);
+        draw(b.lo[j], a.hi[j]);
+      }
+      const bool expected = reference(a, b, bound);
+      apart += expected ? 1 : 0;
+      ++draws;
+      for (const bool avx2 : {false, true}) {
+        if (avx2 && !geometry::detail::ccd_has_avx2()) continue;
+        if (detail::face_boxes_apart(a, b, bound, avx2) != expected) ++mismatches;
+      }
+    }
+  }
+  EXPECT_EQ(mismatches, 0u);
+  EXPECT_GT(apart, draws / 10);
+  EXPECT_LT(apart, draws - draws / 10);
 }
 
 TEST(Continuous, BadInputThrowsInputError) {

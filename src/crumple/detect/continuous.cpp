@@ -8,12 +8,15 @@
 #include <crumple/detect/broad_phase/kdop_tree.hpp>
 #include <crumple/detect/broad_phase/sweep_prune.hpp>
 #include <crumple/detect/continuous.hpp>
+#include <crumple/detect/continuous_detail.hpp>
 #include <crumple/detect/exact/orphans.hpp>
 #include <crumple/detect/exact/ownership.hpp>
 #include <crumple/detect/exact/stars.hpp>
 #include <crumple/detect/scale_detail.hpp>
 #include <crumple/geometry/ccd_detail.hpp>
 #include <crumple/geometry/distance.hpp>
+
+#include <immintrin.h>
 
 #include <algorithm>
 #include <array>
@@ -22,6 +25,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstddef>
+#include <cstring>
 #include <limits>
 #include <mutex>
 #include <string>
@@ -80,23 +84,64 @@ Scalar unit_scale(const geometry::CcdPoints& start, const geometry::CcdPoints& e
 /// instead of scattered vertex positions. The first cache line holds what the face-level test
 /// reads (most candidates stop there); the corners and ids follow.
 struct alignas(64) FaceFrame {
-  /// Per time τ, the corners' box rounded outwards to float: lo at [τ][0..2], hi at [τ][3..5].
-  std::array<std::array<float, 6>, 2> box;
+  /// The corners' box per time, rounded outwards to float (the lows, then the highs: the face
+  /// test takes the differences of the same axis and time two or four at once).
+  detail::FaceBoxes box;
   OwnedFace own;                         ///< its masks in the first cache line
   std::array<std::array<Vec3, 3>, 2> x;  ///< x[τ][corner]
 };
 static_assert(offsetof(FaceFrame, own) + 2 <= 64, "the face test reads one cache line");
 
-/// The slab test of two face records on their float boxes (ccd_slabs_apart's test).
-bool boxes_apart(const FaceFrame& a, const FaceFrame& b, Scalar bound) {
-  int apart = 0;
-  for (std::size_t k = 0; k < 3; ++k) {
-    apart |= int(Scalar(a.box[0][k]) - Scalar(b.box[0][k + 3]) > bound) &
-             int(Scalar(a.box[1][k]) - Scalar(b.box[1][k + 3]) > bound);
-    apart |= int(Scalar(b.box[0][k]) - Scalar(a.box[0][k + 3]) > bound) &
-             int(Scalar(b.box[1][k]) - Scalar(a.box[1][k + 3]) > bound);
+/// Floats p[0] and p[1] as two doubles (exact).
+__attribute__((always_inline)) inline __m128d widen(const float* p) {
+  double two;
+  std::memcpy(&two, p, sizeof two);
+  return _mm_cvtps_pd(_mm_castpd_ps(_mm_set_sd(two)));
+}
+
+/// Bit j = 3 τ + axis set where fl(lo_f − hi_g) > bound for that axis at time τ: the six
+/// differences in double two at a time (SSE2, in every x86-64), the same single roundings and
+/// comparisons as one at a time (NaN, from ∞ − ∞, compares false).
+__attribute__((always_inline)) inline int above_bound(const detail::FaceBoxes& f, const detail::FaceBoxes& g,
+                                                      __m128d bound) {
+  int above = 0;
+  for (int c = 0; c < 3; ++c) {
+    const __m128d d = _mm_sub_pd(widen(&f.lo[static_cast<std::size_t>(2 * c)]), widen(&g.hi[static_cast<std::size_t>(2 * c)]));
+    above |= _mm_movemask_pd(_mm_cmpgt_pd(d, bound)) << (2 * c);
   }
-  return apart != 0;
+  return above;
+}
+
+/// The slab test of two face records on their float boxes (ccd_slabs_apart's test): apart when
+/// on some axis, at t = 0 and at t = 1 alike, one face's low minus the other's high exceeds
+/// the bound.
+bool boxes_apart(const detail::FaceBoxes& a, const detail::FaceBoxes& b, Scalar bound) {
+  const __m128d limit = _mm_set1_pd(bound);
+  const int above = above_bound(a, b, limit) | above_bound(b, a, limit) << 6;
+  return (above & (above >> 3) & 0b000111'000111) != 0;  // bit j and bit j + 3: the same axis at both times
+}
+
+/// boxes_apart as three four-wide double differences (AVX2 only): lanes a.lo − b.hi for
+/// j = 0..3, b.lo − a.hi for j = 0..3, then both for j = 4, 5; the same conversions, single
+/// roundings and comparisons, so the same answer.
+__attribute__((target("avx2"), noinline)) bool boxes_apart_avx2(const detail::FaceBoxes& a,
+                                                                const detail::FaceBoxes& b, Scalar bound) {
+  // (No lambdas: GCC does not give them the function's target.)
+  const __m256d limit = _mm256_set1_pd(bound);
+  const __m256d d1 = _mm256_sub_pd(_mm256_cvtps_pd(_mm_loadu_ps(&a.lo[0])), _mm256_cvtps_pd(_mm_loadu_ps(&b.hi[0])));
+  const __m256d d2 = _mm256_sub_pd(_mm256_cvtps_pd(_mm_loadu_ps(&b.lo[0])), _mm256_cvtps_pd(_mm_loadu_ps(&a.hi[0])));
+  const __m128 lo45 = _mm_loadh_pi(_mm_loadl_pi(_mm_setzero_ps(), reinterpret_cast<const __m64*>(&a.lo[4])),
+                                   reinterpret_cast<const __m64*>(&b.lo[4]));
+  const __m128 hi45 = _mm_loadh_pi(_mm_loadl_pi(_mm_setzero_ps(), reinterpret_cast<const __m64*>(&b.hi[4])),
+                                   reinterpret_cast<const __m64*>(&a.hi[4]));
+  const __m256d d3 = _mm256_sub_pd(_mm256_cvtps_pd(lo45), _mm256_cvtps_pd(hi45));
+  const int m1 = _mm256_movemask_pd(_mm256_cmp_pd(d1, limit, _CMP_GT_OQ));  // a side, j = 0..3
+  const int m2 = _mm256_movemask_pd(_mm256_cmp_pd(d2, limit, _CMP_GT_OQ));  // b side, j = 0..3
+  const int m3 = _mm256_movemask_pd(_mm256_cmp_pd(d3, limit, _CMP_GT_OQ));  // a, then b, j = 4, 5
+  // Axis k at both times: bits k and k + 3 of a side (j = 3, 4, 5 from m1's bit 3 and m3's 0, 1).
+  const int a_side = (m1 & 7) & ((m1 >> 3) | (m3 & 3) << 1);
+  const int b_side = (m2 & 7) & ((m2 >> 3) | (m3 >> 2) << 1);
+  return (a_side | b_side) != 0;
 }
 
 /// Counters of one chunk of work, summed into the query's stats under a lock.
@@ -127,6 +172,8 @@ struct Step {
   geometry::CcdOptions narrow;
   /// #V flags of `ContinuousQuery::query_moved`, or null: then every sub-pair is tested.
   const char* moved = nullptr;
+  /// Whether the face-level test runs four-wide (`boxes_apart_avx2`).
+  bool avx2 = geometry::detail::ccd_has_avx2();
   /// Whether the sub-pair of these four vertices is tested (one of them flagged).
   bool wanted(Index a, Index b, Index c, Index d) const {
     const auto flagged = [&](Index v) { return moved[static_cast<std::size_t>(v)] != 0; };
@@ -172,7 +219,10 @@ __attribute__((always_inline)) inline geometry::CcdSlabs slabs_of(const geometry
 }
 
 /// Set bits of a 3-bit ownership mask (std::popcount is a library call without -mpopcnt).
-int bits(std::uint8_t mask) { return (mask & 1) + (mask >> 1 & 1) + (mask >> 2 & 1); }
+int bits(std::uint8_t mask) {
+  constexpr std::array<std::uint8_t, 8> kBits{0, 1, 1, 2, 1, 2, 2, 3};
+  return kBits[mask & 7u];
+}
 
 /// x(t) = p + t (q − p), as the narrow phase's motion.
 Vec3 at(const Vec3& p, const Vec3& q, Scalar t) { return p + t * (q - p); }
@@ -410,7 +460,7 @@ struct Tester {
     const OwnedFace& f = rf.own;
     const OwnedFace& g = rg.own;
     const int ee_count = bits(f.edge_mask) * bits(g.edge_mask);
-    if (boxes_apart(rf, rg, step.hull_bound)) {
+    if (step.avx2 ? boxes_apart_avx2(rf.box, rg.box, step.hull_bound) : boxes_apart(rf.box, rg.box, step.hull_bound)) {
       counts.vf_box_rejected += bits(f.vertex_mask) + bits(g.vertex_mask);
       counts.ee_box_rejected += ee_count;
       ++counts.face_pairs_apart;
@@ -837,8 +887,8 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
       const Vec3 lo = r.x[tau][0].cwiseMin(r.x[tau][1]).cwiseMin(r.x[tau][2]);
       const Vec3 hi = r.x[tau][0].cwiseMax(r.x[tau][1]).cwiseMax(r.x[tau][2]);
       for (std::size_t k = 0; k < 3; ++k) {
-        r.box[tau][k] = down(lo[static_cast<Eigen::Index>(k)]);
-        r.box[tau][k + 3] = up(hi[static_cast<Eigen::Index>(k)]);
+        r.box.lo[3 * tau + k] = down(lo[static_cast<Eigen::Index>(k)]);
+        r.box.hi[3 * tau + k] = up(hi[static_cast<Eigen::Index>(k)]);
       }
     }
   };
@@ -1133,6 +1183,10 @@ Scalar collision_free_step(std::shared_ptr<const Topology> topology, PositionsVi
                            const ContinuousOptions& options) {
   ContinuousQuery query(std::move(topology), options);
   return query.collision_free_step(previous, current);
+}
+
+bool detail::face_boxes_apart(const FaceBoxes& a, const FaceBoxes& b, Scalar bound, bool avx2) {
+  return avx2 && geometry::detail::ccd_has_avx2() ? boxes_apart_avx2(a, b, bound) : boxes_apart(a, b, bound);
 }
 
 }  // namespace crumple
