@@ -51,6 +51,7 @@ struct SimulateArgs {
   std::optional<int> passes;
   std::optional<std::string> fail_safe;
   std::optional<std::string> untangle;
+  std::optional<std::string> untangle_pull;
   std::optional<std::string> motion_search;
   std::optional<int> motion_retries;
   std::optional<double> push_relaxation;
@@ -260,6 +261,7 @@ void save_state(const std::filesystem::path& out, const sim::Simulation& simulat
                                     .add("passes", settings.passes)
                                     .add("fail_safe", settings.fail_safe)
                                     .add("untangle", settings.untangle)
+                                    .add("untangle_pull", settings.untangle_in_solve ? "solve" : "after")
                                     .add("motion_search", settings.motion_search)
                                     .add("motion_retries", settings.motion_retries)
                                     .add("push_relaxation", settings.proximity_relaxation)
@@ -405,6 +407,13 @@ int run_simulate(const SimulateArgs& args) {
     // Absent from states saved before the fail-safe existed: the default (on).
     if (side->values.count("fail_safe")) settings.fail_safe = side->text("fail_safe", side_path) == "true";
     if (side->values.count("untangle")) settings.untangle = side->text("untangle", side_path) == "true";
+    if (side->values.count("untangle_pull")) {
+      const std::string pull = side->text("untangle_pull", side_path);
+      if (pull != "solve" && pull != "after") {
+        throw ParseError(side_path.string(), {}, "key 'untangle_pull' expects solve or after, got '" + pull + "'");
+      }
+      settings.untangle_in_solve = pull == "solve";
+    }
     if (side->values.count("motion_search")) {
       settings.motion_search = side->text("motion_search", side_path) == "true";
     }
@@ -429,6 +438,12 @@ int run_simulate(const SimulateArgs& args) {
   if (args.passes) settings.passes = *args.passes;
   if (args.fail_safe) settings.fail_safe = parse_on_off(*args.fail_safe, "--fail-safe");
   if (args.untangle) settings.untangle = parse_on_off(*args.untangle, "--untangle");
+  if (args.untangle_pull) {
+    if (*args.untangle_pull != "solve" && *args.untangle_pull != "after") {
+      throw InputError("--untangle-pull expects solve or after, got '" + *args.untangle_pull + "'");
+    }
+    settings.untangle_in_solve = *args.untangle_pull == "solve";
+  }
   if (args.motion_search) settings.motion_search = parse_on_off(*args.motion_search, "--motion-search");
   if (args.motion_retries) settings.motion_retries = *args.motion_retries;
   if (args.push_relaxation) {
@@ -668,6 +683,10 @@ Run add_simulate_command(CLI::App& app) {
                  "on|off: with response on, untangle a cloth that already intersects itself (Global "
                  "Intersection Analysis); the column intersecting_pairs of stats.csv counts the "
                  "intersecting triangle pairs every frame; default on");
+  app.add_option("--untangle-pull", args->untangle_pull,
+                 "solve|after: the untangling pulls act inside the implicit Euler step, as stiff springs "
+                 "that the cloth's springs share with the pulled vertices' neighbours (solve), or move "
+                 "the vertices after each step (after; other integrators always); default after");
   app.add_option("--motion-search", args->motion_search,
                  "on|off: with response on, pairs that the velocities bring within the thickness over "
                  "the frame join its contacts (a continuous query over the fast vertices); default: the "

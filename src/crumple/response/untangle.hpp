@@ -44,7 +44,8 @@
 ///     also get contour minimisation, which shortens the curve towards its pinches until it
 ///     closes.
 ///
-/// Pushes (`Untangler::apply`), built at the analysed positions, applied after each step:
+/// Pushes (`Untangler::apply`), built at the analysed positions, applied after each step (or,
+/// for the pulls, held inside an implicit step as anchors: `Untangler::pull_moves`):
 ///  - a crossing whose edge has one end inside (or at a pinch of its contour: the part of the
 ///    edge between the pinch and the crossing is inside) and one outside: the inside end and
 ///    the crossed face (at the crossing's barycentric point) get a position impulse in the
@@ -166,6 +167,13 @@ struct UntangleOptions {
   int threads = 1;          ///< threads of the intersection detector (0 = all)
 };
 
+/// One vertex's share of a pull (`Untangler::pull_moves`): `offset` (m) along `direction` (unit).
+struct PullMove {
+  Index vertex = -1;
+  Vec3 direction = Vec3::Zero();
+  Scalar offset = 0;
+};
+
 /// What one `apply` did.
 struct UntangleStats {
   std::size_t pulls = 0;       ///< pull-through pushes that moved something
@@ -186,8 +194,16 @@ class Untangler {
   std::size_t count(PositionsView positions);
 
   /// Applies the pushes of the last analysis at the current positions (see the file comment).
+  /// `pulls_moved`: the pulls' moves were held inside the step just taken (`pull_moves`), so
+  /// only their velocity corrections (and the contour moves) are applied.
   UntangleStats apply(std::span<const Scalar> inv_mass, std::span<Vec3> positions,
-                      std::span<Vec3> velocities) const;
+                      std::span<Vec3> velocities, bool pulls_moved = false) const;
+  /// The moves the pulls of the last analysis would give their vertices at `positions` (each
+  /// stencil vertex's share of the position impulse `apply` makes, along the pull's normal), for
+  /// an implicit step that holds them as anchors (`sim::Anchor`) instead of `apply` moving the
+  /// vertices after it. Appends to `out`; returns the number of pulls with a move.
+  std::size_t pull_moves(std::span<const Scalar> inv_mass, PositionsView positions,
+                         std::vector<PullMove>& out) const;
 
   const IntersectionAnalysis& analysis() const { return analysis_; }
   /// The tangle of the last analysis (#V flags, all 0 when the mesh was clean).
@@ -213,6 +229,10 @@ class Untangler {
   std::vector<Stencil> pulls_;
   std::vector<char> held_face_;  ///< per pull: 1 for a band's (the crossed face is held)
   std::vector<Shift> shifts_;
+
+  /// Pull `p` as applied at `x` (a band's cut to its inside end) and its position impulse μ
+  /// (0: nothing to move).
+  Scalar pull_impulse(std::size_t p, std::span<const Scalar> inv_mass, PositionsView x, Stencil& s) const;
 };
 
 }  // namespace crumple::response

@@ -124,6 +124,7 @@ class ImplicitEuler final : public Integrator {
  public:
   explicit ImplicitEuler(const IntegratorOptions& options) : options_(options) {}
   IntegratorKind kind() const override { return IntegratorKind::ImplicitEuler; }
+  bool takes_anchors() const override { return true; }
 
   void step(const Model& model, const ForceField& field, State& s, Scalar h) override {
     check_step(model, s, h);
@@ -182,6 +183,29 @@ class ImplicitEuler final : public Integrator {
         b_.segment<3>(3 * i) -= h * field.drag->stiffness * s.v[k];
       }
       add(diagonal_block_[k], i, diagonal * Mat3::Identity());
+    }
+    // Anchors: A += c D d dᵀ, b += k d (offset − h d · v₀) before the factor h (k = c D / h²:
+    // the force k d (offset − d · (x − x₀)) linearised at x₀ along x = x₀ + h (v₀ + Δv)). D is
+    // read before any anchor adds to the block, so two anchors on one particle do not compound.
+    anchor_diagonal_.assign(anchors_.size(), 0);
+    for (std::size_t a = 0; a < anchors_.size(); ++a) {
+      const Index i = anchors_[a].vertex;
+      CRUMPLE_CHECK(i >= 0 && i < n, "anchor vertex out of range");
+      Scalar trace = 0;
+      for (int c = 0; c < 3; ++c) {
+        trace += values[a_.outerIndexPtr()[3 * i + c] + block_offset_[diagonal_block_[static_cast<std::size_t>(i)]] + c];
+      }
+      anchor_diagonal_[a] = anchor_stiffness_ * trace / 3;
+    }
+    for (std::size_t a = 0; a < anchors_.size(); ++a) {
+      const Anchor& anchor = anchors_[a];
+      const auto k = static_cast<std::size_t>(anchor.vertex);
+      if (inv_mass[k] == 0 || !(anchor_diagonal_[a] > 0)) continue;
+      const Vec3 d = anchor.direction;
+      // A particle already moving farther that way over the step keeps its motion.
+      const Scalar offset = std::max(anchor.offset, h * d.dot(s.v[k]));
+      add(diagonal_block_[k], anchor.vertex, anchor_diagonal_[a] * (d * d.transpose()));
+      b_.segment<3>(3 * anchor.vertex) += (anchor_diagonal_[a] / h2) * (offset - h * d.dot(s.v[k])) * d;
     }
     b_ *= h;
     // Pinned particles: zero their rows and columns, identity on the diagonal, Δv = 0.
@@ -303,6 +327,7 @@ class ImplicitEuler final : public Integrator {
   std::vector<std::array<Index, 4>> pattern_hinges_;
   std::vector<std::array<std::size_t, 16>> hinge_block_;  // block (vertex i, vertex j) at 4i + j
   Vector b_, dv_;
+  std::vector<Scalar> anchor_diagonal_;  // c D per anchor (the step's)
   Eigen::ConjugateGradient<Sparse, Eigen::Lower | Eigen::Upper> cg_;
 };
 

@@ -90,6 +90,20 @@ using ContactSolve = std::function<void(std::span<const Vec3> force, std::span<V
 using ContactForces = std::function<void(std::span<const Vec3> iterate, std::span<const Scalar> diagonal,
                                          const ContactSolve& solve, std::span<Vec3> force)>;
 
+/// A pull held inside an implicit step: a zero-rest-length spring along `direction` (unit)
+/// whose target is `offset` (>= 0) beyond the particle's start of step, d · x = d · x₀ + s with
+/// s = max(offset, h d · v₀) (a particle already moving farther that way keeps its motion). Its
+/// energy ½ k (d · x − d · x₀ − s)², k = stiffness × D / h², D the particle's diagonal (mean of
+/// its 3×3 block) of the step's matrix without anchors, is part of the backward Euler system:
+/// the springs share the pull with the particle's neighbours within the step instead of taking
+/// it back at the next one (docs/simulation.md, "Untangling"). A particle whose neighbours stay
+/// ends the step about stiffness / (1 + stiffness) of the way to the target.
+struct Anchor {
+  Index vertex = -1;
+  Vec3 direction = Vec3::Zero();
+  Scalar offset = 0;
+};
+
 class Integrator {
  public:
   virtual ~Integrator() = default;
@@ -98,6 +112,15 @@ class Integrator {
   /// Installs (or, empty, removes) the contact forces of the following steps; only an
   /// integrator that `takes_contact_forces` uses them.
   void set_contact_forces(ContactForces forces) { contact_forces_ = std::move(forces); }
+  /// Whether `set_anchors` acts (implicit Euler only).
+  virtual bool takes_anchors() const { return false; }
+  /// Installs the anchors of the following steps (stiffness > 0, relative to the particle's
+  /// diagonal, see `Anchor`); an empty span removes them. Anchors on pinned particles are
+  /// ignored. Only an integrator that `takes_anchors` uses them.
+  void set_anchors(std::span<const Anchor> anchors, Scalar stiffness) {
+    anchors_.assign(anchors.begin(), anchors.end());
+    anchor_stiffness_ = stiffness;
+  }
   virtual IntegratorKind kind() const = 0;
   /// Advances `state` (x, v, time) by `dt` seconds (> 0).
   virtual void step(const Model& model, const ForceField& field, State& state, Scalar dt) = 0;
@@ -112,6 +135,8 @@ class Integrator {
   int last_iterations_ = 0;
   std::int64_t factorizations_ = 0;
   ContactForces contact_forces_;
+  std::vector<Anchor> anchors_;
+  Scalar anchor_stiffness_ = 0;
 };
 
 /// The largest step h (s) at which `kind` keeps the linearized motion of `model` at shape `x`

@@ -182,6 +182,8 @@ Simulation::Simulation(Model model, State state, ForceField field,
                 "contour_step must be finite and >= 0");
   CRUMPLE_CHECK(settings_.border_step >= 0 && std::isfinite(settings_.border_step),
                 "border_step must be finite and >= 0");
+  CRUMPLE_CHECK(settings_.untangle_pull_stiffness > 0 && std::isfinite(settings_.untangle_pull_stiffness),
+                "untangle_pull_stiffness must be finite and > 0");
   if (settings_.response && settings_.untangle) {
     response::UntangleOptions options;
     const Scalar h = settings_.detector.thickness;
@@ -211,10 +213,43 @@ void Simulation::untangle_check() {
   untangle_ms_ += ms_since(start);
 }
 
-void Simulation::untangle_push() {
+bool Simulation::untangle_anchor() {
+  if (!untangler_ || !untangler_->tangled() || !settings_.untangle_in_solve || !integrator_->takes_anchors()) {
+    return false;
+  }
+  const auto start = Clock::now();
+  pull_moves_.clear();
+  untangle_pulls_ += untangler_->pull_moves(model_.inv_mass(), state_.x, pull_moves_);
+  anchors_.clear();
+  // One anchor per vertex, along its pulls' net move (their sum, no longer than the longest):
+  // opposed pulls of one vertex cancel as they do when applied one after the other, instead of
+  // holding it between their targets.
+  const std::size_t n = state_.x.size();
+  net_move_.resize(n, Vec3::Zero());
+  longest_move_.resize(n, 0);
+  touched_.clear();
+  for (const response::PullMove& m : pull_moves_) {
+    const auto i = static_cast<std::size_t>(m.vertex);
+    if (longest_move_[i] == 0) touched_.push_back(m.vertex);
+    net_move_[i] += m.offset * m.direction;
+    longest_move_[i] = std::max(longest_move_[i], std::abs(m.offset));
+  }
+  for (Index v : touched_) {
+    const auto i = static_cast<std::size_t>(v);
+    const Scalar length = net_move_[i].norm();
+    if (length > 0) anchors_.push_back({v, net_move_[i] / length, std::min(length, longest_move_[i])});
+    net_move_[i] = Vec3::Zero();
+    longest_move_[i] = 0;
+  }
+  integrator_->set_anchors(anchors_, settings_.untangle_pull_stiffness);
+  untangle_ms_ += ms_since(start);
+  return true;
+}
+
+void Simulation::untangle_push(bool pulls_moved) {
   if (!untangler_ || !untangler_->tangled()) return;
   const auto start = Clock::now();
-  const response::UntangleStats stats = untangler_->apply(model_.inv_mass(), state_.x, state_.v);
+  const response::UntangleStats stats = untangler_->apply(model_.inv_mass(), state_.x, state_.v, pulls_moved);
   untangle_pulls_ += stats.pulls + stats.contour_moves;
   untangle_ms_ += ms_since(start);
 }
@@ -365,7 +400,7 @@ void Simulation::proximity_steps(const response::ProximityOptions& options) {
     }
   } unset{integrator_.get(), forces};
   for (int k = 0; k < settings_.substeps; ++k) {
-    integrate_step();
+    const bool anchored = integrate_step();
     const auto start = Clock::now();
     obstacles_pass();
     // Each stencil's refresh reads positions only: the same bits on any number of threads.
@@ -379,7 +414,7 @@ void Simulation::proximity_steps(const response::ProximityOptions& options) {
     corrections_ += stats.corrections;
     if (!obstacles_.empty() && stats.corrections > 0) obstacles_pass();
     response_ms_ += ms_since(start);
-    untangle_push();
+    untangle_push(anchored);
     check_state(k + 1);
   }
 }
@@ -449,17 +484,27 @@ void Simulation::obstacles_pass() {
                               settings_.detector.threads);
 }
 
-void Simulation::integrate_step() {
+bool Simulation::integrate_step() {
+  const bool anchored = untangle_anchor();
+  // The integrator keeps no anchor past this step (nor past a step that threw).
+  struct Unset {
+    Integrator* integrator;
+    bool on;
+    ~Unset() {
+      if (on) integrator->set_anchors({}, 0);
+    }
+  } unset{integrator_.get(), anchored};
   const auto start = Clock::now();
   integrator_->step(model_, field_, state_, settings_.dt);
   cg_iterations_ += integrator_->last_iterations();
   if (kinematics_) kinematics_(state_);
   integrate_ms_ += ms_since(start);
+  return anchored;
 }
 
 void Simulation::step() {
   if (settings_.response && !contacts_valid_) detect_now();
-  integrate_step();
+  const bool anchored = integrate_step();
 
   auto start = Clock::now();
   obstacles_pass();
@@ -475,7 +520,7 @@ void Simulation::step() {
     if (!obstacles_.empty() && stats.corrections > 0) obstacles_pass();
   }
   response_ms_ += ms_since(start);
-  if (settings_.response) untangle_push();
+  if (settings_.response) untangle_push(anchored);
   contacts_valid_ = false;
   untangle_valid_ = false;
 }
