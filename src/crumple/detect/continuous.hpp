@@ -143,11 +143,11 @@ class ContinuousQuery {
   /// `moved` (#V flags: the vertex of a VF pair or a corner of its face, an end of either edge
   /// of an EE pair), bit for bit the same, in the same order; `moved` all zero gives none.
   /// Such a pair is owned by a face pair of which one face touches a flagged vertex, so only
-  /// those faces are swept against every face (a box tree over them, queried by every face's
-  /// swept box) and the orphans with a flagged vertex are tested: the cost follows the flagged
-  /// region, not the mesh. The broad phase's own structure is neither refitted nor rebuilt (the
-  /// next `query` refits it). Same errors as `query`, and `InputError` when `moved` does not
-  /// have #V entries.
+  /// those faces query a tree of every face (kept across calls, refitted where vertices moved,
+  /// pruned by the slab test: docs/simulation.md, "The CCD fail-safe") and the orphans with a
+  /// flagged vertex are tested: the cost follows the flagged region, not the mesh. The broad
+  /// phase's own structure is neither refitted nor rebuilt (the next `query` refits it). Same
+  /// errors as `query`, and `InputError` when `moved` does not have #V entries.
   void query_moved(PositionsView previous, PositionsView current, std::span<const char> moved, ImpactSet& out);
 
   /// Turns `impacts`, the query (`query`, or this call) of a motion that differs from the one
