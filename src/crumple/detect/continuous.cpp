@@ -1087,7 +1087,9 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
     };
     std::size_t refitted = nf;
     const bool build = !s.face_tree.built() || s.face_slabs.size() != nf || s.face_x0.size() != nv;
-    if (build) {
+    if (touched.empty()) {  // nothing to query: the next query catches the tree up
+      refitted = 0;
+    } else if (build) {
       s.face_slabs.resize(nf);
       all_slabs();
       s.face_tree.build(s.face_slabs);
@@ -1152,7 +1154,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
       const std::lock_guard lock(pairs_mutex);
       pairs.insert(pairs.end(), found.begin(), found.end());
     });
-    stats_.set("face_tree_built", build ? 1 : 0);
+    stats_.set("face_tree_built", build && !touched.empty() ? 1 : 0);
     stats_.set("face_slabs_refitted", static_cast<double>(refitted));
     // The records of the faces of these pairs only.
     std::vector<Index> needed;

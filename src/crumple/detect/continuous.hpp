@@ -168,7 +168,8 @@ class ContinuousQuery {
   /// (broad-phase refit, sort or hash), `stream_ms` (wall time of the candidate stream:
   /// traversal and the narrow phase of its candidates, interleaved on the threads),
   /// `narrow_cpu_ms` (thread time spent in the narrow phase inside the stream), `orphan_ms`,
-  /// `sort_ms`, `total_ms`; and the broad phase's own counters.
+  /// `sort_ms`, `total_ms`; and the broad phase's own counters (`query_moved`: `moved_faces`,
+  /// the faces touching a flagged vertex, `face_tree_built` and `face_slabs_refitted`).
   const DetectorStats& stats() const { return stats_; }
 
   /// The collision-free step of the step from `previous` to `current`: exactly
