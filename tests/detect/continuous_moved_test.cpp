@@ -148,6 +148,50 @@ TEST(ContinuousMoved, LatticesWithRandomMotionMatchTheFullQuery) {
   EXPECT_EQ(seen.changed, 2u * 2u * 3u * 6u) << "every update must change the impacts, or it proves little";
 }
 
+// The restricted query keeps its tree of every face across calls and refits it where vertices
+// moved: over a sequence of motions from one query object, each changing the start or the end
+// of a few vertices (as a fail-safe's rounds and frames do), every restricted query still
+// equals the full query of its own motion filtered to its flags.
+TEST(ContinuousMoved, ASequenceOfMotionsMatchesTheFullQueryAtEveryStep) {
+  const TriMesh mesh = shapes::lattice(12, 11);
+  const auto topo = mesh.topology_ptr();
+  Positions x0 = testing::crumple_lattice(mesh, 0.15, 41);
+  Positions x1 = testing::jitter(testing::crumple_lattice(mesh, 0.25, 42), 0.12, 43);
+  const std::size_t n = x0.size();
+  std::mt19937_64 rng(44);
+  std::size_t flagged = 0, all = 0, changed = 0;
+  for (const int threads : {1, 3}) {
+    SCOPED_TRACE("threads " + std::to_string(threads));
+    ContinuousOptions options;
+    options.min_separation = 0.02;
+    options.threads = threads;
+    ContinuousQuery query(topo, options);
+    ImpactSet last;
+    for (int step = 0; step < 12; ++step) {
+      // A few starts (even steps) or ends (odd steps) move, far enough to change the impacts.
+      const std::vector<char> move = random_flags(n, 0.06, 100 + static_cast<std::uint64_t>(step));
+      Positions& x = step % 2 == 0 ? x0 : x1;
+      const Positions moved_to = testing::jitter(x, 0.15, 200 + static_cast<std::uint64_t>(step));
+      for (std::size_t v = 0; v < n; ++v) {
+        if (move[v]) x[v] = moved_to[v];
+      }
+      const std::vector<char> flags = random_flags(n, step % 3 == 0 ? 0.5 : 0.1, 300 + static_cast<std::uint64_t>(step));
+      ImpactSet full, got;
+      query.query_moved(x0, x1, flags, got);  // before the full query: the tree is the restricted query's own
+      query.query(x0, x1, full);
+      const ImpactSet want = flagged_only(*topo, full, flags);
+      EXPECT_TRUE(identical(got, want)) << "step " << step;
+      flagged += want.size();
+      all += full.size();
+      changed += identical(full, last) ? 0 : 1;
+      last = full;
+    }
+  }
+  EXPECT_GT(flagged, 100u);
+  EXPECT_LT(flagged, all);
+  EXPECT_EQ(changed, 24u) << "every step must change the impacts, or it proves little";
+}
+
 TEST(ContinuousMoved, NoFlagGivesNoImpactAndWrongSizesThrow) {
   const TriMesh mesh = shapes::lattice(6, 6);
   const auto topo = mesh.topology_ptr();

@@ -21,10 +21,12 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <bit>
 #include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 #include <mutex>
@@ -48,6 +50,14 @@ struct OwnedFace {
   std::array<Index, 3> e;
 };
 
+/// The float next to the finite `f` towards +∞ (`upward`) or −∞: std::nextafter's answer,
+/// from the bits (a library call per face corner was a tenth of filling the face records).
+float next_float(float f, bool upward) {
+  if (f == 0) return upward ? std::numeric_limits<float>::denorm_min() : -std::numeric_limits<float>::denorm_min();
+  const auto bits = std::bit_cast<std::uint32_t>(f);
+  // Away from zero, the magnitude's bits grow by one; towards it, they shrink.
+  return std::bit_cast<float>((f > 0) == upward ? bits + 1 : bits - 1);
+}
 /// Rounds toward −∞ (`down`) or +∞ (`up`) to float: a face test on these bounds is never
 /// stronger than on the doubles (a lower lo and a higher hi only lower fl(lo_f − hi_g), rounding
 /// being monotone), so it too rejects only what the narrow phase's hull filter rejects.
@@ -58,7 +68,7 @@ float down(Scalar x) {
   if (x > kMax) return std::numeric_limits<float>::max();
   if (x < -kMax) return -std::numeric_limits<float>::infinity();
   float f = static_cast<float>(x);
-  if (static_cast<Scalar>(f) > x) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
+  if (static_cast<Scalar>(f) > x) f = next_float(f, false);
   return f;
 }
 float up(Scalar x) {
@@ -66,7 +76,7 @@ float up(Scalar x) {
   if (x < -kMax) return -std::numeric_limits<float>::max();
   if (x > kMax) return std::numeric_limits<float>::infinity();
   float f = static_cast<float>(x);
-  if (static_cast<Scalar>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  if (static_cast<Scalar>(f) < x) f = next_float(f, true);
   return f;
 }
 
@@ -143,6 +153,116 @@ __attribute__((target("avx2"), noinline)) bool boxes_apart_avx2(const detail::Fa
   const int b_side = (m2 & 7) & ((m2 >> 3) | (m3 >> 2) << 1);
   return (a_side | b_side) != 0;
 }
+
+/// A binary tree over faces' boxes at the step's two ends (a face's `CcdSlabs`: its corners'
+/// box at t = 0 and at t = 1), queried for the faces whose slabs are not apart from a given
+/// face's (`geometry::ccd_slabs_apart`). A node holds, per end, the box of its faces' boxes, so
+/// slabs apart from a node's are apart from each of its faces': the answers are exactly the
+/// faces that pass the slab test. The same test against the swept box (each face's box over
+/// the whole motion) drops far fewer pairs: faces that move together (a falling layer) stay
+/// apart at each end while their swept boxes overlap. Built once, refitted as faces move.
+class MotionTree {
+ public:
+  /// Builds over `slabs` (kept by reference; the caller changes them in place and refits).
+  void build(std::span<const geometry::CcdSlabs> slabs) {
+    slabs_ = slabs;
+    items_.resize(slabs.size());
+    for (std::size_t i = 0; i < slabs.size(); ++i) items_[i] = static_cast<std::uint32_t>(i);
+    nodes_.clear();
+    if (!items_.empty()) split(0, items_.size());
+  }
+  bool built() const { return !nodes_.empty() && items_.size() == slabs_.size(); }
+
+  /// Every node's boxes again cover its faces' current slabs (children first: preorder).
+  void refit() {
+    for (std::size_t i = nodes_.size(); i-- > 0;) {
+      Node& node = nodes_[i];
+      if (node.right == 0) {
+        node.box = slabs_[items_[node.begin]];
+        for (std::uint32_t k = node.begin + 1; k < node.end; ++k) merge(node.box, slabs_[items_[k]]);
+      } else {
+        node.box = nodes_[node.left].box;
+        merge(node.box, nodes_[node.right].box);
+      }
+    }
+  }
+
+  /// Calls hit(i) for every face i whose slabs are not apart from `query`'s by `bound`.
+  template <class Hit>
+  void query(const geometry::CcdSlabs& query, Scalar bound, const Hit& hit) const {
+    if (nodes_.empty()) return;
+    std::uint32_t stack[64];  // depth <= log2(n) + 1 (median splits)
+    int top = 0;
+    stack[top++] = 0;
+    while (top > 0) {
+      const Node& node = nodes_[stack[--top]];
+      if (geometry::ccd_slabs_apart(node.box, query, bound)) continue;
+      if (node.right == 0) {
+        for (std::uint32_t k = node.begin; k < node.end; ++k) {
+          if (!geometry::ccd_slabs_apart(slabs_[items_[k]], query, bound)) hit(items_[k]);
+        }
+      } else {
+        stack[top++] = node.right;
+        stack[top++] = node.left;
+      }
+    }
+  }
+
+ private:
+  static constexpr std::size_t kLeaf = 4;
+  struct Node {
+    geometry::CcdSlabs box;
+    std::uint32_t begin = 0, end = 0;  ///< items [begin, end)
+    std::uint32_t left = 0, right = 0;  ///< children (inner nodes); right 0: a leaf
+  };
+  static void merge(geometry::CcdSlabs& into, const geometry::CcdSlabs& b) {
+    for (std::size_t tau = 0; tau < 2; ++tau) {
+      into.lo[tau] = into.lo[tau].cwiseMin(b.lo[tau]);
+      into.hi[tau] = into.hi[tau].cwiseMax(b.hi[tau]);
+    }
+  }
+  /// The centre of face i's box over both ends along axis a (the split's key).
+  Scalar centre(std::uint32_t i, Eigen::Index a) const {
+    const geometry::CcdSlabs& b = slabs_[i];
+    return std::min(b.lo[0][a], b.lo[1][a]) / 2 + std::max(b.hi[0][a], b.hi[1][a]) / 2;
+  }
+  /// Adds the node of items [begin, end) and its subtree (median split along the longest
+  /// extent of the centres); returns its place. The boxes are set by `refit`.
+  std::uint32_t split(std::size_t begin, std::size_t end) {
+    const auto at = static_cast<std::uint32_t>(nodes_.size());
+    Node node;
+    node.box.lo.fill(Vec3::Zero());  // set by `refit`
+    node.box.hi.fill(Vec3::Zero());
+    node.begin = static_cast<std::uint32_t>(begin);
+    node.end = static_cast<std::uint32_t>(end);
+    nodes_.push_back(node);
+    if (end - begin <= kLeaf) return at;
+    Vec3 lo = Vec3::Constant(std::numeric_limits<Scalar>::infinity()), hi = -lo;
+    for (std::size_t k = begin; k < end; ++k) {
+      for (Eigen::Index a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], centre(items_[k], a));
+        hi[a] = std::max(hi[a], centre(items_[k], a));
+      }
+    }
+    Eigen::Index axis = 0;
+    for (Eigen::Index a = 1; a < 3; ++a) {
+      if (hi[a] - lo[a] > hi[axis] - lo[axis]) axis = a;
+    }
+    const std::size_t mid = begin + (end - begin) / 2;
+    std::nth_element(items_.begin() + static_cast<std::ptrdiff_t>(begin), items_.begin() + static_cast<std::ptrdiff_t>(mid),
+                     items_.begin() + static_cast<std::ptrdiff_t>(end),
+                     [&](std::uint32_t i, std::uint32_t j) { return centre(i, axis) < centre(j, axis); });
+    const std::uint32_t left = split(begin, mid);
+    const std::uint32_t right = split(mid, end);
+    nodes_[at].left = left;
+    nodes_[at].right = right;
+    return at;
+  }
+
+  std::span<const geometry::CcdSlabs> slabs_;
+  std::vector<std::uint32_t> items_;
+  std::vector<Node> nodes_;
+};
 
 /// Counters of one chunk of work, summed into the query's stats under a lock.
 struct Counts {
@@ -451,6 +571,53 @@ struct Tester {
     narrow_edge_edge(e0, e1, a, b, start, end);
   }
 
+  /// An orphan: vertex v against face f. Its slab test runs first, straight from the
+  /// positions (no query is assembled for the most, which it rejects); the slab test does not
+  /// depend on the order of the points, so `vertex_face` then gives the same answer.
+  void orphan_vertex_face(Index v, Index f) {
+    if (done()) return;
+    const Face& t = step.topo.face(f);
+    if (!step.wanted(v, t[0], t[1], t[2])) return;
+    geometry::CcdSlabs point, face;
+    for (std::size_t tau = 0; tau < 2; ++tau) {
+      const PositionsView x = tau == 0 ? step.x0 : step.x1;
+      const Vec3& c0 = x[static_cast<std::size_t>(t[0])];
+      const Vec3& c1 = x[static_cast<std::size_t>(t[1])];
+      const Vec3& c2 = x[static_cast<std::size_t>(t[2])];
+      point.lo[tau] = point.hi[tau] = x[static_cast<std::size_t>(v)];
+      face.lo[tau] = c0.cwiseMin(c1).cwiseMin(c2);
+      face.hi[tau] = c0.cwiseMax(c1).cwiseMax(c2);
+    }
+    if (geometry::ccd_slabs_apart(point, face, step.hull_bound)) {
+      ++counts.vf_box_rejected;
+      return;
+    }
+    vertex_face(v, f);
+  }
+
+  /// An orphan edge pair, as `orphan_vertex_face`, with the edges' vertices from the list.
+  void orphan_edge_edge(const exact::OrphanEdges& o) {
+    if (done()) return;
+    if (!step.wanted(o.a[0], o.a[1], o.b[0], o.b[1])) return;
+    geometry::CcdSlabs a, b;
+    for (std::size_t tau = 0; tau < 2; ++tau) {
+      const PositionsView x = tau == 0 ? step.x0 : step.x1;
+      const auto edge = [&](const Edge& e, geometry::CcdSlabs& out) {
+        const Vec3& p = x[static_cast<std::size_t>(e[0])];
+        const Vec3& q = x[static_cast<std::size_t>(e[1])];
+        out.lo[tau] = p.cwiseMin(q);
+        out.hi[tau] = p.cwiseMax(q);
+      };
+      edge(o.a, a);
+      edge(o.b, b);
+    }
+    if (geometry::ccd_slabs_apart(a, b, step.hull_bound)) {
+      ++counts.ee_box_rejected;
+      return;
+    }
+    edge_edge(o.e[0], o.e[1]);
+  }
+
   /// Every owned sub-pair of faces fi and gi (sharing no vertex), from their records. The
   /// faces' slabs contain their features' slabs, so faces apart put every sub-pair apart.
   void face_pair(Index fi, Index gi) {
@@ -671,6 +838,16 @@ struct ContinuousQuery::State {
   std::vector<FaceFrame> frames;  // 64-byte aligned elements (C++17 aligned new)
   int exponent = 0;       ///< the last step's scale exponent (detect/scale_detail.hpp)
   Positions x0, x1;       ///< the step's positions times 2^exponent, when it is not 0
+  /// The restricted queries' tree of every face's slabs (`query_moved`): `face_slabs[f]` is
+  /// face f's for the motion `face_x0` → `face_x1` (as the query sees them: scaled); built at
+  /// the first restricted query, refitted at the next ones where vertices moved.
+  std::vector<geometry::CcdSlabs> face_slabs;
+  MotionTree face_tree;
+  Positions face_x0, face_x1;
+  std::vector<char> face_dirty;
+  std::vector<Index> dirty;
+  std::vector<std::uint32_t> orphan_seen;  ///< per orphan, the restricted query that gathered it
+  std::uint32_t orphan_stamp = 0;
 };
 
 namespace {
@@ -925,38 +1102,109 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
     const auto nf = static_cast<std::size_t>(topo.num_faces());
     std::vector<char> face_moved(nf, 0);
     std::vector<Index> touched;
-    std::vector<Box> touched_box;
     for (std::size_t f = 0; f < nf; ++f) {
       const Face& t = topo.face(static_cast<Index>(f));
       if (!(flagged(t[0]) || flagged(t[1]) || flagged(t[2]))) continue;
       face_moved[f] = 1;
       touched.push_back(static_cast<Index>(f));
-      touched_box.push_back(face_box(static_cast<Index>(f)));
     }
-    detail::BoxTree tree;
-    tree.build(touched_box);
+    // The tree of every face's slabs for this step, built once (its node order follows the
+    // first restricted query's motion) and refitted since, as the broad phase's own tree: the
+    // slabs of the faces around a vertex whose x⁰ or x¹ changed (bit for bit) since the last
+    // restricted query are recomputed (all of them when most faces changed) and the nodes
+    // refitted, so each face's slabs are exactly this step's.
+    const auto nv = static_cast<std::size_t>(topo.num_vertices());
+    const auto slabs_of_face = [&](std::size_t f) {
+      const Face& t = topo.face(static_cast<Index>(f));
+      geometry::CcdSlabs b;
+      for (std::size_t tau = 0; tau < 2; ++tau) {
+        const PositionsView x = tau == 0 ? previous : current;
+        const Vec3& p = x[static_cast<std::size_t>(t[0])];
+        const Vec3& q = x[static_cast<std::size_t>(t[1])];
+        const Vec3& r = x[static_cast<std::size_t>(t[2])];
+        b.lo[tau] = p.cwiseMin(q).cwiseMin(r);
+        b.hi[tau] = p.cwiseMax(q).cwiseMax(r);
+      }
+      s.face_slabs[f] = b;
+    };
+    const auto all_slabs = [&] {
+      parallel_for_chunks(nf, threads, 4096, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t f = begin; f < end; ++f) slabs_of_face(f);
+      });
+      s.face_x0.assign(previous.begin(), previous.end());
+      s.face_x1.assign(current.begin(), current.end());
+    };
+    std::size_t refitted = nf;
+    const bool build = !s.face_tree.built() || s.face_slabs.size() != nf || s.face_x0.size() != nv;
+    if (touched.empty()) {  // nothing to query: the next query catches the tree up
+      refitted = 0;
+    } else if (build) {
+      s.face_slabs.resize(nf);
+      all_slabs();
+      s.face_tree.build(s.face_slabs);
+    } else {
+      s.face_dirty.resize(nf, 0);
+      s.dirty.clear();
+      for (std::size_t v = 0; v < nv && 4 * s.dirty.size() <= nf; ++v) {
+        if (std::memcmp(previous[v].data(), s.face_x0[v].data(), sizeof(Vec3)) == 0 &&
+            std::memcmp(current[v].data(), s.face_x1[v].data(), sizeof(Vec3)) == 0) {
+          continue;
+        }
+        s.face_x0[v] = previous[v];
+        s.face_x1[v] = current[v];
+        for (const Index f : topo.vertex_faces()[static_cast<Index>(v)]) {
+          if (!s.face_dirty[static_cast<std::size_t>(f)]) {
+            s.face_dirty[static_cast<std::size_t>(f)] = 1;
+            s.dirty.push_back(f);
+          }
+        }
+      }
+      for (const Index f : s.dirty) s.face_dirty[static_cast<std::size_t>(f)] = 0;
+      if (4 * s.dirty.size() > nf) {  // the loop stopped early; `all_slabs` sets face_x0/x1
+        all_slabs();
+      } else {
+        for (const Index f : s.dirty) slabs_of_face(static_cast<std::size_t>(f));
+        refitted = s.dirty.size();
+      }
+    }
+    if (refitted > 0) s.face_tree.refit();
+    // Each touching face queries the tree: the face pairs with a touching face whose swept
+    // boxes meet, as in the broad phase, each unordered pair once (a pair of two touching
+    // faces is found from both), less those whose slabs are apart: every sub-pair's slabs then
+    // are (a feature's slabs lie in its face's), which the narrow phase rejects by its hull
+    // filter, so leaving them out changes no impact. The slab test is the tree's: faces that
+    // move together (a falling layer) stay apart at each end while their swept boxes meet.
+    const auto swept = [&](const geometry::CcdSlabs& b) {  // `face_box`, bit for bit
+      Box box;
+      for (std::size_t k = 0; k < 3; ++k) {
+        const auto a = static_cast<Eigen::Index>(k);
+        box.lo[k] = std::min(b.lo[0][a], b.lo[1][a]) - half;
+        box.hi[k] = std::max(b.hi[0][a], b.hi[1][a]) + half;
+      }
+      return box;
+    };
     std::vector<FacePair> pairs;
     std::mutex pairs_mutex;
-    if (!touched.empty()) {
-      parallel_for_chunks(nf, threads, 1024, [&](std::size_t begin, std::size_t end) {
-        std::vector<FacePair> found;
-        for (std::size_t gu = begin; gu < end; ++gu) {
+    parallel_for_chunks(touched.size(), threads, 256, [&](std::size_t begin, std::size_t end) {
+      std::vector<FacePair> found;
+      for (std::size_t k = begin; k < end; ++k) {
+        const Index f = touched[k];
+        const Face& tf = topo.face(f);
+        const Box box = swept(s.face_slabs[static_cast<std::size_t>(f)]);
+        s.face_tree.query(s.face_slabs[static_cast<std::size_t>(f)], step.hull_bound, [&](std::uint32_t gu) {
           const auto g = static_cast<Index>(gu);
-          const Face& tg = topo.face(g);
-          tree.query(face_box(g), [&](std::uint32_t k) {
-            const Index f = touched[k];
-            // Each unordered pair once: a pair of two touching faces is found from both.
-            if (f == g || (face_moved[gu] && f > g)) return;
-            for (const Index u : topo.face(f)) {
-              if (u == tg[0] || u == tg[1] || u == tg[2]) return;
-            }
-            found.push_back({f, g});
-          });
-        }
-        const std::lock_guard lock(pairs_mutex);
-        pairs.insert(pairs.end(), found.begin(), found.end());
-      });
-    }
+          if (g == f || (face_moved[gu] && g < f) || !box.overlaps(swept(s.face_slabs[gu]))) return;
+          for (const Index u : topo.face(g)) {
+            if (u == tf[0] || u == tf[1] || u == tf[2]) return;
+          }
+          found.push_back({f, g});
+        });
+      }
+      const std::lock_guard lock(pairs_mutex);
+      pairs.insert(pairs.end(), found.begin(), found.end());
+    });
+    stats_.set("face_tree_built", build && !touched.empty() ? 1 : 0);
+    stats_.set("face_slabs_refitted", static_cast<double>(refitted));
     // The records of the faces of these pairs only.
     std::vector<Index> needed;
     for (const FacePair& p : pairs) {
@@ -1018,37 +1266,48 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
   if (step.moved == nullptr) {
     parallel_for_chunks(ovf.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
       Tester tester(step, earliest);
-      for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[i][0], ovf[i][1]);
+      for (std::size_t i = begin; i < end; ++i) tester.orphan_vertex_face(ovf[i][0], ovf[i][1]);
       sink.take(tester, 0);
     });
     parallel_for_chunks(oee.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
       Tester tester(step, earliest);
-      for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[i].e[0], oee[i].e[1]);
+      for (std::size_t i = begin; i < end; ++i) tester.orphan_edge_edge(oee[i]);
       sink.take(tester, 0);
     });
   } else {
-    // The orphans holding a flagged vertex, from the per-vertex index (built once).
+    // The orphans holding a flagged vertex, from the per-vertex index (built once), each once:
+    // `orphan_seen` holds, per orphan (VF first, then EE), the stamp of the last gather that
+    // took it (the order of the tests does not matter: the impacts are sorted).
     if (s.orphans_of.vf_begin.empty()) s.orphans_of = index_orphans(topo, s.orphans);
-    const auto gather = [&](const std::vector<std::size_t>& begin, const std::vector<std::uint32_t>& at) {
+    s.orphan_seen.resize(ovf.size() + oee.size(), 0);
+    if (++s.orphan_stamp == 0) {  // wrapped around: start the stamps over
+      std::fill(s.orphan_seen.begin(), s.orphan_seen.end(), 0);
+      s.orphan_stamp = 1;
+    }
+    const auto gather = [&](const std::vector<std::size_t>& begin, const std::vector<std::uint32_t>& at,
+                            std::size_t offset) {
       std::vector<std::uint32_t> list;
       for (std::size_t v = 0; v < moved.size(); ++v) {
-        if (moved[v]) list.insert(list.end(), at.begin() + static_cast<std::ptrdiff_t>(begin[v]),
-                                  at.begin() + static_cast<std::ptrdiff_t>(begin[v + 1]));
+        if (!moved[v]) continue;
+        for (std::size_t k = begin[v]; k < begin[v + 1]; ++k) {
+          std::uint32_t& seen = s.orphan_seen[offset + at[k]];
+          if (seen == s.orphan_stamp) continue;
+          seen = s.orphan_stamp;
+          list.push_back(at[k]);
+        }
       }
-      std::sort(list.begin(), list.end());
-      list.erase(std::unique(list.begin(), list.end()), list.end());
       return list;
     };
-    const std::vector<std::uint32_t> vf_list = gather(s.orphans_of.vf_begin, s.orphans_of.vf);
-    const std::vector<std::uint32_t> ee_list = gather(s.orphans_of.ee_begin, s.orphans_of.ee);
+    const std::vector<std::uint32_t> vf_list = gather(s.orphans_of.vf_begin, s.orphans_of.vf, 0);
+    const std::vector<std::uint32_t> ee_list = gather(s.orphans_of.ee_begin, s.orphans_of.ee, ovf.size());
     parallel_for_chunks(vf_list.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
       Tester tester(step, earliest);
-      for (std::size_t i = begin; i < end; ++i) tester.vertex_face(ovf[vf_list[i]][0], ovf[vf_list[i]][1]);
+      for (std::size_t i = begin; i < end; ++i) tester.orphan_vertex_face(ovf[vf_list[i]][0], ovf[vf_list[i]][1]);
       sink.take(tester, 0);
     });
     parallel_for_chunks(ee_list.size(), threads, 1024, [&](std::size_t begin, std::size_t end) {
       Tester tester(step, earliest);
-      for (std::size_t i = begin; i < end; ++i) tester.edge_edge(oee[ee_list[i]].e[0], oee[ee_list[i]].e[1]);
+      for (std::size_t i = begin; i < end; ++i) tester.orphan_edge_edge(oee[ee_list[i]]);
       sink.take(tester, 0);
     });
   }

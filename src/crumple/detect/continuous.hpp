@@ -143,11 +143,11 @@ class ContinuousQuery {
   /// `moved` (#V flags: the vertex of a VF pair or a corner of its face, an end of either edge
   /// of an EE pair), bit for bit the same, in the same order; `moved` all zero gives none.
   /// Such a pair is owned by a face pair of which one face touches a flagged vertex, so only
-  /// those faces are swept against every face (a box tree over them, queried by every face's
-  /// swept box) and the orphans with a flagged vertex are tested: the cost follows the flagged
-  /// region, not the mesh. The broad phase's own structure is neither refitted nor rebuilt (the
-  /// next `query` refits it). Same errors as `query`, and `InputError` when `moved` does not
-  /// have #V entries.
+  /// those faces query a tree of every face (kept across calls, refitted where vertices moved,
+  /// pruned by the slab test: docs/simulation.md, "The CCD fail-safe") and the orphans with a
+  /// flagged vertex are tested: the cost follows the flagged region, not the mesh. The broad
+  /// phase's own structure is neither refitted nor rebuilt (the next `query` refits it). Same
+  /// errors as `query`, and `InputError` when `moved` does not have #V entries.
   void query_moved(PositionsView previous, PositionsView current, std::span<const char> moved, ImpactSet& out);
 
   /// Turns `impacts`, the query (`query`, or this call) of a motion that differs from the one
@@ -168,7 +168,8 @@ class ContinuousQuery {
   /// (broad-phase refit, sort or hash), `stream_ms` (wall time of the candidate stream:
   /// traversal and the narrow phase of its candidates, interleaved on the threads),
   /// `narrow_cpu_ms` (thread time spent in the narrow phase inside the stream), `orphan_ms`,
-  /// `sort_ms`, `total_ms`; and the broad phase's own counters.
+  /// `sort_ms`, `total_ms`; and the broad phase's own counters (`query_moved`: `moved_faces`,
+  /// the faces touching a flagged vertex, `face_tree_built` and `face_slabs_refitted`).
   const DetectorStats& stats() const { return stats_; }
 
   /// The collision-free step of the step from `previous` to `current`: exactly
