@@ -300,12 +300,15 @@ def render(mesh: TriMesh, positions: _Positions | None = None, contacts: Contact
 class Simulation:
     """Mass-spring cloth with obstacles and self-collision response (the CLI's `simulate`).
     Settings keywords (None = the scene's): method, thickness, kinds, response, fail_safe,
-    untangle, response_from, passes, dt, substeps, integrator, threads. The scene's own step
+    untangle, untangle_pull ("after" | "solve"), motion_search, motion_retries, push_relaxation,
+    response_from, passes, dt, substeps, integrator, threads. The scene's own step
     beyond an explicit integrator's stable range is split as the CLI splits it (time_step_fit);
     a given dt or substeps is kept, with a RuntimeWarning when beyond it."""
     def __init__(self, scene: str = "cloth-on-sphere", *, seed: int = 1, method: str | None = ...,
                  thickness: float | None = ..., kinds: str | None = ..., response: bool | None = ...,
                  fail_safe: bool | None = ..., untangle: bool | None = ...,
+                 untangle_pull: str | None = ..., motion_search: bool | None = ...,
+                 motion_retries: int | None = ..., push_relaxation: float | None = ...,
                  response_from: int | None = ...,
                  passes: int | None = ..., dt: float | None = ..., substeps: int | None = ...,
                  integrator: str | None = ..., threads: int = 0) -> None:
@@ -315,7 +318,9 @@ class Simulation:
     def from_mesh(mesh: TriMesh, params: str = "", *, method: str | None = ...,
                   thickness: float | None = ..., kinds: str | None = ...,
                   response: bool | None = ..., fail_safe: bool | None = ...,
-                  untangle: bool | None = ..., response_from: int | None = ...,
+                  untangle: bool | None = ..., untangle_pull: str | None = ...,
+                  motion_search: bool | None = ..., motion_retries: int | None = ...,
+                  push_relaxation: float | None = ..., response_from: int | None = ...,
                   passes: int | None = ..., dt: float | None = ...,
                   substeps: int | None = ..., integrator: str | None = ...,
                   threads: int = 0) -> Simulation:

@@ -36,6 +36,7 @@ struct SettingsArgs {
   std::optional<bool> response;
   std::optional<bool> fail_safe;
   std::optional<bool> untangle;
+  std::optional<std::string> untangle_pull;
   std::optional<bool> motion_search;
   std::optional<int> motion_retries;
   std::optional<double> push_relaxation;
@@ -53,6 +54,12 @@ struct SettingsArgs {
     if (response) s.response = *response;
     if (fail_safe) s.fail_safe = *fail_safe;
     if (untangle) s.untangle = *untangle;
+    if (untangle_pull) {
+      if (*untangle_pull != "after" && *untangle_pull != "solve") {
+        throw InputError("Simulation: untangle_pull must be \"after\" or \"solve\", not \"" + *untangle_pull + "\"");
+      }
+      s.untangle_in_solve = *untangle_pull == "solve";
+    }
     if (motion_search) s.motion_search = *motion_search;
     if (motion_retries) s.motion_retries = *motion_retries;
     if (push_relaxation) s.proximity_relaxation = *push_relaxation;
@@ -332,6 +339,7 @@ SettingsArgs settings_args(const py::kwargs& kw) {
     else if (key == "response") a.response = v.cast<bool>();
     else if (key == "fail_safe") a.fail_safe = v.cast<bool>();
     else if (key == "untangle") a.untangle = v.cast<bool>();
+    else if (key == "untangle_pull") a.untangle_pull = v.cast<std::string>();
     else if (key == "motion_search") a.motion_search = v.cast<bool>();
     else if (key == "motion_retries") a.motion_retries = v.cast<int>();
     else if (key == "push_relaxation") a.push_relaxation = v.cast<double>();
@@ -343,7 +351,8 @@ SettingsArgs settings_args(const py::kwargs& kw) {
     else if (key == "threads") a.threads = v.cast<int>();
     else {
       throw py::type_error("Simulation: unexpected keyword '" + key +
-                           "' (method, thickness, kinds, response, fail_safe, untangle, motion_search, motion_retries, "
+                           "' (method, thickness, kinds, response, fail_safe, untangle, untangle_pull, motion_search, "
+                           "motion_retries, "
                            "push_relaxation, response_from, passes, dt, "
                            "substeps, integrator, threads; scene options go in the spec text)");
     }
@@ -362,7 +371,9 @@ method (detection spec, as Detector's), thickness (contact thickness, m), kinds 
 response (bool: self-collision response), fail_safe (bool, default on with response: the
 continuous fail-safe that keeps every frame intersection-free, docs/simulation.md), untangle
 (bool, default on with response: a cloth that already intersects itself is untangled; the
-figures intersecting_pairs, contours and untangle_pulls), motion_search (bool: pairs the
+figures intersecting_pairs, contours and untangle_pulls), untangle_pull ("after", the default:
+the pulls move the vertices after each step; "solve": inside the implicit Euler step, as the
+CLI's --untangle-pull), motion_search (bool: pairs the
 velocities bring within the thickness join the frame's contacts), motion_retries (int >= 0: times
 a frame may run again when its own motion brings far pairs within the fail-safe's reach; the
 crumple scene uses 1), push_relaxation (the share in (0, 1] of a pair's shortfall below the
@@ -544,6 +555,7 @@ The GIL is released while drawing. crumple.InputError on a bad size or camera.
             d["response"] = st.response;
             d["fail_safe"] = st.fail_safe;
             d["untangle"] = st.untangle;
+            d["untangle_pull"] = std::string(st.untangle_in_solve ? "solve" : "after");
             d["motion_search"] = st.motion_search;
             d["motion_retries"] = st.motion_retries;
             d["push_relaxation"] = st.proximity_relaxation;

@@ -228,6 +228,10 @@ def test_motion_settings_follow_the_scene_unless_given():
     assert s.settings["motion_retries"] == 0 and s.settings["motion_search"] is True
     with pytest.raises(crumple.InputError, match="motion_retries"):
         crumple.Simulation("crumple:n=6", threads=1, motion_retries=-1)
+    assert crumple.Simulation("crumple:n=6", threads=1).settings["untangle_pull"] == "after"
+    assert crumple.Simulation("hanging-cloth:nx=4,ny=4", threads=1, untangle_pull="solve").settings["untangle_pull"] == "solve"
+    with pytest.raises(crumple.InputError, match="untangle_pull"):
+        crumple.Simulation("crumple:n=6", threads=1, untangle_pull="inside")
     assert crumple.Simulation("crumple:n=6", threads=1).settings["push_relaxation"] == 0.5
     assert crumple.Simulation("cloth-on-sphere:n=6", threads=1).settings["push_relaxation"] == 1
     assert crumple.Simulation("crumple:n=6", threads=1, push_relaxation=0.25).settings["push_relaxation"] == 0.25
