@@ -338,6 +338,22 @@ __attribute__((always_inline)) inline geometry::CcdSlabs slabs_of(const geometry
   return s;
 }
 
+/// The slabs of the step's vertices `ids`, from the positions at t = 0 (`x0`) and t = 1 (`x1`).
+template <std::size_t N>
+__attribute__((always_inline)) inline geometry::CcdSlabs slabs_of(PositionsView x0, PositionsView x1,
+                                                                  const std::array<Index, N>& ids) {
+  geometry::CcdSlabs s;
+  for (std::size_t tau = 0; tau < 2; ++tau) {
+    const PositionsView x = tau == 0 ? x0 : x1;
+    s.lo[tau] = s.hi[tau] = x[static_cast<std::size_t>(ids[0])];
+    for (std::size_t i = 1; i < N; ++i) {
+      s.lo[tau] = s.lo[tau].cwiseMin(x[static_cast<std::size_t>(ids[i])]);
+      s.hi[tau] = s.hi[tau].cwiseMax(x[static_cast<std::size_t>(ids[i])]);
+    }
+  }
+  return s;
+}
+
 /// Set bits of a 3-bit ownership mask (std::popcount is a library call without -mpopcnt).
 int bits(std::uint8_t mask) {
   constexpr std::array<std::uint8_t, 8> kBits{0, 1, 1, 2, 1, 2, 2, 3};
@@ -578,17 +594,8 @@ struct Tester {
     if (done()) return;
     const Face& t = step.topo.face(f);
     if (!step.wanted(v, t[0], t[1], t[2])) return;
-    geometry::CcdSlabs point, face;
-    for (std::size_t tau = 0; tau < 2; ++tau) {
-      const PositionsView x = tau == 0 ? step.x0 : step.x1;
-      const Vec3& c0 = x[static_cast<std::size_t>(t[0])];
-      const Vec3& c1 = x[static_cast<std::size_t>(t[1])];
-      const Vec3& c2 = x[static_cast<std::size_t>(t[2])];
-      point.lo[tau] = point.hi[tau] = x[static_cast<std::size_t>(v)];
-      face.lo[tau] = c0.cwiseMin(c1).cwiseMin(c2);
-      face.hi[tau] = c0.cwiseMax(c1).cwiseMax(c2);
-    }
-    if (geometry::ccd_slabs_apart(point, face, step.hull_bound)) {
+    if (geometry::ccd_slabs_apart(slabs_of(step.x0, step.x1, std::array<Index, 1>{v}), slabs_of(step.x0, step.x1, t),
+                                  step.hull_bound)) {
       ++counts.vf_box_rejected;
       return;
     }
@@ -599,19 +606,7 @@ struct Tester {
   void orphan_edge_edge(const exact::OrphanEdges& o) {
     if (done()) return;
     if (!step.wanted(o.a[0], o.a[1], o.b[0], o.b[1])) return;
-    geometry::CcdSlabs a, b;
-    for (std::size_t tau = 0; tau < 2; ++tau) {
-      const PositionsView x = tau == 0 ? step.x0 : step.x1;
-      const auto edge = [&](const Edge& e, geometry::CcdSlabs& out) {
-        const Vec3& p = x[static_cast<std::size_t>(e[0])];
-        const Vec3& q = x[static_cast<std::size_t>(e[1])];
-        out.lo[tau] = p.cwiseMin(q);
-        out.hi[tau] = p.cwiseMax(q);
-      };
-      edge(o.a, a);
-      edge(o.b, b);
-    }
-    if (geometry::ccd_slabs_apart(a, b, step.hull_bound)) {
+    if (geometry::ccd_slabs_apart(slabs_of(step.x0, step.x1, o.a), slabs_of(step.x0, step.x1, o.b), step.hull_bound)) {
       ++counts.ee_box_rejected;
       return;
     }
@@ -1115,17 +1110,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
     // refitted, so each face's slabs are exactly this step's.
     const auto nv = static_cast<std::size_t>(topo.num_vertices());
     const auto slabs_of_face = [&](std::size_t f) {
-      const Face& t = topo.face(static_cast<Index>(f));
-      geometry::CcdSlabs b;
-      for (std::size_t tau = 0; tau < 2; ++tau) {
-        const PositionsView x = tau == 0 ? previous : current;
-        const Vec3& p = x[static_cast<std::size_t>(t[0])];
-        const Vec3& q = x[static_cast<std::size_t>(t[1])];
-        const Vec3& r = x[static_cast<std::size_t>(t[2])];
-        b.lo[tau] = p.cwiseMin(q).cwiseMin(r);
-        b.hi[tau] = p.cwiseMax(q).cwiseMax(r);
-      }
-      s.face_slabs[f] = b;
+      s.face_slabs[f] = slabs_of(previous, current, topo.face(static_cast<Index>(f)));
     };
     const auto all_slabs = [&] {
       parallel_for_chunks(nf, threads, 4096, [&](std::size_t begin, std::size_t end) {
