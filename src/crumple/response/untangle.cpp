@@ -480,12 +480,17 @@ std::size_t Untangler::analyse(PositionsView x, std::span<const Scalar> inv_mass
   return analysis_.pairs;
 }
 
-Scalar Untangler::pull_impulse(std::size_t p, std::span<const Scalar> inv_mass, PositionsView x, Stencil& s) const {
-  const Scalar gap = relative_normal(pulls_[p], x);
+Stencil Untangler::acting_pull(std::size_t p) const {
   // A pull of a band moves the inside end alone (its stencil cut to the vertex; the gap is
   // still measured to the face), and removes that end's own velocity against the pull.
-  s = pulls_[p];
+  Stencil s = pulls_[p];
   if (held_face_[p]) s.count = 1;
+  return s;
+}
+
+Scalar Untangler::pull_impulse(std::size_t p, const Stencil& s, std::span<const Scalar> inv_mass,
+                               PositionsView x) const {
+  const Scalar gap = relative_normal(pulls_[p], x);
   const Scalar denom = inverse_effective_mass(s, inv_mass);
   if (!(denom > 0) || !(gap < options_.thickness)) return 0;
   return std::min(options_.thickness - gap, options_.max_step) / denom;
@@ -493,9 +498,9 @@ Scalar Untangler::pull_impulse(std::size_t p, std::span<const Scalar> inv_mass, 
 
 std::size_t Untangler::pull_moves(std::span<const Scalar> inv_mass, PositionsView x, std::vector<PullMove>& out) const {
   std::size_t count = 0;
-  Stencil s;
   for (std::size_t p = 0; p < pulls_.size(); ++p) {
-    const Scalar mu = pull_impulse(p, inv_mass, x, s);
+    const Stencil s = acting_pull(p);
+    const Scalar mu = pull_impulse(p, s, inv_mass, x);
     if (!(mu > 0)) continue;
     for (int k = 0; k < s.count; ++k) {
       const Index i = s.vertex[at(k)];
@@ -510,13 +515,9 @@ std::size_t Untangler::pull_moves(std::span<const Scalar> inv_mass, PositionsVie
 UntangleStats Untangler::apply(std::span<const Scalar> inv_mass, std::span<Vec3> x, std::span<Vec3> v,
                                bool pulls_moved) const {
   UntangleStats stats;
-  Stencil s;
   for (std::size_t p = 0; p < pulls_.size(); ++p) {
-    const Scalar mu = pulls_moved ? 0 : pull_impulse(p, inv_mass, x, s);
-    if (pulls_moved) {
-      s = pulls_[p];
-      if (held_face_[p]) s.count = 1;
-    }
+    const Stencil s = acting_pull(p);
+    const Scalar mu = pulls_moved ? 0 : pull_impulse(p, s, inv_mass, x);
     if (mu > 0) {
       for (int k = 0; k < s.count; ++k) {
         const Index i = s.vertex[at(k)];

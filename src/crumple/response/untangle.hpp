@@ -230,9 +230,10 @@ class Untangler {
   std::vector<char> held_face_;  ///< per pull: 1 for a band's (the crossed face is held)
   std::vector<Shift> shifts_;
 
-  /// Pull `p` as applied at `x` (a band's cut to its inside end) and its position impulse μ
-  /// (0: nothing to move).
-  Scalar pull_impulse(std::size_t p, std::span<const Scalar> inv_mass, PositionsView x, Stencil& s) const;
+  /// Pull `p` as it acts: a band's stencil cut to its inside end.
+  Stencil acting_pull(std::size_t p) const;
+  /// The position impulse μ of pull `p`, acting as `s` (`acting_pull`), at `x` (0: nothing to move).
+  Scalar pull_impulse(std::size_t p, const Stencil& s, std::span<const Scalar> inv_mass, PositionsView x) const;
 };
 
 }  // namespace crumple::response
