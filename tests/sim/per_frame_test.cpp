@@ -302,6 +302,17 @@ TEST(PerFrame, ScenesHaveContactForcesAboveOneHundredQuads) {
   }
 }
 
+// The scene of `spec`, whose key turns the contact forces on, on one thread with
+// `Settings::contact_forces` = `forces`.
+Simulation one_thread_simulation(const char* spec, bool forces) {
+  Scene s = make_scene(SceneSpec::parse(spec), 1);
+  EXPECT_TRUE(s.settings.contact_forces) << "the scene key";
+  s.settings.detector.threads = 1;
+  s.settings.contact_forces = forces;
+  return Simulation(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
+                    s.settings);
+}
+
 // `cloth-on-sphere` runs its frames again (`Settings::motion_retries`) above n = 100 quads a
 // side, as it turns its contact forces on; the key `motion-retries` sets the count at any size.
 TEST(PerFrame, SphereRetriesItsFramesAboveOneHundredQuads) {
@@ -334,13 +345,9 @@ TEST(PerFrame, MotionRetriesKeepAStiffLandingCalm) {
     std::size_t impacts = 0;         // the fail-safe's live impacts, summed
   };
   const auto land = [](int retries) {
-    Scene s = make_scene(SceneSpec::parse("cloth-on-sphere:n=24,stretch=27778,thickness=0.1,height=0.6,"
-                                          "contact-forces=on,motion-retries=" +
-                                          std::to_string(retries)),
-                         1);
-    s.settings.detector.threads = 1;
-    Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
-                   s.settings);
+    const std::string spec = "cloth-on-sphere:n=24,stretch=27778,thickness=0.1,height=0.6,contact-forces=on,"
+                             "motion-retries=" + std::to_string(retries);
+    Simulation sim = one_thread_simulation(spec.c_str(), true);
     Landing out;
     for (int f = 1; f <= 54; ++f) {
       const FrameStats st = sim.advance_frame();
@@ -360,17 +367,6 @@ TEST(PerFrame, MotionRetriesKeepAStiffLandingCalm) {
   EXPECT_LT(with.impacts, 10u);
   EXPECT_LT(with.longest, 1.25);
   EXPECT_LT(with.energy, 20) << "J";
-}
-
-// The scene of `spec`, whose key turns the contact forces on, on one thread with
-// `Settings::contact_forces` = `forces`.
-Simulation one_thread_simulation(const char* spec, bool forces) {
-  Scene s = make_scene(SceneSpec::parse(spec), 1);
-  EXPECT_TRUE(s.settings.contact_forces) << "the scene key";
-  s.settings.detector.threads = 1;
-  s.settings.contact_forces = forces;
-  return Simulation(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
-                    s.settings);
 }
 
 // `crumple:n=16` with the stiffness scaled by (200/16)², so that its steps have the ωh of
