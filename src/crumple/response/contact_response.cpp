@@ -194,11 +194,16 @@ std::size_t drop_flat_neighbours(std::vector<Stencil>& stencils, const Topology&
   return dropped;
 }
 
-Scalar relative_normal(const Stencil& s, std::span<const Vec3> q) {
+namespace {
+/// `relative_normal`, inlined into the sweep that tests every stencil several times a step.
+inline Scalar relative_normal_inline(const Stencil& s, std::span<const Vec3> q) {
   Vec3 r = Vec3::Zero();
   for (int k = 0; k < s.count; ++k) r += s.weight[k] * q[at(s.vertex[k])];
   return r.dot(s.normal);
 }
+}  // namespace
+
+Scalar relative_normal(const Stencil& s, std::span<const Vec3> q) { return relative_normal_inline(s, q); }
 
 Scalar inverse_effective_mass(const Stencil& s, std::span<const Scalar> inv_mass) {
   Scalar d = 0;
@@ -289,7 +294,7 @@ ResponseStats resolve_proximity(std::span<const Stencil> stencils, std::span<con
     ++stats.passes;
     std::size_t applied = 0;
     for (const Stencil& s : stencils) {
-      const Scalar gap = relative_normal(s, x);
+      const Scalar gap = relative_normal_inline(s, x);
       if (!(gap < too_close)) continue;
       const Scalar d = inverse_effective_mass(s, inv_mass);
       if (!(d > 0)) continue;
