@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <random>
 
 namespace crumple::response {
 namespace {
@@ -73,6 +75,48 @@ TEST(Proximity, RefreshKeepsTheSideACrossedPairCameFrom) {
   EXPECT_NEAR(c.stencil.weight[1], -0.25, 1e-12);  // closest point (0.5, 0.25): w = (0.25, 0.5, 0.25)
   EXPECT_NEAR(c.stencil.weight[2], -0.5, 1e-12);
   EXPECT_NEAR(relative_normal(c.stencil, c.x), -0.03, 1e-12);
+}
+
+// `refresh_stencils` refreshes in blocks (a block's closest points, then its normals): the same
+// bits as `refresh_stencil` stencil by stencil, over several blocks and a partial one, for EE
+// and VF pairs apart (normals turned to either side) and touching (normals kept).
+TEST(Proximity, BlockRefreshGivesTheBitsOfEachStencilsRefresh) {
+  std::mt19937 random(7);
+  std::uniform_real_distribution<Scalar> coordinate(-1, 1);
+  constexpr int kStencils = 100;
+  std::vector<Vec3> x(4 * kStencils);
+  for (Vec3& p : x) p = Vec3(coordinate(random), coordinate(random), coordinate(random));
+  std::vector<Stencil> stencils(kStencils);
+  for (int i = 0; i < kStencils; ++i) {
+    Stencil& s = stencils[static_cast<std::size_t>(i)];
+    s.count = 4;
+    s.vertex = {4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 3};
+    s.edge_edge = i % 3 != 0;
+    s.normal = Vec3(coordinate(random), coordinate(random), coordinate(random)).normalized();
+    const auto p = [&](int k) -> Vec3& { return x[static_cast<std::size_t>(4 * i + k)]; };
+    if (i % 7 == 3) {  // touching: the vertex on its face, or the edges crossing
+      if (s.edge_edge) {
+        const Vec3 middle = 0.5 * (p(0) + p(1)), u = p(3) - p(2);
+        p(2) = middle - 0.5 * u;
+        p(3) = middle + 0.5 * u;
+      } else {
+        p(0) = (p(1) + p(2) + p(3)) / 3;
+      }
+    }
+  }
+  const std::vector<Stencil> before = stencils;
+  std::vector<Stencil> each = stencils;
+  for (Stencil& s : each) refresh_stencil(s, x);
+  refresh_stencils(stencils, x);
+  int kept = 0, turned = 0;
+  for (std::size_t i = 0; i < stencils.size(); ++i) {
+    EXPECT_EQ(std::memcmp(stencils[i].weight.data(), each[i].weight.data(), sizeof(Scalar) * 4), 0) << "stencil " << i;
+    EXPECT_EQ(std::memcmp(stencils[i].normal.data(), each[i].normal.data(), sizeof(Scalar) * 3), 0) << "stencil " << i;
+    kept += each[i].normal == before[i].normal ? 1 : 0;
+    turned += each[i].normal.dot(before[i].normal) >= 0 && each[i].normal != before[i].normal ? 1 : 0;
+  }
+  EXPECT_GE(kept, kStencils / 7) << "the touching pairs keep their normals";
+  EXPECT_GT(turned, kStencils / 2) << "the others take their closest points' direction";
 }
 
 // A vertex that lands on its face (the squeezed pile's steps carry vertices onto the layer

@@ -50,7 +50,10 @@ std::vector<Stencil> make_stencils(const ContactSet& contacts, std::span<const F
   return out;
 }
 
-void refresh_stencil(Stencil& s, std::span<const Vec3> x) {
+namespace {
+/// The first half of `refresh_stencil`: the closest points' weights into `s`, their difference
+/// (from the first primitive to the second) and the stencil's extent.
+inline void closest_points(Stencil& s, std::span<const Vec3> x, Vec3& d, Scalar& extent) {
   const auto p = [&](int k) { return x[at(s.vertex[static_cast<std::size_t>(k)])]; };
   Vec3 from, to;
   if (s.edge_edge) {
@@ -64,17 +67,43 @@ void refresh_stencil(Stencil& s, std::span<const Vec3> x) {
     from = r.closest;
     to = p(0);
   }
-  const Vec3 d = to - from;
+  d = to - from;
+  extent = 0;
+  for (int k = 1; k < s.count; ++k) extent = std::max(extent, (p(k) - p(0)).cwiseAbs().maxCoeff());
+}
+
+/// The second half: the normal along `d`, on the side of the current one.
+inline void turn_normal(Stencil& s, const Vec3& d, Scalar extent) {
   const Scalar length = d.norm();
   // The closest points carry rounding errors of a few ulps of the configuration's size: at a
   // distance within a small multiple of that, d's direction is noise (a vertex landing on its
   // face can get an in-plane "normal", and the push-out then moves it sideways and lets it
   // through). Such a pair touches: it keeps its normal.
-  Scalar extent = 0;
-  for (int k = 1; k < s.count; ++k) extent = std::max(extent, (p(k) - p(0)).cwiseAbs().maxCoeff());
   if (!(length > 1e-9 * extent)) return;
   const Vec3 n = d / length;
   s.normal = n.dot(s.normal) >= 0 ? n : Vec3(-n);
+}
+}  // namespace
+
+void refresh_stencil(Stencil& s, std::span<const Vec3> x) {
+  Vec3 d;
+  Scalar extent;
+  closest_points(s, x, d, extent);
+  turn_normal(s, d, extent);
+}
+
+void refresh_stencils(std::span<Stencil> stencils, std::span<const Vec3> x) {
+  // In blocks: the closest points (branchy) of the whole block first, then its square roots and
+  // divisions, which no longer wait behind each stencil's mispredicted branches. The same
+  // operations on the same values as `refresh_stencil`, stencil by stencil.
+  constexpr std::size_t kBlock = 32;
+  std::array<Vec3, kBlock> d;
+  std::array<Scalar, kBlock> extent;
+  for (std::size_t begin = 0; begin < stencils.size(); begin += kBlock) {
+    const std::size_t count = std::min(kBlock, stencils.size() - begin);
+    for (std::size_t k = 0; k < count; ++k) closest_points(stencils[begin + k], x, d[k], extent[k]);
+    for (std::size_t k = 0; k < count; ++k) turn_normal(stencils[begin + k], d[k], extent[k]);
+  }
 }
 
 namespace {
@@ -165,11 +194,16 @@ std::size_t drop_flat_neighbours(std::vector<Stencil>& stencils, const Topology&
   return dropped;
 }
 
-Scalar relative_normal(const Stencil& s, std::span<const Vec3> q) {
+namespace {
+/// `relative_normal`, inlined into the sweep that tests every stencil several times a step.
+inline Scalar relative_normal_inline(const Stencil& s, std::span<const Vec3> q) {
   Vec3 r = Vec3::Zero();
   for (int k = 0; k < s.count; ++k) r += s.weight[k] * q[at(s.vertex[k])];
   return r.dot(s.normal);
 }
+}  // namespace
+
+Scalar relative_normal(const Stencil& s, std::span<const Vec3> q) { return relative_normal_inline(s, q); }
 
 Scalar inverse_effective_mass(const Stencil& s, std::span<const Scalar> inv_mass) {
   Scalar d = 0;
@@ -260,7 +294,7 @@ ResponseStats resolve_proximity(std::span<const Stencil> stencils, std::span<con
     ++stats.passes;
     std::size_t applied = 0;
     for (const Stencil& s : stencils) {
-      const Scalar gap = relative_normal(s, x);
+      const Scalar gap = relative_normal_inline(s, x);
       if (!(gap < too_close)) continue;
       const Scalar d = inverse_effective_mass(s, inv_mass);
       if (!(d > 0)) continue;

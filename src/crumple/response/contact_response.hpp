@@ -46,6 +46,9 @@ struct Stencil {
 /// that crossed is still pushed back to the side it came from); kept when the primitives touch
 /// (closest points within 1e-9 of the stencil's extent, where their direction is rounding noise).
 void refresh_stencil(Stencil& stencil, std::span<const Vec3> positions);
+/// `refresh_stencil` of every stencil, bit for bit, in blocks that overlap the stencils' square
+/// roots and divisions.
+void refresh_stencils(std::span<Stencil> stencils, std::span<const Vec3> positions);
 
 /// Stencil of `vertex` against face `f` at barycentric coordinates `w` (weights 1, −w), with
 /// `normal`: the one form shared by proximity contacts and continuous impacts.

@@ -407,7 +407,7 @@ void Simulation::proximity_steps(const response::ProximityOptions& options) {
     parallel_for_chunks(stencils_.size(), settings_.detector.threads,
                         balanced_grain(stencils_.size(), resolve_threads(settings_.detector.threads), 256, 4096),
                         [&](std::size_t begin, std::size_t end) {
-                          for (std::size_t i = begin; i < end; ++i) response::refresh_stencil(stencils_[i], state_.x);
+                          response::refresh_stencils(std::span(stencils_).subspan(begin, end - begin), state_.x);
                         });
     const response::ResponseStats stats =
         response::resolve_proximity(stencils_, model_.inv_mass(), state_.x, state_.v, options);
