@@ -699,20 +699,41 @@ struct Tester {
   }
 };
 
-/// Where a tester's results go: appended under the lock (impacts are few; order is restored
-/// by the final sort).
+/// The impact sets' order (`ImpactSet`).
+bool vf_less(const VertexFaceImpact& x, const VertexFaceImpact& y) {
+  return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face);
+}
+bool ee_less(const EdgeEdgeImpact& x, const EdgeEdgeImpact& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); }
+
+/// Where a tester's results go: each tester's impacts sorted on its own thread, then appended
+/// under the lock as one run; `merge` orders the runs into the final sets (detail::merge_sorted_runs:
+/// each impact moved once, instead of a sort of up to a million records on one thread).
 struct Sink {
   std::mutex mutex;
   ImpactSet impacts;
+  std::vector<std::size_t> vf_runs, ee_runs;  ///< where each run of `impacts` ends
   Counts counts;
   double narrow_cpu_ms = 0;
   void take(Tester& t, double ms) {
     t.flush();
+    // Lambdas, not the function pointers: std::sort then inlines the comparison.
+    std::sort(t.found.vf.begin(), t.found.vf.end(), [](const auto& x, const auto& y) { return vf_less(x, y); });
+    std::sort(t.found.ee.begin(), t.found.ee.end(), [](const auto& x, const auto& y) { return ee_less(x, y); });
     const std::lock_guard lock(mutex);
-    impacts.vf.insert(impacts.vf.end(), t.found.vf.begin(), t.found.vf.end());
-    impacts.ee.insert(impacts.ee.end(), t.found.ee.begin(), t.found.ee.end());
+    const auto append = [](auto& to, const auto& from, std::vector<std::size_t>& runs) {
+      if (from.empty()) return;
+      to.insert(to.end(), from.begin(), from.end());
+      runs.push_back(to.size());
+    };
+    append(impacts.vf, t.found.vf, vf_runs);
+    append(impacts.ee, t.found.ee, ee_runs);
     counts.add(t.counts);
     narrow_cpu_ms += ms;
+  }
+  /// The impacts, sorted (keys are unique, so the order is that of a sort of them all).
+  void merge() {
+    detail::merge_sorted_runs(impacts.vf, vf_runs, [](const auto& x, const auto& y) { return vf_less(x, y); });
+    detail::merge_sorted_runs(impacts.ee, ee_runs, [](const auto& x, const auto& y) { return ee_less(x, y); });
   }
 };
 
@@ -729,12 +750,6 @@ std::unique_ptr<BroadPhase> make_broad_phase(const MethodSpec& spec) {
                        " has no broad phase; expected kdop, hash or sap");
   }
 }
-
-/// The impact sets' order (`ImpactSet`).
-bool vf_less(const VertexFaceImpact& x, const VertexFaceImpact& y) {
-  return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face);
-}
-bool ee_less(const EdgeEdgeImpact& x, const EdgeEdgeImpact& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); }
 
 void put_double(std::ostream& out, double value) {
   char buffer[32];
@@ -1342,11 +1357,8 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
   stats_.set("orphan_ms", ms_since(t2));
 
   const auto t3 = std::chrono::steady_clock::now();
+  sink.merge();
   out = std::move(sink.impacts);
-  // Lambdas, not the function pointers: std::sort then inlines the comparison (the pointers
-  // made every comparison an indirect call; keys are unique, so the order is the same).
-  std::sort(out.vf.begin(), out.vf.end(), [](const auto& x, const auto& y) { return vf_less(x, y); });
-  std::sort(out.ee.begin(), out.ee.end(), [](const auto& x, const auto& y) { return ee_less(x, y); });
   if (scaled.exponent != 0) {
     for (auto& i : out.vf) i.distance = std::scalbn(i.distance, -scaled.exponent);
     for (auto& i : out.ee) i.distance = std::scalbn(i.distance, -scaled.exponent);
