@@ -407,7 +407,7 @@ struct Tester {
     Index i0, i1;
     Edge a, b;
   };
-  static constexpr std::size_t kQueue = 16;
+  static constexpr std::size_t kQueue = 64;
   std::array<geometry::detail::CcdQuery, kQueue> queued_points;
   std::array<Waiting, kQueue> queued;
   std::size_t queue_size = 0;
@@ -415,7 +415,7 @@ struct Tester {
   /// The sub-pairs the batched filters kept, per pair type (0: VF, 1: EE), waiting for the rest
   /// of the narrow phase, whose advancement runs four sub-pairs at a time
   /// (geometry::detail::ccd_after_direction): the more wait, the less often the lanes drain.
-  static constexpr std::size_t kKept = 64;
+  static constexpr std::size_t kKept = 256;
   struct Kept {
     std::vector<geometry::detail::CcdQuery> points = std::vector<geometry::detail::CcdQuery>(kKept);
     std::vector<Waiting> waiting = std::vector<Waiting>(kKept);
@@ -673,7 +673,11 @@ struct Tester {
     if (done()) return;
     geometry::detail::CcdQuery& q = push({true, f.v[uk], gi, {}, {}});
     for (std::size_t tau = 0; tau < 2; ++tau) {
-      (tau == 0 ? q.start : q.end) = {rf.x[tau][uk], rg.x[tau][0], rg.x[tau][1], rg.x[tau][2]};
+      geometry::CcdPoints& to = tau == 0 ? q.start : q.end;
+      to[0] = rf.x[tau][uk];
+      to[1] = rg.x[tau][0];
+      to[2] = rg.x[tau][1];
+      to[3] = rg.x[tau][2];
     }
   }
 
@@ -693,8 +697,12 @@ struct Tester {
       std::swap(ca, cb);
     }
     geometry::detail::CcdQuery& q = push({false, e0, e1, a, b});
-    for (std::size_t tau = 0; tau < 2; ++tau) {
-      (tau == 0 ? q.start : q.end) = {ra->x[tau][ca[0]], ra->x[tau][ca[1]], rb->x[tau][cb[0]], rb->x[tau][cb[1]]};
+    for (std::size_t tau = 0; tau < 2; ++tau) {  // point by point: no temporary array
+      geometry::CcdPoints& to = tau == 0 ? q.start : q.end;
+      to[0] = ra->x[tau][ca[0]];
+      to[1] = ra->x[tau][ca[1]];
+      to[2] = rb->x[tau][cb[0]];
+      to[3] = rb->x[tau][cb[1]];
     }
   }
 };
