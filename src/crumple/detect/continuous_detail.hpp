@@ -29,35 +29,49 @@ struct alignas(16) FaceBoxes {
 bool face_boxes_apart(const FaceBoxes& a, const FaceBoxes& b, Scalar bound, bool avx2);
 
 /// Sorts `items` made of consecutive runs each sorted by `less` (run r ends at `ends[r]`; the
-/// ends increase and the last is items.size(); empty runs are allowed): a k-way merge on a heap
-/// of the runs' heads, each item moved once. With unique keys, the order of `std::sort`.
+/// ends increase and the last is items.size(); empty runs are allowed): a k-way merge on a
+/// binary heap of the runs' heads (the top replaced and sifted down as its run advances), each
+/// item moved once. With unique keys, the order of `std::sort`.
 template <class T, class Less>
 void merge_sorted_runs(std::vector<T>& items, std::span<const std::size_t> ends, Less less) {
   struct Head {
-    std::size_t at, end;
+    T* at;
+    T* end;
   };
   std::vector<Head> heap;
   heap.reserve(ends.size());
   std::size_t begin = 0;
   for (const std::size_t end : ends) {
-    if (end > begin) heap.push_back({begin, end});
+    if (end > begin) heap.push_back({items.data() + begin, items.data() + end});
     begin = end;
   }
   if (heap.size() <= 1) return;
-  // A max-heap on "later": its top is the run whose head comes first.
-  const auto later = [&](const Head& x, const Head& y) { return less(items[y.at], items[x.at]); };
-  std::make_heap(heap.begin(), heap.end(), later);
+  // Restores the heap order (the smallest head on top) below position i.
+  const auto sift_down = [&](std::size_t i) {
+    const std::size_t n = heap.size();
+    const Head h = heap[i];
+    for (;;) {
+      std::size_t c = 2 * i + 1;
+      if (c >= n) break;
+      if (c + 1 < n && less(*heap[c + 1].at, *heap[c].at)) ++c;
+      if (!less(*heap[c].at, *h.at)) break;
+      heap[i] = heap[c];
+      i = c;
+    }
+    heap[i] = h;
+  };
+  for (std::size_t i = heap.size() / 2; i-- > 0;) sift_down(i);
   std::vector<T> out;
   out.reserve(items.size());
   while (!heap.empty()) {
-    std::pop_heap(heap.begin(), heap.end(), later);
-    Head& h = heap.back();
-    out.push_back(std::move(items[h.at++]));
-    if (h.at == h.end) {
+    Head& top = heap.front();
+    out.push_back(std::move(*top.at));
+    if (++top.at == top.end) {
+      top = heap.back();
       heap.pop_back();
-    } else {
-      std::push_heap(heap.begin(), heap.end(), later);
+      if (heap.empty()) break;
     }
+    sift_down(0);
   }
   items = std::move(out);
 }
