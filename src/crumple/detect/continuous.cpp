@@ -425,6 +425,7 @@ struct Tester {
     std::size_t size = 0;
   };
   std::array<Kept, 2> kept;
+  std::vector<geometry::CcdResult> results;  ///< finish_kept's
 
   /// Runs the narrow phase on every queued and kept sub-pair (called before the tester's
   /// results are taken).
@@ -478,7 +479,7 @@ struct Tester {
     k.size = 0;
     if (n == 0 || done()) return;
     const geometry::CcdPair pair = k.waiting[0].face ? geometry::CcdPair::kVertexFace : geometry::CcdPair::kEdgeEdge;
-    std::array<geometry::CcdResult, kKept> results;
+    if (results.size() < n) results.resize(n);  // grown as needed: a tester per chunk
     geometry::detail::ccd_after_direction(pair, {k.points.get(), n}, narrow_options(), results.data());
     for (std::size_t i = 0; i < n; ++i) {
       if (!keep(results[i])) continue;
