@@ -418,8 +418,8 @@ struct Tester {
   /// (geometry::detail::ccd_after_direction): the more wait, the less often the lanes drain.
   static constexpr std::size_t kKept = 256;
   struct Kept {
-    // Not value-initialised (new[] leaves them unset): a tester is built per chunk, and zeroing
-    // 2 × 256 entries each time cost more than the merge of the impacts. Entries below `size` are set.
+    // Not value-initialised (new[] leaves them unset; a tester is built per chunk): only the
+    // entries below `size` are ever read, and each is written first.
     std::unique_ptr<geometry::detail::CcdQuery[]> points{new geometry::detail::CcdQuery[kKept]};
     std::unique_ptr<Waiting[]> waiting{new Waiting[kKept]};
     std::size_t size = 0;
@@ -718,8 +718,8 @@ bool vf_less(const VertexFaceImpact& x, const VertexFaceImpact& y) {
 bool ee_less(const EdgeEdgeImpact& x, const EdgeEdgeImpact& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); }
 
 /// Where a tester's results go: each tester's impacts sorted on its own thread, then appended
-/// under the lock as one run; `merge` orders the runs into the final sets (detail::merge_sorted_runs:
-/// each impact moved once, instead of a sort of up to a million records on one thread).
+/// under the lock as one run; `merge` orders the runs into the final sets
+/// (detail::merge_sorted_runs: each impact moved once).
 struct Sink {
   std::mutex mutex;
   ImpactSet impacts;
