@@ -24,6 +24,7 @@
 #include <memory>
 #include <mutex>
 #include <numbers>
+#include <numeric>
 #include <random>
 #include <sstream>
 #include <string>
@@ -582,6 +583,39 @@ TEST(Continuous, FaceBoxKernelsGiveTheScalarSlabTest) {
   EXPECT_EQ(mismatches, 0u);
   EXPECT_GT(apart, draws / 10);
   EXPECT_LT(apart, draws - draws / 10);
+}
+
+TEST(Continuous, SortedRunsMergeToTheSortOfAll) {
+  // The impacts' merge: runs of unique keys (each run sorted, the runs interleaved), some
+  // empty, in any number, against std::sort of the whole; equal keys are not needed (the
+  // impacts' keys are unique). Payloads ride along, so a key moved without its record fails.
+  std::mt19937 rng(7);
+  using Item = std::pair<int, int>;
+  const auto key_less = [](const Item& x, const Item& y) { return x.first < y.first; };
+  for (const int runs : {0, 1, 2, 3, 17, 300}) {
+    for (int draw = 0; draw < 20; ++draw) {
+      std::vector<int> keys(static_cast<std::size_t>(std::uniform_int_distribution<int>(0, 2000)(rng)));
+      std::iota(keys.begin(), keys.end(), 0);
+      std::shuffle(keys.begin(), keys.end(), rng);
+      std::vector<Item> items;
+      std::vector<std::size_t> ends;
+      std::size_t begin = 0;
+      for (int r = 0; r < runs; ++r) {
+        const std::size_t end = r + 1 == runs ? keys.size()
+                                              : std::uniform_int_distribution<std::size_t>(begin, keys.size())(rng);
+        std::vector<Item> run;
+        for (std::size_t i = begin; i < end; ++i) run.push_back({keys[i], -keys[i]});
+        std::sort(run.begin(), run.end(), key_less);
+        items.insert(items.end(), run.begin(), run.end());
+        ends.push_back(end);
+        begin = end;
+      }
+      std::vector<Item> expected = items;
+      std::sort(expected.begin(), expected.end(), key_less);
+      detail::merge_sorted_runs(items, ends, key_less);
+      ASSERT_EQ(items, expected) << runs << " runs, draw " << draw;
+    }
+  }
 }
 
 TEST(Continuous, BadInputThrowsInputError) {

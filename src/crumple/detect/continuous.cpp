@@ -29,6 +29,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <tuple>
@@ -407,7 +408,7 @@ struct Tester {
     Index i0, i1;
     Edge a, b;
   };
-  static constexpr std::size_t kQueue = 16;
+  static constexpr std::size_t kQueue = 64;
   std::array<geometry::detail::CcdQuery, kQueue> queued_points;
   std::array<Waiting, kQueue> queued;
   std::size_t queue_size = 0;
@@ -415,13 +416,16 @@ struct Tester {
   /// The sub-pairs the batched filters kept, per pair type (0: VF, 1: EE), waiting for the rest
   /// of the narrow phase, whose advancement runs four sub-pairs at a time
   /// (geometry::detail::ccd_after_direction): the more wait, the less often the lanes drain.
-  static constexpr std::size_t kKept = 64;
+  static constexpr std::size_t kKept = 256;
   struct Kept {
-    std::vector<geometry::detail::CcdQuery> points = std::vector<geometry::detail::CcdQuery>(kKept);
-    std::vector<Waiting> waiting = std::vector<Waiting>(kKept);
+    // Not value-initialised (new[] leaves them unset; a tester is built per chunk): only the
+    // entries below `size` are ever read, and each is written first.
+    std::unique_ptr<geometry::detail::CcdQuery[]> points{new geometry::detail::CcdQuery[kKept]};
+    std::unique_ptr<Waiting[]> waiting{new Waiting[kKept]};
     std::size_t size = 0;
   };
   std::array<Kept, 2> kept;
+  std::vector<geometry::CcdResult> results;  ///< finish_kept's
 
   /// Runs the narrow phase on every queued and kept sub-pair (called before the tester's
   /// results are taken).
@@ -475,8 +479,8 @@ struct Tester {
     k.size = 0;
     if (n == 0 || done()) return;
     const geometry::CcdPair pair = k.waiting[0].face ? geometry::CcdPair::kVertexFace : geometry::CcdPair::kEdgeEdge;
-    std::array<geometry::CcdResult, kKept> results;
-    geometry::detail::ccd_after_direction(pair, {k.points.data(), n}, narrow_options(), results.data());
+    if (results.size() < n) results.resize(n);  // grown as needed: a tester per chunk
+    geometry::detail::ccd_after_direction(pair, {k.points.get(), n}, narrow_options(), results.data());
     for (std::size_t i = 0; i < n; ++i) {
       if (!keep(results[i])) continue;
       const Waiting& w = k.waiting[i];
@@ -673,7 +677,11 @@ struct Tester {
     if (done()) return;
     geometry::detail::CcdQuery& q = push({true, f.v[uk], gi, {}, {}});
     for (std::size_t tau = 0; tau < 2; ++tau) {
-      (tau == 0 ? q.start : q.end) = {rf.x[tau][uk], rg.x[tau][0], rg.x[tau][1], rg.x[tau][2]};
+      geometry::CcdPoints& to = tau == 0 ? q.start : q.end;
+      to[0] = rf.x[tau][uk];
+      to[1] = rg.x[tau][0];
+      to[2] = rg.x[tau][1];
+      to[3] = rg.x[tau][2];
     }
   }
 
@@ -693,26 +701,51 @@ struct Tester {
       std::swap(ca, cb);
     }
     geometry::detail::CcdQuery& q = push({false, e0, e1, a, b});
-    for (std::size_t tau = 0; tau < 2; ++tau) {
-      (tau == 0 ? q.start : q.end) = {ra->x[tau][ca[0]], ra->x[tau][ca[1]], rb->x[tau][cb[0]], rb->x[tau][cb[1]]};
+    for (std::size_t tau = 0; tau < 2; ++tau) {  // point by point: no temporary array
+      geometry::CcdPoints& to = tau == 0 ? q.start : q.end;
+      to[0] = ra->x[tau][ca[0]];
+      to[1] = ra->x[tau][ca[1]];
+      to[2] = rb->x[tau][cb[0]];
+      to[3] = rb->x[tau][cb[1]];
     }
   }
 };
 
-/// Where a tester's results go: appended under the lock (impacts are few; order is restored
-/// by the final sort).
+/// The impact sets' order (`ImpactSet`).
+bool vf_less(const VertexFaceImpact& x, const VertexFaceImpact& y) {
+  return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face);
+}
+bool ee_less(const EdgeEdgeImpact& x, const EdgeEdgeImpact& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); }
+
+/// Where a tester's results go: each tester's impacts sorted on its own thread, then appended
+/// under the lock as one run; `merge` orders the runs into the final sets
+/// (detail::merge_sorted_runs: each impact moved once).
 struct Sink {
   std::mutex mutex;
   ImpactSet impacts;
+  std::vector<std::size_t> vf_runs, ee_runs;  ///< where each run of `impacts` ends
   Counts counts;
   double narrow_cpu_ms = 0;
   void take(Tester& t, double ms) {
     t.flush();
+    // Lambdas, not the function pointers: std::sort then inlines the comparison.
+    std::sort(t.found.vf.begin(), t.found.vf.end(), [](const auto& x, const auto& y) { return vf_less(x, y); });
+    std::sort(t.found.ee.begin(), t.found.ee.end(), [](const auto& x, const auto& y) { return ee_less(x, y); });
     const std::lock_guard lock(mutex);
-    impacts.vf.insert(impacts.vf.end(), t.found.vf.begin(), t.found.vf.end());
-    impacts.ee.insert(impacts.ee.end(), t.found.ee.begin(), t.found.ee.end());
+    const auto append = [](auto& to, const auto& from, std::vector<std::size_t>& runs) {
+      if (from.empty()) return;
+      to.insert(to.end(), from.begin(), from.end());
+      runs.push_back(to.size());
+    };
+    append(impacts.vf, t.found.vf, vf_runs);
+    append(impacts.ee, t.found.ee, ee_runs);
     counts.add(t.counts);
     narrow_cpu_ms += ms;
+  }
+  /// The impacts, sorted (keys are unique, so the order is that of a sort of them all).
+  void merge() {
+    detail::merge_sorted_runs(impacts.vf, vf_runs, [](const auto& x, const auto& y) { return vf_less(x, y); });
+    detail::merge_sorted_runs(impacts.ee, ee_runs, [](const auto& x, const auto& y) { return ee_less(x, y); });
   }
 };
 
@@ -729,12 +762,6 @@ std::unique_ptr<BroadPhase> make_broad_phase(const MethodSpec& spec) {
                        " has no broad phase; expected kdop, hash or sap");
   }
 }
-
-/// The impact sets' order (`ImpactSet`).
-bool vf_less(const VertexFaceImpact& x, const VertexFaceImpact& y) {
-  return std::tie(x.vertex, x.face) < std::tie(y.vertex, y.face);
-}
-bool ee_less(const EdgeEdgeImpact& x, const EdgeEdgeImpact& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); }
 
 void put_double(std::ostream& out, double value) {
   char buffer[32];
@@ -1342,11 +1369,8 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
   stats_.set("orphan_ms", ms_since(t2));
 
   const auto t3 = std::chrono::steady_clock::now();
+  sink.merge();
   out = std::move(sink.impacts);
-  // Lambdas, not the function pointers: std::sort then inlines the comparison (the pointers
-  // made every comparison an indirect call; keys are unique, so the order is the same).
-  std::sort(out.vf.begin(), out.vf.end(), [](const auto& x, const auto& y) { return vf_less(x, y); });
-  std::sort(out.ee.begin(), out.ee.end(), [](const auto& x, const auto& y) { return ee_less(x, y); });
   if (scaled.exponent != 0) {
     for (auto& i : out.vf) i.distance = std::scalbn(i.distance, -scaled.exponent);
     for (auto& i : out.ee) i.distance = std::scalbn(i.distance, -scaled.exponent);

@@ -1514,10 +1514,15 @@ void run_filter(std::span<const CcdQuery> queries, const std::uint8_t* index, st
 }  // namespace
 
 void ccd_never_coplanar(std::span<const CcdQuery> queries, std::uint8_t* out, bool avx2) {
-  constexpr std::uint8_t kFirst[4] = {0, 1, 2, 3};
-  for (std::size_t i = 0; i < queries.size(); i += 4) {
-    const std::size_t n = std::min<std::size_t>(4, queries.size() - i);
-    run_filter(queries.subspan(i), kFirst, n, true, CcdPair::kVertexFace, 0, out + i, avx2);
+  // One filter call per 256 queries (the index is one byte).
+  static constexpr std::array<std::uint8_t, 256> index = [] {
+    std::array<std::uint8_t, 256> first{};
+    for (std::size_t i = 0; i < first.size(); ++i) first[i] = static_cast<std::uint8_t>(i);
+    return first;
+  }();
+  for (std::size_t i = 0; i < queries.size(); i += index.size()) {
+    const std::size_t n = std::min(index.size(), queries.size() - i);
+    run_filter(queries.subspan(i), index.data(), n, true, CcdPair::kVertexFace, 0, out + i, avx2);
   }
 }
 
