@@ -117,6 +117,125 @@ class Rk4 final : public Integrator {
   std::vector<Vec3> f_, a1_, a2_, a3_, a4_, xt_, vt_, v2_, v3_, v4_;
 };
 
+/// Nested dissection (George, *Nested dissection of a regular finite element mesh*, SIAM J.
+/// Numer. Anal. 1973) as a fill-reducing ordering for Eigen's simplicial Cholesky, from the
+/// matrix pattern only: in each connected part, a breadth-first level structure from a
+/// pseudo-peripheral vertex; the smallest level with 35–65 % of the part before it separates
+/// the two sides, which are ordered first (recursively), the level last; parts of at most
+/// `kLeaf` vertices keep their breadth-first order. Every separator then splits the
+/// elimination tree below it into two subtrees of similar size, which the parallel solve runs
+/// side by side (AMD leaves a long, nearly dense chain on top instead).
+struct NestedDissection {
+  using PermutationType = Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int>;
+
+  /// `a`: the full symmetric pattern. Sets `inverse` to the permutation Eigen expects from an
+  /// ordering (entry k: the vertex eliminated k-th).
+  template <class MatrixType>
+  void operator()(const MatrixType& a, PermutationType& inverse) const {
+    const auto n = static_cast<std::size_t>(a.rows());
+    Graph g;
+    g.start.assign(n + 1, 0);
+    for (std::size_t j = 0; j < n; ++j) {
+      for (typename MatrixType::InnerIterator it(a, static_cast<Eigen::Index>(j)); it; ++it) {
+        if (static_cast<std::size_t>(it.index()) != j) g.adjacent.push_back(static_cast<int>(it.index()));
+      }
+      g.start[j + 1] = static_cast<int>(g.adjacent.size());
+    }
+    g.mark.assign(n, 0);
+    g.level.assign(n, 0);
+    std::vector<int> all(n);
+    for (std::size_t i = 0; i < n; ++i) all[i] = static_cast<int>(i);
+    g.dissect(all);
+    inverse.resize(static_cast<Eigen::Index>(n));
+    for (std::size_t k = 0; k < n; ++k) inverse.indices()[static_cast<Eigen::Index>(k)] = g.order[k];
+  }
+
+ private:
+  static constexpr std::size_t kLeaf = 32;
+
+  struct Graph {
+    std::vector<int> start, adjacent;  // symmetric adjacency, by vertex
+    std::vector<int> mark;             // the stamp of the part a vertex is in
+    std::vector<int> level;
+    std::vector<int> order;            // vertices in elimination order
+    int stamp = 0;
+
+    /// Breadth-first order of the vertices of part `tag` reachable from `source`, their levels
+    /// in `level`.
+    std::vector<int> search(int source, int tag) {
+      const int seen = ++stamp;
+      std::vector<int> queue{source};
+      mark[static_cast<std::size_t>(source)] = seen;
+      level[static_cast<std::size_t>(source)] = 0;
+      for (std::size_t head = 0; head < queue.size(); ++head) {
+        const auto v = static_cast<std::size_t>(queue[head]);
+        for (int k = start[v]; k < start[v + 1]; ++k) {
+          const auto w = static_cast<std::size_t>(adjacent[static_cast<std::size_t>(k)]);
+          if (mark[w] != tag) continue;
+          mark[w] = seen;
+          level[w] = level[v] + 1;
+          queue.push_back(static_cast<int>(w));
+        }
+      }
+      for (const int v : queue) mark[static_cast<std::size_t>(v)] = tag;
+      return queue;
+    }
+
+    /// Orders `part`: its connected components in turn, each searched from its vertex of least
+    /// degree (the first in `part`'s order among equals), in the order of those vertices.
+    void dissect(const std::vector<int>& part) {
+      const int tag = ++stamp;
+      for (const int v : part) mark[static_cast<std::size_t>(v)] = tag;
+      const auto degree = [&](int v) { return start[static_cast<std::size_t>(v) + 1] - start[static_cast<std::size_t>(v)]; };
+      std::vector<int> sources = part;
+      std::stable_sort(sources.begin(), sources.end(), [&](int x, int y) { return degree(x) < degree(y); });
+      for (const int source : sources) {
+        if (mark[static_cast<std::size_t>(source)] != tag) continue;  // in a component done
+        std::vector<int> component = search(source, tag);
+        const int done = ++stamp;
+        for (const int w : component) mark[static_cast<std::size_t>(w)] = done;
+        dissect_connected(std::move(component));
+      }
+    }
+
+    /// Orders a connected part given in breadth-first order: both sides of a separating level,
+    /// then the level; a small part as it is.
+    void dissect_connected(std::vector<int> queue) {
+      if (queue.size() <= kLeaf) {
+        order.insert(order.end(), queue.begin(), queue.end());
+        return;
+      }
+      const int tag = ++stamp;
+      for (const int v : queue) mark[static_cast<std::size_t>(v)] = tag;
+      // Pseudo-peripheral source: the last vertex reached, twice.
+      queue = search(queue.back(), tag);
+      queue = search(queue.back(), tag);
+      const auto levels = static_cast<std::size_t>(level[static_cast<std::size_t>(queue.back())]) + 1;
+      std::vector<std::size_t> count(levels, 0);
+      for (const int v : queue) ++count[static_cast<std::size_t>(level[static_cast<std::size_t>(v)])];
+      const std::size_t total = queue.size();
+      std::size_t separator = levels, before = 0;
+      for (std::size_t l = 0; l < levels; ++l) {
+        const bool balanced = 100 * before >= 35 * total && 100 * before <= 65 * total;
+        if (balanced && (separator == levels || count[l] < count[separator])) separator = l;
+        before += count[l];
+      }
+      if (separator == levels) {  // no level in the window (few, wide levels): the median one
+        before = 0;
+        for (separator = 0; 2 * (before + count[separator]) < total; ++separator) before += count[separator];
+      }
+      std::vector<int> low, high, middle;
+      for (const int v : queue) {
+        const auto l = static_cast<std::size_t>(level[static_cast<std::size_t>(v)]);
+        (l < separator ? low : l > separator ? high : middle).push_back(v);
+      }
+      dissect(low);
+      dissect(high);
+      order.insert(order.end(), middle.begin(), middle.end());
+    }
+  };
+};
+
 /// Backward Euler with one Newton step. The system matrix A = M − h ∂f/∂v − h² ∂f/∂x has a
 /// fixed block pattern (diagonal blocks plus one block pair per spring), built once per model;
 /// each step only refills the values in place.
@@ -392,125 +511,6 @@ void spring_pulls(std::span<const Spring> springs, const std::vector<Vec3>& x, s
 #endif
   spring_pulls_scalar(springs, x, pull, begin, end);
 }
-
-/// Nested dissection (George, *Nested dissection of a regular finite element mesh*, SIAM J.
-/// Numer. Anal. 1973) as a fill-reducing ordering for Eigen's simplicial Cholesky, from the
-/// matrix pattern only: in each connected part, a breadth-first level structure from a
-/// pseudo-peripheral vertex; the smallest level with 35–65 % of the part before it separates
-/// the two sides, which are ordered first (recursively), the level last; parts of at most
-/// `kLeaf` vertices keep their breadth-first order. Every separator then splits the
-/// elimination tree below it into two subtrees of similar size, which the parallel solve runs
-/// side by side (AMD leaves a long, nearly dense chain on top instead).
-struct NestedDissection {
-  using PermutationType = Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int>;
-
-  /// `a`: the full symmetric pattern. Sets `inverse` to the permutation Eigen expects from an
-  /// ordering (entry k: the vertex eliminated k-th).
-  template <class MatrixType>
-  void operator()(const MatrixType& a, PermutationType& inverse) const {
-    const auto n = static_cast<std::size_t>(a.rows());
-    Graph g;
-    g.start.assign(n + 1, 0);
-    for (std::size_t j = 0; j < n; ++j) {
-      for (typename MatrixType::InnerIterator it(a, static_cast<Eigen::Index>(j)); it; ++it) {
-        if (static_cast<std::size_t>(it.index()) != j) g.adjacent.push_back(static_cast<int>(it.index()));
-      }
-      g.start[j + 1] = static_cast<int>(g.adjacent.size());
-    }
-    g.mark.assign(n, 0);
-    g.level.assign(n, 0);
-    std::vector<int> all(n);
-    for (std::size_t i = 0; i < n; ++i) all[i] = static_cast<int>(i);
-    g.dissect(all);
-    inverse.resize(static_cast<Eigen::Index>(n));
-    for (std::size_t k = 0; k < n; ++k) inverse.indices()[static_cast<Eigen::Index>(k)] = g.order[k];
-  }
-
- private:
-  static constexpr std::size_t kLeaf = 32;
-
-  struct Graph {
-    std::vector<int> start, adjacent;  // symmetric adjacency, by vertex
-    std::vector<int> mark;             // the stamp of the part a vertex is in
-    std::vector<int> level;
-    std::vector<int> order;            // vertices in elimination order
-    int stamp = 0;
-
-    /// Breadth-first order of the vertices of part `tag` reachable from `source`, their levels
-    /// in `level`.
-    std::vector<int> search(int source, int tag) {
-      const int seen = ++stamp;
-      std::vector<int> queue{source};
-      mark[static_cast<std::size_t>(source)] = seen;
-      level[static_cast<std::size_t>(source)] = 0;
-      for (std::size_t head = 0; head < queue.size(); ++head) {
-        const auto v = static_cast<std::size_t>(queue[head]);
-        for (int k = start[v]; k < start[v + 1]; ++k) {
-          const auto w = static_cast<std::size_t>(adjacent[static_cast<std::size_t>(k)]);
-          if (mark[w] != tag) continue;
-          mark[w] = seen;
-          level[w] = level[v] + 1;
-          queue.push_back(static_cast<int>(w));
-        }
-      }
-      for (const int v : queue) mark[static_cast<std::size_t>(v)] = tag;
-      return queue;
-    }
-
-    /// Orders `part`: its connected components in turn, each searched from its vertex of least
-    /// degree (the first in `part`'s order among equals), in the order of those vertices.
-    void dissect(const std::vector<int>& part) {
-      const int tag = ++stamp;
-      for (const int v : part) mark[static_cast<std::size_t>(v)] = tag;
-      const auto degree = [&](int v) { return start[static_cast<std::size_t>(v) + 1] - start[static_cast<std::size_t>(v)]; };
-      std::vector<int> sources = part;
-      std::stable_sort(sources.begin(), sources.end(), [&](int x, int y) { return degree(x) < degree(y); });
-      for (const int source : sources) {
-        if (mark[static_cast<std::size_t>(source)] != tag) continue;  // in a component done
-        std::vector<int> component = search(source, tag);
-        const int done = ++stamp;
-        for (const int w : component) mark[static_cast<std::size_t>(w)] = done;
-        dissect_connected(std::move(component));
-      }
-    }
-
-    /// Orders a connected part given in breadth-first order: both sides of a separating level,
-    /// then the level; a small part as it is.
-    void dissect_connected(std::vector<int> queue) {
-      if (queue.size() <= kLeaf) {
-        order.insert(order.end(), queue.begin(), queue.end());
-        return;
-      }
-      const int tag = ++stamp;
-      for (const int v : queue) mark[static_cast<std::size_t>(v)] = tag;
-      // Pseudo-peripheral source: the last vertex reached, twice.
-      queue = search(queue.back(), tag);
-      queue = search(queue.back(), tag);
-      const auto levels = static_cast<std::size_t>(level[static_cast<std::size_t>(queue.back())]) + 1;
-      std::vector<std::size_t> count(levels, 0);
-      for (const int v : queue) ++count[static_cast<std::size_t>(level[static_cast<std::size_t>(v)])];
-      const std::size_t total = queue.size();
-      std::size_t separator = levels, before = 0;
-      for (std::size_t l = 0; l < levels; ++l) {
-        const bool balanced = 100 * before >= 35 * total && 100 * before <= 65 * total;
-        if (balanced && (separator == levels || count[l] < count[separator])) separator = l;
-        before += count[l];
-      }
-      if (separator == levels) {  // no level in the window (few, wide levels): the median one
-        before = 0;
-        for (separator = 0; 2 * (before + count[separator]) < total; ++separator) before += count[separator];
-      }
-      std::vector<int> low, high, middle;
-      for (const int v : queue) {
-        const auto l = static_cast<std::size_t>(level[static_cast<std::size_t>(v)]);
-        (l < separator ? low : l > separator ? high : middle).push_back(v);
-      }
-      dissect(low);
-      dissect(high);
-      order.insert(order.end(), middle.begin(), middle.end());
-    }
-  };
-};
 
 /// Projective dynamics (see the header). The system is over the free particles only: a pinned
 /// particle's known new position moves to the right-hand side.
