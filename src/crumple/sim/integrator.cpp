@@ -241,7 +241,12 @@ struct NestedDissection {
 /// each step only refills the values in place.
 class ImplicitEuler final : public Integrator {
  public:
-  explicit ImplicitEuler(const IntegratorOptions& options) : options_(options) {}
+  explicit ImplicitEuler(const IntegratorOptions& options) : options_(options) {
+    CRUMPLE_CHECK(options.threads >= 0, "threads must be >= 0");
+    threads_ = std::min(2, resolve_threads(options.threads));
+  }
+  ImplicitEuler(const ImplicitEuler&) = delete;
+  ImplicitEuler& operator=(const ImplicitEuler&) = delete;
   IntegratorKind kind() const override { return IntegratorKind::ImplicitEuler; }
   bool takes_anchors() const override { return true; }
 
@@ -340,11 +345,19 @@ class ImplicitEuler final : public Integrator {
       }
       b_.segment<3>(3 * i).setZero();
     }
-    cg_.setTolerance(options_.cg_tolerance);
-    cg_.setMaxIterations(options_.cg_max_iterations);
-    cg_.compute(a_);
-    dv_ = cg_.solve(b_);
-    last_iterations_ = static_cast<int>(cg_.iterations());
+    int products = -1;
+    if (options_.cg_preconditioner == CgPreconditioner::Rest) {
+      factor_rest(model, field, h);
+      products = preconditioned_cg();
+    }
+    if (products < 0) {  // the Diagonal path, or the Rest path short of the tolerance
+      cg_.setTolerance(options_.cg_tolerance);
+      cg_.setMaxIterations(options_.cg_max_iterations);
+      cg_.compute(a_);
+      dv_ = cg_.solve(b_);
+      products = static_cast<int>(cg_.iterations());
+    }
+    last_iterations_ = products;
     for (Index i = 0; i < n; ++i) {
       const auto k = static_cast<std::size_t>(i);
       if (inv_mass[k] != 0) s.v[k] += dv_.segment<3>(3 * i);
@@ -357,6 +370,181 @@ class ImplicitEuler final : public Integrator {
   using Mat3 = Eigen::Matrix<Scalar, 3, 3>;
   using Sparse = Eigen::SparseMatrix<Scalar>;
   using Vector = Eigen::Matrix<Scalar, Eigen::Dynamic, 1>;
+
+  /// What the rest preconditioner depends on: the model (its revision names its masses,
+  /// springs, damping and hinges), h and the air damping.
+  struct RestKey {
+    std::uint64_t revision = 0;
+    Index particles = -1;
+    Scalar h = 0, air = 0;
+    bool operator==(const RestKey&) const = default;
+  };
+
+  /// Factors K (`CgPreconditioner::Rest`) over the free particles when its key changed. Every
+  /// spring block of A, h c u uᵀ + h² k (u uᵀ + t (I − u uᵀ)) with t = max(0, 1 − L/l) < 1, is
+  /// at most (h c + h² k) I, so A ≤ I₃ ⊗ K over the free rows (drag and anchors aside, which
+  /// K leaves out: they change from step to step) and K⁻¹ A's spectrum lies in (0, 1] there;
+  /// the along-spring stiffness, which makes A ill-conditioned, is matched exactly.
+  void factor_rest(const Model& model, const ForceField& field, Scalar h) {
+    RestKey key;
+    key.revision = model.revision();
+    key.particles = model.num_particles();
+    key.h = h;
+    key.air = field.air_damping;
+    if (rest_factored_ && key == rest_key_) return;
+    rest_key_ = key;
+    const auto n = static_cast<std::size_t>(model.num_particles());
+    rest_row_.assign(n, -1);
+    rest_free_.clear();
+    for (std::size_t i = 0; i < n; ++i) {
+      if (model.pinned(static_cast<Index>(i))) continue;
+      rest_row_[i] = static_cast<Eigen::Index>(rest_free_.size());
+      rest_free_.push_back(i);
+    }
+    const auto mass = model.mass();
+    const auto springs = model.springs();
+    const auto damping = model.damping();
+    std::vector<Eigen::Triplet<Scalar>> t;
+    for (std::size_t r = 0; r < rest_free_.size(); ++r) {
+      const auto rr = static_cast<Eigen::Index>(r);
+      t.emplace_back(rr, rr, mass[rest_free_[r]] * (1 + h * field.air_damping));
+    }
+    for (std::size_t k = 0; k < springs.size(); ++k) {
+      const Scalar weight = h * damping[k] + h * h * springs[k].stiffness;
+      const Eigen::Index ra = rest_row_[static_cast<std::size_t>(springs[k].a)];
+      const Eigen::Index rb = rest_row_[static_cast<std::size_t>(springs[k].b)];
+      if (ra >= 0) t.emplace_back(ra, ra, weight);
+      if (rb >= 0) t.emplace_back(rb, rb, weight);
+      if (ra >= 0 && rb >= 0) {
+        t.emplace_back(ra, rb, -weight);
+        t.emplace_back(rb, ra, -weight);
+      }
+    }
+    for (const Hinge& hg : model.hinges()) {
+      const Scalar weight = h * hg.damping + h * h * hg.stiffness;
+      for (std::size_t i = 0; i < 4; ++i) {
+        const Eigen::Index ri = rest_row_[static_cast<std::size_t>(hg.vertex[i])];
+        if (ri < 0) continue;
+        for (std::size_t j = 0; j < 4; ++j) {
+          const Eigen::Index rj = rest_row_[static_cast<std::size_t>(hg.vertex[j])];
+          if (rj >= 0) t.emplace_back(ri, rj, weight * hg.weight[i] * hg.weight[j]);
+        }
+      }
+    }
+    const auto m = static_cast<Eigen::Index>(rest_free_.size());
+    Sparse k(m, m);
+    k.setFromTriplets(t.begin(), t.end());
+    rest_factored_ = false;
+    if (m > 0) {
+      rest_solver_.compute(k);
+      CRUMPLE_CHECK(rest_solver_.info() == Eigen::Success,
+                    "implicit Euler: the rest preconditioner is not positive definite");
+      rest_supernodal_.plan(rest_solver_.matrixL().nestedExpression(), rest_solver_.vectorD());
+    }
+    ++factorizations_;
+    rest_factored_ = true;
+  }
+
+  /// z = P⁻¹ r, P⁻¹ = I₃ ⊗ K⁻¹ + B⁻¹ on the free rows, B A's 3 × 3 diagonal blocks (the
+  /// step's), z = r on the pinned rows (where r stays 0). Both terms are symmetric positive
+  /// definite (K's factor with its entries rounded to single precision is still a fixed SPD
+  /// operator), so their sum is, all CG needs. K⁻¹ takes the smooth, stiff modes along the
+  /// springs; B⁻¹ the local ones across them, where A's stiffness is the springs' tension only
+  /// (t ≪ 1) and K alone would overestimate it by up to 1/t.
+  void precondition(const Vector& r, Vector& z) {
+    z = r;
+    if (rest_free_.empty()) return;
+    const auto& p = rest_solver_.permutationP().indices();
+    rest_tmp_.resize(rest_free_.size());
+    for (std::size_t q = 0; q < rest_free_.size(); ++q) {
+      rest_tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(q)])] =
+          r.segment<3>(3 * static_cast<Eigen::Index>(rest_free_[q]));
+    }
+    rest_supernodal_.solve(rest_tmp_, threads_);
+    for (std::size_t q = 0; q < rest_free_.size(); ++q) {
+      const auto at = 3 * static_cast<Eigen::Index>(rest_free_[q]);
+      z.segment<3>(at) = rest_tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(q)])] +
+                         block_inverse_[rest_free_[q]] * r.segment<3>(at);
+    }
+  }
+
+  /// y = A x, particle by particle: A is symmetric, so particle j's three rows are its three
+  /// columns, which hold the same neighbour blocks (B_ij, i increasing) at the same offsets;
+  /// y_j = Σ_i B_ijᵀ x_i in that order (the same bits on any thread count).
+  void multiply(const Vector& x, Vector& y) const {
+    const auto* outer = a_.outerIndexPtr();
+    const Scalar* values = a_.valuePtr();
+    const auto particles = static_cast<std::size_t>(a_.cols() / 3);
+    y.resize(a_.cols());
+    const Scalar* xp = x.data();
+    Scalar* yp = y.data();
+    parallel_for_chunks(particles, threads_, balanced_grain(particles, threads_, 512, 1 << 15),
+                        [&](std::size_t begin, std::size_t end) {
+                          for (std::size_t j = begin; j < end; ++j) {
+                            const auto start = outer[3 * j];
+                            const auto count = outer[3 * j + 1] - start;  // 3 × neighbours
+                            const Scalar* c0 = values + start;
+                            const Scalar* c1 = values + outer[3 * j + 1];
+                            const Scalar* c2 = values + outer[3 * j + 2];
+                            const int* rows = block_row_.data() + start / 9;
+                            Scalar s0 = 0, s1 = 0, s2 = 0;
+                            for (std::ptrdiff_t q = 0; q < count; q += 3) {
+                              const Scalar* xi = xp + rows[q / 3];
+                              const Scalar a = xi[0], b = xi[1], c = xi[2];
+                              s0 += (c0[q] * a + c0[q + 1] * b) + c0[q + 2] * c;
+                              s1 += (c1[q] * a + c1[q + 1] * b) + c1[q + 2] * c;
+                              s2 += (c2[q] * a + c2[q + 1] * b) + c2[q + 2] * c;
+                            }
+                            yp[3 * j] = s0;
+                            yp[3 * j + 1] = s1;
+                            yp[3 * j + 2] = s2;
+                          }
+                        });
+  }
+
+  /// Preconditioned conjugate gradient on A Δv = b from Δv = 0, preconditioned by
+  /// `precondition`; stops as Eigen's `ConjugateGradient` does (the `Diagonal` path): once the
+  /// recurrence's residual |r|² < cg_tolerance² |b|². Returns the products with A, or −1 when it
+  /// did not get there within cg_max_iterations products (or broke down: a curvature pᵀAp or
+  /// rᵀz not positive and finite, which exact arithmetic rules out).
+  int preconditioned_cg() {
+    const Eigen::Index size = b_.size();
+    dv_.setZero(size);
+    const Scalar rhs2 = b_.squaredNorm();
+    if (rhs2 == 0) return 0;
+    const Scalar threshold =
+        std::max(options_.cg_tolerance * options_.cg_tolerance * rhs2, std::numeric_limits<Scalar>::min());
+    block_inverse_.resize(static_cast<std::size_t>(size / 3));
+    const Scalar* values = a_.valuePtr();
+    for (std::size_t i = 0; i < block_inverse_.size(); ++i) {
+      Mat3 d;
+      for (std::size_t c = 0; c < 3; ++c) {
+        const Scalar* column = values + a_.outerIndexPtr()[3 * i + c] + block_offset_[diagonal_block_[i]];
+        for (std::size_t r = 0; r < 3; ++r) d(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c)) = column[r];
+      }
+      block_inverse_[i] = d.inverse();
+    }
+    residual_ = b_;
+    precondition(residual_, direction_);
+    Scalar rz = residual_.dot(direction_);
+    int products = 0;
+    while (products < options_.cg_max_iterations) {
+      if (!(rz > 0) || !std::isfinite(rz)) return -1;
+      multiply(direction_, product_);
+      ++products;
+      const Scalar curvature = direction_.dot(product_);
+      if (!(curvature > 0) || !std::isfinite(curvature)) return -1;
+      const Scalar alpha = rz / curvature;
+      dv_ += alpha * direction_;
+      residual_ -= alpha * product_;
+      if (residual_.squaredNorm() < threshold) return products;
+      precondition(residual_, z_);
+      const Scalar previous = rz;
+      rz = residual_.dot(z_);
+      direction_ = z_ + (rz / previous) * direction_;
+    }
+    return -1;
+  }
 
   /// Zeroes entry (row, col)'s symmetric partner (col, row).
   void pinned_row_zero(Eigen::Index row, Eigen::Index col) { a_.coeffRef(col, row) = 0; }
@@ -402,6 +590,12 @@ class ImplicitEuler final : public Integrator {
     a_.resize(3 * n, 3 * n);
     a_.setFromTriplets(triplets.begin(), triplets.end());
     a_.makeCompressed();
+    // Each particle's blocks' first rows, compact: particle j's start at outer(3j) / 9 (the
+    // particles before it store 9 entries per block).
+    block_row_.clear();
+    for (Index j = 0; j < n; ++j) {
+      for (Index i : neighbours[static_cast<std::size_t>(j)]) block_row_.push_back(static_cast<int>(3 * i));
+    }
     // Block (i, j) starts at row offset 3 * (rank of i among the neighbours of j) in each of
     // column j's three columns.
     const auto offset = [&](Index i, Index j) {
@@ -440,6 +634,7 @@ class ImplicitEuler final : public Integrator {
   Index pattern_n_ = -1;
   std::vector<std::array<Index, 2>> pattern_pairs_;
   Sparse a_;
+  std::vector<int> block_row_;  // per particle j, its neighbour blocks' first rows 3i, i increasing
   std::vector<std::size_t> block_offset_;  // row offset of each referenced block in its columns
   std::vector<std::size_t> diagonal_block_;
   std::vector<std::array<std::size_t, 4>> spring_block_;
@@ -447,7 +642,18 @@ class ImplicitEuler final : public Integrator {
   std::vector<std::array<std::size_t, 16>> hinge_block_;  // block (vertex i, vertex j) at 4i + j
   Vector b_, dv_;
   std::vector<Scalar> anchor_diagonal_;  // c D per anchor (the step's)
-  Eigen::ConjugateGradient<Sparse, Eigen::Lower | Eigen::Upper> cg_;
+  Eigen::ConjugateGradient<Sparse, Eigen::Lower | Eigen::Upper> cg_;  // the Diagonal path
+  int threads_ = 1;
+  // The Rest path: K's factor, the free particles' rows, the CG vectors.
+  RestKey rest_key_;
+  bool rest_factored_ = false;
+  std::vector<Eigen::Index> rest_row_;  // K's row of each particle, -1 when pinned
+  std::vector<std::size_t> rest_free_;  // the particle of each row of K
+  Eigen::SimplicialLDLT<Sparse, Eigen::Lower, NestedDissection> rest_solver_;
+  detail::SupernodalSolve rest_supernodal_;
+  std::vector<Vec3> rest_tmp_;
+  Vector residual_, direction_, product_, z_;
+  std::vector<Mat3> block_inverse_;  // per particle: A's diagonal block, inverted (the step's)
 };
 
 /// pull[k] = k_s (L_s / l) d for the springs [begin, end): d = x_a − x_b, l = √((d_x² + d_y²) + d_z²)
