@@ -156,10 +156,10 @@ TEST(ImplicitPcg, SolvesTheBackwardEulerSystemToTheTolerance) {
   }
 }
 
-/// On a stiff cloth (h² k / m ≈ 60 per spring at n = 16) Jacobi needs ~√(condition number)
-/// iterations; the prefactored rest matrix plus the diagonal blocks needs a third of them or
-/// fewer, at the same tolerance, with and without anchors; and the step is the same bits on
-/// one and two threads.
+/// On a stiff cloth (stretch 10⁴ N/m at n = 16, h = 1/240 s) Jacobi needs ~√(condition number)
+/// iterations (measured: 255); the prefactored rest matrix plus the diagonal blocks needs a
+/// third of them or fewer (76), at the same tolerance, with and without anchors; and the step
+/// is the same bits on one and two threads.
 TEST(ImplicitPcg, NeedsFarFewerIterationsThanJacobi) {
   const Crumpled c(16, 1e4);
   const Scalar h = 1.0 / 240;
