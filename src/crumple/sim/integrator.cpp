@@ -117,282 +117,6 @@ class Rk4 final : public Integrator {
   std::vector<Vec3> f_, a1_, a2_, a3_, a4_, xt_, vt_, v2_, v3_, v4_;
 };
 
-/// Backward Euler with one Newton step. The system matrix A = M − h ∂f/∂v − h² ∂f/∂x has a
-/// fixed block pattern (diagonal blocks plus one block pair per spring), built once per model;
-/// each step only refills the values in place.
-class ImplicitEuler final : public Integrator {
- public:
-  explicit ImplicitEuler(const IntegratorOptions& options) : options_(options) {}
-  IntegratorKind kind() const override { return IntegratorKind::ImplicitEuler; }
-  bool takes_anchors() const override { return true; }
-
-  void step(const Model& model, const ForceField& field, State& s, Scalar h) override {
-    check_step(model, s, h);
-    const Index n = model.num_particles();
-    const auto mass = model.mass();
-    const auto inv_mass = model.inv_mass();
-    const auto springs = model.springs();
-    const auto damping = model.damping();
-    prepare(model);
-
-    compute_forces(model, field, s.x, s.v, f_);
-    // b = h (f0 + h ∂f/∂x v0), accumulated per spring; A refilled block by block.
-    b_.resize(3 * n);
-    for (Index i = 0; i < n; ++i) b_.segment<3>(3 * i) = f_[static_cast<std::size_t>(i)];
-    Scalar* values = a_.valuePtr();
-    std::fill(values, values + a_.nonZeros(), Scalar(0));
-    const auto add = [&](std::size_t block, Index col_particle, const Mat3& m) {
-      // Entry (3i+r, 3j+c) lives at outer[3j+c] + block_row_offset + r.
-      for (int c = 0; c < 3; ++c) {
-        Scalar* col = values + a_.outerIndexPtr()[3 * col_particle + c] + block_offset_[block];
-        for (int r = 0; r < 3; ++r) col[r] += m(r, c);
-      }
-    };
-    const Scalar h2 = h * h;
-    for (std::size_t k = 0; k < springs.size(); ++k) {
-      const Spring& sp = springs[k];
-      const auto ia = static_cast<std::size_t>(sp.a), ib = static_cast<std::size_t>(sp.b);
-      const SpringBlocks blocks = spring_blocks(sp, damping[k], s.x[ia], s.x[ib]);
-      const Mat3 m = -h * blocks.dv - h2 * blocks.dx;
-      add(spring_block_[k][0], sp.a, m);   // (a, a)
-      add(spring_block_[k][1], sp.b, m);   // (b, b)
-      add(spring_block_[k][2], sp.b, -m);  // (a, b)
-      add(spring_block_[k][3], sp.a, -m);  // (b, a)
-      const Vec3 kv = blocks.dx * (s.v[ia] - s.v[ib]);
-      b_.segment<3>(3 * sp.a) += h * kv;
-      b_.segment<3>(3 * sp.b) -= h * kv;
-    }
-    const auto hinges = model.hinges();
-    for (std::size_t k = 0; k < hinges.size(); ++k) {
-      const Hinge& hg = hinges[k];
-      Vec3 rate = Vec3::Zero();
-      for (std::size_t i = 0; i < 4; ++i) rate += hg.weight[i] * s.v[static_cast<std::size_t>(hg.vertex[i])];
-      for (std::size_t i = 0; i < 4; ++i) {
-        b_.segment<3>(3 * hg.vertex[i]) -= h * hg.stiffness * hg.weight[i] * rate;
-        for (std::size_t j = 0; j < 4; ++j) {
-          const Scalar coefficient = (h * hg.damping + h2 * hg.stiffness) * hg.weight[i] * hg.weight[j];
-          add(hinge_block_[k][4 * i + j], hg.vertex[j], coefficient * Mat3::Identity());
-        }
-      }
-    }
-    for (Index i = 0; i < n; ++i) {
-      const auto k = static_cast<std::size_t>(i);
-      Scalar diagonal = mass[k] + h * field.air_damping * mass[k];
-      if (field.drag && field.drag->vertex == i) {
-        diagonal += h * field.drag->damping + h2 * field.drag->stiffness;
-        b_.segment<3>(3 * i) -= h * field.drag->stiffness * s.v[k];
-      }
-      add(diagonal_block_[k], i, diagonal * Mat3::Identity());
-    }
-    // Anchors: A += c D d dᵀ, b += k d (offset − h d · v₀) before the factor h (k = c D / h²:
-    // the force k d (offset − d · (x − x₀)) linearised at x₀ along x = x₀ + h (v₀ + Δv)). D is
-    // read before any anchor adds to the block, so two anchors on one particle do not compound.
-    anchor_diagonal_.assign(anchors_.size(), 0);
-    for (std::size_t a = 0; a < anchors_.size(); ++a) {
-      const Index i = anchors_[a].vertex;
-      CRUMPLE_CHECK(i >= 0 && i < n, "anchor vertex out of range");
-      Scalar trace = 0;
-      for (int c = 0; c < 3; ++c) {
-        trace += values[a_.outerIndexPtr()[3 * i + c] + block_offset_[diagonal_block_[static_cast<std::size_t>(i)]] + c];
-      }
-      anchor_diagonal_[a] = anchor_stiffness_ * trace / 3;
-    }
-    for (std::size_t a = 0; a < anchors_.size(); ++a) {
-      const Anchor& anchor = anchors_[a];
-      const auto k = static_cast<std::size_t>(anchor.vertex);
-      if (inv_mass[k] == 0 || !(anchor_diagonal_[a] > 0)) continue;
-      const Vec3 d = anchor.direction;
-      // A particle already moving farther that way over the step keeps its motion.
-      const Scalar offset = std::max(anchor.offset, h * d.dot(s.v[k]));
-      add(diagonal_block_[k], anchor.vertex, anchor_diagonal_[a] * (d * d.transpose()));
-      b_.segment<3>(3 * anchor.vertex) += (anchor_diagonal_[a] / h2) * (offset - h * d.dot(s.v[k])) * d;
-    }
-    b_ *= h;
-    // Pinned particles: zero their rows and columns, identity on the diagonal, Δv = 0.
-    for (Index i = 0; i < n; ++i) {
-      if (inv_mass[static_cast<std::size_t>(i)] != 0) continue;
-      for (int c = 0; c < 3; ++c) {
-        const Eigen::Index col = 3 * i + c;
-        for (Eigen::Index p = a_.outerIndexPtr()[col]; p < a_.outerIndexPtr()[col + 1]; ++p) {
-          const Eigen::Index row = a_.innerIndexPtr()[p];
-          values[p] = row == col ? 1 : 0;
-          if (row != col) pinned_row_zero(row, col);
-        }
-      }
-      b_.segment<3>(3 * i).setZero();
-    }
-    cg_.setTolerance(options_.cg_tolerance);
-    cg_.setMaxIterations(options_.cg_max_iterations);
-    cg_.compute(a_);
-    dv_ = cg_.solve(b_);
-    last_iterations_ = static_cast<int>(cg_.iterations());
-    for (Index i = 0; i < n; ++i) {
-      const auto k = static_cast<std::size_t>(i);
-      if (inv_mass[k] != 0) s.v[k] += dv_.segment<3>(3 * i);
-      s.x[k] += h * s.v[k];
-    }
-    s.time += h;
-  }
-
- private:
-  using Mat3 = Eigen::Matrix<Scalar, 3, 3>;
-  using Sparse = Eigen::SparseMatrix<Scalar>;
-  using Vector = Eigen::Matrix<Scalar, Eigen::Dynamic, 1>;
-
-  /// Zeroes entry (row, col)'s symmetric partner (col, row).
-  void pinned_row_zero(Eigen::Index row, Eigen::Index col) { a_.coeffRef(col, row) = 0; }
-
-  /// Builds the block pattern when the model's springs differ from the cached ones.
-  void prepare(const Model& model) {
-    const auto springs = model.springs();
-    const auto hinges = model.hinges();
-    const Index n = model.num_particles();
-    bool same = pattern_n_ == n && pattern_pairs_.size() == springs.size() && pattern_hinges_.size() == hinges.size();
-    for (std::size_t k = 0; same && k < springs.size(); ++k) {
-      same = pattern_pairs_[k] == std::array<Index, 2>{springs[k].a, springs[k].b};
-    }
-    for (std::size_t k = 0; same && k < hinges.size(); ++k) same = pattern_hinges_[k] == hinges[k].vertex;
-    if (same) return;
-    pattern_n_ = n;
-    pattern_pairs_.clear();
-    pattern_hinges_.clear();
-    std::vector<std::vector<Index>> neighbours(static_cast<std::size_t>(n));
-    for (Index i = 0; i < n; ++i) neighbours[static_cast<std::size_t>(i)].push_back(i);
-    for (const Spring& sp : springs) {
-      pattern_pairs_.push_back({sp.a, sp.b});
-      neighbours[static_cast<std::size_t>(sp.a)].push_back(sp.b);
-      neighbours[static_cast<std::size_t>(sp.b)].push_back(sp.a);
-    }
-    for (const Hinge& hg : hinges) {
-      pattern_hinges_.push_back(hg.vertex);
-      for (Index a : hg.vertex) {
-        for (Index b : hg.vertex) neighbours[static_cast<std::size_t>(a)].push_back(b);
-      }
-    }
-    std::vector<Eigen::Triplet<Scalar>> triplets;
-    for (auto& list : neighbours) {
-      std::sort(list.begin(), list.end());
-      list.erase(std::unique(list.begin(), list.end()), list.end());
-    }
-    for (Index j = 0; j < n; ++j) {
-      for (Index i : neighbours[static_cast<std::size_t>(j)]) {
-        for (int c = 0; c < 3; ++c)
-          for (int r = 0; r < 3; ++r) triplets.emplace_back(3 * i + r, 3 * j + c, 0.0);
-      }
-    }
-    a_.resize(3 * n, 3 * n);
-    a_.setFromTriplets(triplets.begin(), triplets.end());
-    a_.makeCompressed();
-    // Block (i, j) starts at row offset 3 * (rank of i among the neighbours of j) in each of
-    // column j's three columns.
-    const auto offset = [&](Index i, Index j) {
-      const auto& list = neighbours[static_cast<std::size_t>(j)];
-      return static_cast<std::size_t>(3 * (std::lower_bound(list.begin(), list.end(), i) - list.begin()));
-    };
-    block_offset_.clear();
-    diagonal_block_.resize(static_cast<std::size_t>(n));
-    for (Index i = 0; i < n; ++i) {
-      diagonal_block_[static_cast<std::size_t>(i)] = block_offset_.size();
-      block_offset_.push_back(offset(i, i));
-    }
-    spring_block_.resize(springs.size());
-    for (std::size_t k = 0; k < springs.size(); ++k) {
-      const Index a = springs[k].a, b = springs[k].b;
-      const std::array<std::pair<Index, Index>, 4> blocks{{{a, a}, {b, b}, {a, b}, {b, a}}};
-      for (int q = 0; q < 4; ++q) {
-        spring_block_[k][static_cast<std::size_t>(q)] = block_offset_.size();
-        block_offset_.push_back(offset(blocks[static_cast<std::size_t>(q)].first,
-                                       blocks[static_cast<std::size_t>(q)].second));
-      }
-    }
-    hinge_block_.resize(hinges.size());
-    for (std::size_t k = 0; k < hinges.size(); ++k) {
-      for (std::size_t i = 0; i < 4; ++i) {
-        for (std::size_t j = 0; j < 4; ++j) {
-          hinge_block_[k][4 * i + j] = block_offset_.size();
-          block_offset_.push_back(offset(hinges[k].vertex[i], hinges[k].vertex[j]));
-        }
-      }
-    }
-  }
-
-  IntegratorOptions options_;
-  std::vector<Vec3> f_;
-  Index pattern_n_ = -1;
-  std::vector<std::array<Index, 2>> pattern_pairs_;
-  Sparse a_;
-  std::vector<std::size_t> block_offset_;  // row offset of each referenced block in its columns
-  std::vector<std::size_t> diagonal_block_;
-  std::vector<std::array<std::size_t, 4>> spring_block_;
-  std::vector<std::array<Index, 4>> pattern_hinges_;
-  std::vector<std::array<std::size_t, 16>> hinge_block_;  // block (vertex i, vertex j) at 4i + j
-  Vector b_, dv_;
-  std::vector<Scalar> anchor_diagonal_;  // c D per anchor (the step's)
-  Eigen::ConjugateGradient<Sparse, Eigen::Lower | Eigen::Upper> cg_;
-};
-
-/// pull[k] = k_s (L_s / l) d for the springs [begin, end): d = x_a − x_b, l = √((d_x² + d_y²) + d_z²)
-/// (zero where l = 0), the spring's rest-length projection times its stiffness.
-void spring_pulls_scalar(std::span<const Spring> springs, const std::vector<Vec3>& x, std::vector<Vec3>& pull,
-                         std::size_t begin, std::size_t end) {
-  for (std::size_t k = begin; k < end; ++k) {
-    const Spring& sp = springs[k];
-    const Vec3 d = x[static_cast<std::size_t>(sp.a)] - x[static_cast<std::size_t>(sp.b)];
-    const Scalar l = std::sqrt((d.x() * d.x() + d.y() * d.y()) + d.z() * d.z());
-    if (l > 0) {
-      const Scalar s = sp.rest_length / l;
-      pull[k] = Vec3(sp.stiffness * (s * d.x()), sp.stiffness * (s * d.y()), sp.stiffness * (s * d.z()));
-    } else {
-      pull[k] = Vec3::Zero();
-    }
-  }
-}
-
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(CRUMPLE_SANITIZED)
-/// `spring_pulls_scalar`, four springs at a time in AVX: the same operations in the same order,
-/// each correctly rounded, so the same bits (a zero length's quotient, infinite or NaN, is
-/// masked to zero).
-__attribute__((target("avx2"))) void spring_pulls_avx2(std::span<const Spring> springs, const std::vector<Vec3>& x,
-                                                       std::vector<Vec3>& pull, std::size_t begin, std::size_t end) {
-  std::size_t k = begin;
-  for (; k + 4 <= end; k += 4) {
-    alignas(32) std::array<Scalar, 4> dx, dy, dz, stiffness, rest;
-    for (std::size_t j = 0; j < 4; ++j) {
-      const Spring& sp = springs[k + j];
-      const Vec3 d = x[static_cast<std::size_t>(sp.a)] - x[static_cast<std::size_t>(sp.b)];
-      dx[j] = d.x();
-      dy[j] = d.y();
-      dz[j] = d.z();
-      stiffness[j] = sp.stiffness;
-      rest[j] = sp.rest_length;
-    }
-    const __m256d vx = _mm256_load_pd(dx.data()), vy = _mm256_load_pd(dy.data()), vz = _mm256_load_pd(dz.data());
-    const __m256d l = _mm256_sqrt_pd(
-        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(vx, vx), _mm256_mul_pd(vy, vy)), _mm256_mul_pd(vz, vz)));
-    const __m256d s = _mm256_div_pd(_mm256_load_pd(rest.data()), l);
-    const __m256d kk = _mm256_load_pd(stiffness.data());
-    const __m256d live = _mm256_cmp_pd(l, _mm256_setzero_pd(), _CMP_GT_OQ);
-    _mm256_store_pd(dx.data(), _mm256_and_pd(live, _mm256_mul_pd(kk, _mm256_mul_pd(s, vx))));
-    _mm256_store_pd(dy.data(), _mm256_and_pd(live, _mm256_mul_pd(kk, _mm256_mul_pd(s, vy))));
-    _mm256_store_pd(dz.data(), _mm256_and_pd(live, _mm256_mul_pd(kk, _mm256_mul_pd(s, vz))));
-    for (std::size_t j = 0; j < 4; ++j) pull[k + j] = Vec3(dx[j], dy[j], dz[j]);
-  }
-  spring_pulls_scalar(springs, x, pull, k, end);
-}
-#endif
-
-/// `spring_pulls_scalar` (in AVX where the CPU has it: the same bits).
-void spring_pulls(std::span<const Spring> springs, const std::vector<Vec3>& x, std::vector<Vec3>& pull,
-                  std::size_t begin, std::size_t end) {
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(CRUMPLE_SANITIZED)
-  if (geometry::has_avx2()) {
-    spring_pulls_avx2(springs, x, pull, begin, end);
-    return;
-  }
-#endif
-  spring_pulls_scalar(springs, x, pull, begin, end);
-}
-
 /// Nested dissection (George, *Nested dissection of a regular finite element mesh*, SIAM J.
 /// Numer. Anal. 1973) as a fill-reducing ordering for Eigen's simplicial Cholesky, from the
 /// matrix pattern only: in each connected part, a breadth-first level structure from a
@@ -511,6 +235,488 @@ struct NestedDissection {
     }
   };
 };
+
+/// Backward Euler with one Newton step. The system matrix A = M − h ∂f/∂v − h² ∂f/∂x has a
+/// fixed block pattern (diagonal blocks plus one block pair per spring), built once per model;
+/// each step only refills the values in place.
+class ImplicitEuler final : public Integrator {
+ public:
+  explicit ImplicitEuler(const IntegratorOptions& options) : options_(options) {
+    CRUMPLE_CHECK(options.threads >= 0, "threads must be >= 0");
+    threads_ = std::min(2, resolve_threads(options.threads));
+  }
+  ImplicitEuler(const ImplicitEuler&) = delete;
+  ImplicitEuler& operator=(const ImplicitEuler&) = delete;
+  IntegratorKind kind() const override { return IntegratorKind::ImplicitEuler; }
+  bool takes_anchors() const override { return true; }
+
+  void step(const Model& model, const ForceField& field, State& s, Scalar h) override {
+    check_step(model, s, h);
+    const Index n = model.num_particles();
+    const auto mass = model.mass();
+    const auto inv_mass = model.inv_mass();
+    const auto springs = model.springs();
+    const auto damping = model.damping();
+    prepare(model);
+
+    compute_forces(model, field, s.x, s.v, f_);
+    // b = h (f0 + h ∂f/∂x v0), accumulated per spring; A refilled block by block.
+    b_.resize(3 * n);
+    for (Index i = 0; i < n; ++i) b_.segment<3>(3 * i) = f_[static_cast<std::size_t>(i)];
+    Scalar* values = a_.valuePtr();
+    std::fill(values, values + a_.nonZeros(), Scalar(0));
+    const auto add = [&](std::size_t block, Index col_particle, const Mat3& m) {
+      // Entry (3i+r, 3j+c) lives at outer[3j+c] + block_row_offset + r.
+      for (int c = 0; c < 3; ++c) {
+        Scalar* col = values + a_.outerIndexPtr()[3 * col_particle + c] + block_offset_[block];
+        for (int r = 0; r < 3; ++r) col[r] += m(r, c);
+      }
+    };
+    const Scalar h2 = h * h;
+    for (std::size_t k = 0; k < springs.size(); ++k) {
+      const Spring& sp = springs[k];
+      const auto ia = static_cast<std::size_t>(sp.a), ib = static_cast<std::size_t>(sp.b);
+      const SpringBlocks blocks = spring_blocks(sp, damping[k], s.x[ia], s.x[ib]);
+      const Mat3 m = -h * blocks.dv - h2 * blocks.dx;
+      add(spring_block_[k][0], sp.a, m);   // (a, a)
+      add(spring_block_[k][1], sp.b, m);   // (b, b)
+      add(spring_block_[k][2], sp.b, -m);  // (a, b)
+      add(spring_block_[k][3], sp.a, -m);  // (b, a)
+      const Vec3 kv = blocks.dx * (s.v[ia] - s.v[ib]);
+      b_.segment<3>(3 * sp.a) += h * kv;
+      b_.segment<3>(3 * sp.b) -= h * kv;
+    }
+    const auto hinges = model.hinges();
+    for (std::size_t k = 0; k < hinges.size(); ++k) {
+      const Hinge& hg = hinges[k];
+      Vec3 rate = Vec3::Zero();
+      for (std::size_t i = 0; i < 4; ++i) rate += hg.weight[i] * s.v[static_cast<std::size_t>(hg.vertex[i])];
+      for (std::size_t i = 0; i < 4; ++i) {
+        b_.segment<3>(3 * hg.vertex[i]) -= h * hg.stiffness * hg.weight[i] * rate;
+        for (std::size_t j = 0; j < 4; ++j) {
+          const Scalar coefficient = (h * hg.damping + h2 * hg.stiffness) * hg.weight[i] * hg.weight[j];
+          add(hinge_block_[k][4 * i + j], hg.vertex[j], coefficient * Mat3::Identity());
+        }
+      }
+    }
+    for (Index i = 0; i < n; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      Scalar diagonal = mass[k] + h * field.air_damping * mass[k];
+      if (field.drag && field.drag->vertex == i) {
+        diagonal += h * field.drag->damping + h2 * field.drag->stiffness;
+        b_.segment<3>(3 * i) -= h * field.drag->stiffness * s.v[k];
+      }
+      add(diagonal_block_[k], i, diagonal * Mat3::Identity());
+    }
+    // Anchors: A += c D d dᵀ, b += k d (offset − h d · v₀) before the factor h (k = c D / h²:
+    // the force k d (offset − d · (x − x₀)) linearised at x₀ along x = x₀ + h (v₀ + Δv)). D is
+    // read before any anchor adds to the block, so two anchors on one particle do not compound.
+    anchor_diagonal_.assign(anchors_.size(), 0);
+    for (std::size_t a = 0; a < anchors_.size(); ++a) {
+      const Index i = anchors_[a].vertex;
+      CRUMPLE_CHECK(i >= 0 && i < n, "anchor vertex out of range");
+      Scalar trace = 0;
+      for (int c = 0; c < 3; ++c) {
+        trace += values[a_.outerIndexPtr()[3 * i + c] + block_offset_[diagonal_block_[static_cast<std::size_t>(i)]] + c];
+      }
+      anchor_diagonal_[a] = anchor_stiffness_ * trace / 3;
+    }
+    for (std::size_t a = 0; a < anchors_.size(); ++a) {
+      const Anchor& anchor = anchors_[a];
+      const auto k = static_cast<std::size_t>(anchor.vertex);
+      if (inv_mass[k] == 0 || !(anchor_diagonal_[a] > 0)) continue;
+      const Vec3 d = anchor.direction;
+      // A particle already moving farther that way over the step keeps its motion.
+      const Scalar offset = std::max(anchor.offset, h * d.dot(s.v[k]));
+      add(diagonal_block_[k], anchor.vertex, anchor_diagonal_[a] * (d * d.transpose()));
+      b_.segment<3>(3 * anchor.vertex) += (anchor_diagonal_[a] / h2) * (offset - h * d.dot(s.v[k])) * d;
+    }
+    b_ *= h;
+    // Pinned particles: zero their rows and columns, identity on the diagonal, Δv = 0.
+    for (Index i = 0; i < n; ++i) {
+      if (inv_mass[static_cast<std::size_t>(i)] != 0) continue;
+      for (int c = 0; c < 3; ++c) {
+        const Eigen::Index col = 3 * i + c;
+        for (Eigen::Index p = a_.outerIndexPtr()[col]; p < a_.outerIndexPtr()[col + 1]; ++p) {
+          const Eigen::Index row = a_.innerIndexPtr()[p];
+          values[p] = row == col ? 1 : 0;
+          if (row != col) pinned_row_zero(row, col);
+        }
+      }
+      b_.segment<3>(3 * i).setZero();
+    }
+    int products = -1;
+    if (options_.cg_preconditioner == CgPreconditioner::Rest) {
+      factor_rest(model, field, h);
+      products = preconditioned_cg();
+    }
+    if (products < 0) {  // the Diagonal path, or the Rest path short of the tolerance
+      cg_.setTolerance(options_.cg_tolerance);
+      cg_.setMaxIterations(options_.cg_max_iterations);
+      cg_.compute(a_);
+      dv_ = cg_.solve(b_);
+      products = static_cast<int>(cg_.iterations());
+    }
+    last_iterations_ = products;
+    for (Index i = 0; i < n; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      if (inv_mass[k] != 0) s.v[k] += dv_.segment<3>(3 * i);
+      s.x[k] += h * s.v[k];
+    }
+    s.time += h;
+  }
+
+ private:
+  using Mat3 = Eigen::Matrix<Scalar, 3, 3>;
+  using Sparse = Eigen::SparseMatrix<Scalar>;
+  using Vector = Eigen::Matrix<Scalar, Eigen::Dynamic, 1>;
+
+  /// What the rest preconditioner depends on: the model (its revision names its masses,
+  /// springs, damping and hinges), h and the air damping.
+  struct RestKey {
+    std::uint64_t revision = 0;
+    Index particles = -1;
+    Scalar h = 0, air = 0;
+    bool operator==(const RestKey&) const = default;
+  };
+
+  /// Factors K (`CgPreconditioner::Rest`) over the free particles when its key changed. Every
+  /// spring block of A, h c u uᵀ + h² k (u uᵀ + t (I − u uᵀ)) with t = max(0, 1 − L/l) < 1, is
+  /// at most (h c + h² k) I, so A ≤ I₃ ⊗ K over the free rows (drag and anchors aside, which
+  /// K leaves out: they change from step to step) and K⁻¹ A's spectrum lies in (0, 1] there;
+  /// the along-spring stiffness, which makes A ill-conditioned, is matched exactly.
+  void factor_rest(const Model& model, const ForceField& field, Scalar h) {
+    RestKey key;
+    key.revision = model.revision();
+    key.particles = model.num_particles();
+    key.h = h;
+    key.air = field.air_damping;
+    if (rest_factored_ && key == rest_key_) return;
+    rest_key_ = key;
+    const auto n = static_cast<std::size_t>(model.num_particles());
+    rest_row_.assign(n, -1);
+    rest_free_.clear();
+    for (std::size_t i = 0; i < n; ++i) {
+      if (model.pinned(static_cast<Index>(i))) continue;
+      rest_row_[i] = static_cast<Eigen::Index>(rest_free_.size());
+      rest_free_.push_back(i);
+    }
+    const auto mass = model.mass();
+    const auto springs = model.springs();
+    const auto damping = model.damping();
+    std::vector<Eigen::Triplet<Scalar>> t;
+    for (std::size_t r = 0; r < rest_free_.size(); ++r) {
+      const auto rr = static_cast<Eigen::Index>(r);
+      t.emplace_back(rr, rr, mass[rest_free_[r]] * (1 + h * field.air_damping));
+    }
+    for (std::size_t k = 0; k < springs.size(); ++k) {
+      const Scalar weight = h * damping[k] + h * h * springs[k].stiffness;
+      const Eigen::Index ra = rest_row_[static_cast<std::size_t>(springs[k].a)];
+      const Eigen::Index rb = rest_row_[static_cast<std::size_t>(springs[k].b)];
+      if (ra >= 0) t.emplace_back(ra, ra, weight);
+      if (rb >= 0) t.emplace_back(rb, rb, weight);
+      if (ra >= 0 && rb >= 0) {
+        t.emplace_back(ra, rb, -weight);
+        t.emplace_back(rb, ra, -weight);
+      }
+    }
+    for (const Hinge& hg : model.hinges()) {
+      const Scalar weight = h * hg.damping + h * h * hg.stiffness;
+      for (std::size_t i = 0; i < 4; ++i) {
+        const Eigen::Index ri = rest_row_[static_cast<std::size_t>(hg.vertex[i])];
+        if (ri < 0) continue;
+        for (std::size_t j = 0; j < 4; ++j) {
+          const Eigen::Index rj = rest_row_[static_cast<std::size_t>(hg.vertex[j])];
+          if (rj >= 0) t.emplace_back(ri, rj, weight * hg.weight[i] * hg.weight[j]);
+        }
+      }
+    }
+    const auto m = static_cast<Eigen::Index>(rest_free_.size());
+    Sparse k(m, m);
+    k.setFromTriplets(t.begin(), t.end());
+    rest_factored_ = false;
+    if (m > 0) {
+      rest_solver_.compute(k);
+      CRUMPLE_CHECK(rest_solver_.info() == Eigen::Success,
+                    "implicit Euler: the rest preconditioner is not positive definite");
+      rest_supernodal_.plan(rest_solver_.matrixL().nestedExpression(), rest_solver_.vectorD());
+    }
+    ++factorizations_;
+    rest_factored_ = true;
+  }
+
+  /// z = P⁻¹ r, P⁻¹ = I₃ ⊗ K⁻¹ + B⁻¹ on the free rows, B A's 3 × 3 diagonal blocks (the
+  /// step's), z = r on the pinned rows (where r stays 0). Both terms are symmetric positive
+  /// definite (K's factor with its entries rounded to single precision is still a fixed SPD
+  /// operator), so their sum is, all CG needs. K⁻¹ takes the smooth, stiff modes along the
+  /// springs; B⁻¹ the local ones across them, where A's stiffness is the springs' tension only
+  /// (t ≪ 1) and K alone would overestimate it by up to 1/t.
+  void precondition(const Vector& r, Vector& z) {
+    z = r;
+    if (rest_free_.empty()) return;
+    const auto& p = rest_solver_.permutationP().indices();
+    rest_tmp_.resize(rest_free_.size());
+    for (std::size_t q = 0; q < rest_free_.size(); ++q) {
+      rest_tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(q)])] =
+          r.segment<3>(3 * static_cast<Eigen::Index>(rest_free_[q]));
+    }
+    rest_supernodal_.solve(rest_tmp_, threads_);
+    for (std::size_t q = 0; q < rest_free_.size(); ++q) {
+      const auto at = 3 * static_cast<Eigen::Index>(rest_free_[q]);
+      z.segment<3>(at) = rest_tmp_[static_cast<std::size_t>(p[static_cast<Eigen::Index>(q)])] +
+                         block_inverse_[rest_free_[q]] * r.segment<3>(at);
+    }
+  }
+
+  /// y = A x, particle by particle: A is symmetric, so particle j's three rows are its three
+  /// columns, which hold the same neighbour blocks (B_ij, i increasing) at the same offsets;
+  /// y_j = Σ_i B_ijᵀ x_i in that order (the same bits on any thread count).
+  void multiply(const Vector& x, Vector& y) const {
+    const auto* outer = a_.outerIndexPtr();
+    const Scalar* values = a_.valuePtr();
+    const auto particles = static_cast<std::size_t>(a_.cols() / 3);
+    y.resize(a_.cols());
+    const Scalar* xp = x.data();
+    Scalar* yp = y.data();
+    parallel_for_chunks(particles, threads_, balanced_grain(particles, threads_, 512, 1 << 15),
+                        [&](std::size_t begin, std::size_t end) {
+                          for (std::size_t j = begin; j < end; ++j) {
+                            const auto start = outer[3 * j];
+                            const auto count = outer[3 * j + 1] - start;  // 3 × neighbours
+                            const Scalar* c0 = values + start;
+                            const Scalar* c1 = values + outer[3 * j + 1];
+                            const Scalar* c2 = values + outer[3 * j + 2];
+                            const int* rows = block_row_.data() + start / 9;
+                            Scalar s0 = 0, s1 = 0, s2 = 0;
+                            for (std::ptrdiff_t q = 0; q < count; q += 3) {
+                              const Scalar* xi = xp + rows[q / 3];
+                              const Scalar a = xi[0], b = xi[1], c = xi[2];
+                              s0 += (c0[q] * a + c0[q + 1] * b) + c0[q + 2] * c;
+                              s1 += (c1[q] * a + c1[q + 1] * b) + c1[q + 2] * c;
+                              s2 += (c2[q] * a + c2[q + 1] * b) + c2[q + 2] * c;
+                            }
+                            yp[3 * j] = s0;
+                            yp[3 * j + 1] = s1;
+                            yp[3 * j + 2] = s2;
+                          }
+                        });
+  }
+
+  /// Preconditioned conjugate gradient on A Δv = b from Δv = 0, preconditioned by
+  /// `precondition`; stops as Eigen's `ConjugateGradient` does (the `Diagonal` path): once the
+  /// recurrence's residual |r|² < cg_tolerance² |b|². Returns the products with A, or −1 when it
+  /// did not get there within cg_max_iterations products (or broke down: a curvature pᵀAp or
+  /// rᵀz not positive and finite, which exact arithmetic rules out).
+  int preconditioned_cg() {
+    const Eigen::Index size = b_.size();
+    dv_.setZero(size);
+    const Scalar rhs2 = b_.squaredNorm();
+    if (rhs2 == 0) return 0;
+    const Scalar threshold =
+        std::max(options_.cg_tolerance * options_.cg_tolerance * rhs2, std::numeric_limits<Scalar>::min());
+    block_inverse_.resize(static_cast<std::size_t>(size / 3));
+    const Scalar* values = a_.valuePtr();
+    for (std::size_t i = 0; i < block_inverse_.size(); ++i) {
+      Mat3 d;
+      for (std::size_t c = 0; c < 3; ++c) {
+        const Scalar* column = values + a_.outerIndexPtr()[3 * i + c] + block_offset_[diagonal_block_[i]];
+        for (std::size_t r = 0; r < 3; ++r) d(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c)) = column[r];
+      }
+      block_inverse_[i] = d.inverse();
+    }
+    residual_ = b_;
+    precondition(residual_, direction_);
+    Scalar rz = residual_.dot(direction_);
+    int products = 0;
+    while (products < options_.cg_max_iterations) {
+      if (!(rz > 0) || !std::isfinite(rz)) return -1;
+      multiply(direction_, product_);
+      ++products;
+      const Scalar curvature = direction_.dot(product_);
+      if (!(curvature > 0) || !std::isfinite(curvature)) return -1;
+      const Scalar alpha = rz / curvature;
+      dv_ += alpha * direction_;
+      residual_ -= alpha * product_;
+      if (residual_.squaredNorm() < threshold) return products;
+      precondition(residual_, z_);
+      const Scalar previous = rz;
+      rz = residual_.dot(z_);
+      direction_ = z_ + (rz / previous) * direction_;
+    }
+    return -1;
+  }
+
+  /// Zeroes entry (row, col)'s symmetric partner (col, row).
+  void pinned_row_zero(Eigen::Index row, Eigen::Index col) { a_.coeffRef(col, row) = 0; }
+
+  /// Builds the block pattern when the model's springs differ from the cached ones.
+  void prepare(const Model& model) {
+    const auto springs = model.springs();
+    const auto hinges = model.hinges();
+    const Index n = model.num_particles();
+    bool same = pattern_n_ == n && pattern_pairs_.size() == springs.size() && pattern_hinges_.size() == hinges.size();
+    for (std::size_t k = 0; same && k < springs.size(); ++k) {
+      same = pattern_pairs_[k] == std::array<Index, 2>{springs[k].a, springs[k].b};
+    }
+    for (std::size_t k = 0; same && k < hinges.size(); ++k) same = pattern_hinges_[k] == hinges[k].vertex;
+    if (same) return;
+    pattern_n_ = n;
+    pattern_pairs_.clear();
+    pattern_hinges_.clear();
+    std::vector<std::vector<Index>> neighbours(static_cast<std::size_t>(n));
+    for (Index i = 0; i < n; ++i) neighbours[static_cast<std::size_t>(i)].push_back(i);
+    for (const Spring& sp : springs) {
+      pattern_pairs_.push_back({sp.a, sp.b});
+      neighbours[static_cast<std::size_t>(sp.a)].push_back(sp.b);
+      neighbours[static_cast<std::size_t>(sp.b)].push_back(sp.a);
+    }
+    for (const Hinge& hg : hinges) {
+      pattern_hinges_.push_back(hg.vertex);
+      for (Index a : hg.vertex) {
+        for (Index b : hg.vertex) neighbours[static_cast<std::size_t>(a)].push_back(b);
+      }
+    }
+    std::vector<Eigen::Triplet<Scalar>> triplets;
+    for (auto& list : neighbours) {
+      std::sort(list.begin(), list.end());
+      list.erase(std::unique(list.begin(), list.end()), list.end());
+    }
+    for (Index j = 0; j < n; ++j) {
+      for (Index i : neighbours[static_cast<std::size_t>(j)]) {
+        for (int c = 0; c < 3; ++c)
+          for (int r = 0; r < 3; ++r) triplets.emplace_back(3 * i + r, 3 * j + c, 0.0);
+      }
+    }
+    a_.resize(3 * n, 3 * n);
+    a_.setFromTriplets(triplets.begin(), triplets.end());
+    a_.makeCompressed();
+    // Each particle's blocks' first rows, compact: particle j's start at outer(3j) / 9 (the
+    // particles before it store 9 entries per block).
+    block_row_.clear();
+    for (Index j = 0; j < n; ++j) {
+      for (Index i : neighbours[static_cast<std::size_t>(j)]) block_row_.push_back(static_cast<int>(3 * i));
+    }
+    // Block (i, j) starts at row offset 3 * (rank of i among the neighbours of j) in each of
+    // column j's three columns.
+    const auto offset = [&](Index i, Index j) {
+      const auto& list = neighbours[static_cast<std::size_t>(j)];
+      return static_cast<std::size_t>(3 * (std::lower_bound(list.begin(), list.end(), i) - list.begin()));
+    };
+    block_offset_.clear();
+    diagonal_block_.resize(static_cast<std::size_t>(n));
+    for (Index i = 0; i < n; ++i) {
+      diagonal_block_[static_cast<std::size_t>(i)] = block_offset_.size();
+      block_offset_.push_back(offset(i, i));
+    }
+    spring_block_.resize(springs.size());
+    for (std::size_t k = 0; k < springs.size(); ++k) {
+      const Index a = springs[k].a, b = springs[k].b;
+      const std::array<std::pair<Index, Index>, 4> blocks{{{a, a}, {b, b}, {a, b}, {b, a}}};
+      for (int q = 0; q < 4; ++q) {
+        spring_block_[k][static_cast<std::size_t>(q)] = block_offset_.size();
+        block_offset_.push_back(offset(blocks[static_cast<std::size_t>(q)].first,
+                                       blocks[static_cast<std::size_t>(q)].second));
+      }
+    }
+    hinge_block_.resize(hinges.size());
+    for (std::size_t k = 0; k < hinges.size(); ++k) {
+      for (std::size_t i = 0; i < 4; ++i) {
+        for (std::size_t j = 0; j < 4; ++j) {
+          hinge_block_[k][4 * i + j] = block_offset_.size();
+          block_offset_.push_back(offset(hinges[k].vertex[i], hinges[k].vertex[j]));
+        }
+      }
+    }
+  }
+
+  IntegratorOptions options_;
+  std::vector<Vec3> f_;
+  Index pattern_n_ = -1;
+  std::vector<std::array<Index, 2>> pattern_pairs_;
+  Sparse a_;
+  std::vector<int> block_row_;  // per particle j, its neighbour blocks' first rows 3i, i increasing
+  std::vector<std::size_t> block_offset_;  // row offset of each referenced block in its columns
+  std::vector<std::size_t> diagonal_block_;
+  std::vector<std::array<std::size_t, 4>> spring_block_;
+  std::vector<std::array<Index, 4>> pattern_hinges_;
+  std::vector<std::array<std::size_t, 16>> hinge_block_;  // block (vertex i, vertex j) at 4i + j
+  Vector b_, dv_;
+  std::vector<Scalar> anchor_diagonal_;  // c D per anchor (the step's)
+  Eigen::ConjugateGradient<Sparse, Eigen::Lower | Eigen::Upper> cg_;  // the Diagonal path
+  int threads_ = 1;
+  // The Rest path: K's factor, the free particles' rows, the CG vectors.
+  RestKey rest_key_;
+  bool rest_factored_ = false;
+  std::vector<Eigen::Index> rest_row_;  // K's row of each particle, -1 when pinned
+  std::vector<std::size_t> rest_free_;  // the particle of each row of K
+  Eigen::SimplicialLDLT<Sparse, Eigen::Lower, NestedDissection> rest_solver_;
+  detail::SupernodalSolve rest_supernodal_;
+  std::vector<Vec3> rest_tmp_;
+  Vector residual_, direction_, product_, z_;
+  std::vector<Mat3> block_inverse_;  // per particle: A's diagonal block, inverted (the step's)
+};
+
+/// pull[k] = k_s (L_s / l) d for the springs [begin, end): d = x_a − x_b, l = √((d_x² + d_y²) + d_z²)
+/// (zero where l = 0), the spring's rest-length projection times its stiffness.
+void spring_pulls_scalar(std::span<const Spring> springs, const std::vector<Vec3>& x, std::vector<Vec3>& pull,
+                         std::size_t begin, std::size_t end) {
+  for (std::size_t k = begin; k < end; ++k) {
+    const Spring& sp = springs[k];
+    const Vec3 d = x[static_cast<std::size_t>(sp.a)] - x[static_cast<std::size_t>(sp.b)];
+    const Scalar l = std::sqrt((d.x() * d.x() + d.y() * d.y()) + d.z() * d.z());
+    if (l > 0) {
+      const Scalar s = sp.rest_length / l;
+      pull[k] = Vec3(sp.stiffness * (s * d.x()), sp.stiffness * (s * d.y()), sp.stiffness * (s * d.z()));
+    } else {
+      pull[k] = Vec3::Zero();
+    }
+  }
+}
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(CRUMPLE_SANITIZED)
+/// `spring_pulls_scalar`, four springs at a time in AVX: the same operations in the same order,
+/// each correctly rounded, so the same bits (a zero length's quotient, infinite or NaN, is
+/// masked to zero).
+__attribute__((target("avx2"))) void spring_pulls_avx2(std::span<const Spring> springs, const std::vector<Vec3>& x,
+                                                       std::vector<Vec3>& pull, std::size_t begin, std::size_t end) {
+  std::size_t k = begin;
+  for (; k + 4 <= end; k += 4) {
+    alignas(32) std::array<Scalar, 4> dx, dy, dz, stiffness, rest;
+    for (std::size_t j = 0; j < 4; ++j) {
+      const Spring& sp = springs[k + j];
+      const Vec3 d = x[static_cast<std::size_t>(sp.a)] - x[static_cast<std::size_t>(sp.b)];
+      dx[j] = d.x();
+      dy[j] = d.y();
+      dz[j] = d.z();
+      stiffness[j] = sp.stiffness;
+      rest[j] = sp.rest_length;
+    }
+    const __m256d vx = _mm256_load_pd(dx.data()), vy = _mm256_load_pd(dy.data()), vz = _mm256_load_pd(dz.data());
+    const __m256d l = _mm256_sqrt_pd(
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(vx, vx), _mm256_mul_pd(vy, vy)), _mm256_mul_pd(vz, vz)));
+    const __m256d s = _mm256_div_pd(_mm256_load_pd(rest.data()), l);
+    const __m256d kk = _mm256_load_pd(stiffness.data());
+    const __m256d live = _mm256_cmp_pd(l, _mm256_setzero_pd(), _CMP_GT_OQ);
+    _mm256_store_pd(dx.data(), _mm256_and_pd(live, _mm256_mul_pd(kk, _mm256_mul_pd(s, vx))));
+    _mm256_store_pd(dy.data(), _mm256_and_pd(live, _mm256_mul_pd(kk, _mm256_mul_pd(s, vy))));
+    _mm256_store_pd(dz.data(), _mm256_and_pd(live, _mm256_mul_pd(kk, _mm256_mul_pd(s, vz))));
+    for (std::size_t j = 0; j < 4; ++j) pull[k + j] = Vec3(dx[j], dy[j], dz[j]);
+  }
+  spring_pulls_scalar(springs, x, pull, k, end);
+}
+#endif
+
+/// `spring_pulls_scalar` (in AVX where the CPU has it: the same bits).
+void spring_pulls(std::span<const Spring> springs, const std::vector<Vec3>& x, std::vector<Vec3>& pull,
+                  std::size_t begin, std::size_t end) {
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(CRUMPLE_SANITIZED)
+  if (geometry::has_avx2()) {
+    spring_pulls_avx2(springs, x, pull, begin, end);
+    return;
+  }
+#endif
+  spring_pulls_scalar(springs, x, pull, begin, end);
+}
 
 /// Projective dynamics (see the header). The system is over the free particles only: a pinned
 /// particle's known new position moves to the right-hand side.
