@@ -195,7 +195,9 @@ class ContinuousQuery {
   /// traversal and the narrow phase of its candidates, interleaved on the threads),
   /// `narrow_cpu_ms` (thread time spent in the narrow phase inside the stream), `orphan_ms`,
   /// `sort_ms`, `total_ms`; and the broad phase's own counters (`query_moved`: `moved_faces`,
-  /// the faces touching a flagged vertex, `face_tree_built` and `face_slabs_refitted`).
+  /// the faces touching a flagged vertex, `face_tree_built` and `face_slabs_refitted`); with a
+  /// `MotionBound`, `face_pairs_together` (the sweep's candidates dropped as moving together)
+  /// and `orphans_calm` (the sweep's orphans dropped around a calm vertex).
   const DetectorStats& stats() const { return stats_; }
 
   /// The collision-free step of the step from `previous` to `current`: exactly
