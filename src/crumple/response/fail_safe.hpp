@@ -166,10 +166,10 @@ class CcdFailSafe {
   }
   static constexpr std::size_t kUnrestricted = static_cast<std::size_t>(-1);
   /// Flags in `moved_` the vertices the first query must cover (see `apply`) and, with
-  /// `motion_bound`, in `exempt_` those of the listed pairs their own test does not clear;
-  /// returns the count of `moved_`, or `kUnrestricted` when `proximity` allows no restricted
-  /// query (no bound, or more than `restricted_share` of the vertices flagged, or exempt with
-  /// `motion_bound`).
+  /// `motion_bound`, in `exempt_` those of the listed pairs their own test does not clear
+  /// (`motion_valid_` then set, for a restricted query or a sweep); returns the count of
+  /// `moved_`, or `kUnrestricted` when `proximity` allows no restricted query (no bound, or
+  /// more than `restricted_share` of the vertices flagged).
   std::size_t flag_first_query(PositionsView start, std::span<const Vec3> positions,
                                const StartProximity& proximity);
 
