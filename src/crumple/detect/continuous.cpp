@@ -910,14 +910,17 @@ std::vector<Index> orphan_hubs(const Topology& topo, const exact::Orphans& orpha
     return false;
   };
   const auto hub = [&](const std::array<Index, 4>& v) -> Index {
-    // A vertex both faces share is a corner of a face around v[0], or v[0] itself.
     const auto holds_all = [&](Index w) {
       return in_ring(w, v[0]) && in_ring(w, v[1]) && in_ring(w, v[2]) && in_ring(w, v[3]);
     };
-    if (holds_all(v[0])) return v[0];
+    // Likely first: the four themselves (a VF orphan's shared vertex is a corner of its face);
+    // then every candidate: a vertex both faces share is v[0] or a corner of a face around it.
+    for (const Index w : v) {
+      if (holds_all(w)) return w;
+    }
     for (const Index f : topo.vertex_faces()[v[0]]) {
       for (const Index w : topo.face(f)) {
-        if (w != v[0] && holds_all(w)) return w;
+        if (holds_all(w)) return w;
       }
     }
     return -1;
