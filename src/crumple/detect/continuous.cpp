@@ -171,11 +171,31 @@ class MotionTree {
   };
   /// Whether every displacement in `a` lies within √reach2 of every one in `b` (neither
   /// exempt): the largest distance between the boxes' points, per axis the larger of the two
-  /// far-side differences.
+  /// far-side differences. (Per coordinate, here and below: Eigen's cwise expressions were
+  /// library loops, not inlined.)
   static bool together(const MotionBox& a, const MotionBox& b, Scalar reach2) {
     if (a.exempt || b.exempt) return false;
-    const Vec3 far = (a.hi - b.lo).cwiseMax(b.hi - a.lo);
-    return far.squaredNorm() <= reach2;  // NaN: not together
+    Scalar sum = 0;
+    for (Eigen::Index k = 0; k < 3; ++k) {
+      const Scalar far = std::max(a.hi[k] - b.lo[k], b.hi[k] - a.lo[k]);
+      sum += far * far;
+    }
+    return sum <= reach2;  // NaN: not together
+  }
+  /// Grows `into` to hold `b`.
+  static void merge(MotionBox& into, const MotionBox& b) {
+    for (Eigen::Index k = 0; k < 3; ++k) {
+      into.lo[k] = std::min(into.lo[k], b.lo[k]);
+      into.hi[k] = std::max(into.hi[k], b.hi[k]);
+    }
+    into.exempt = into.exempt || b.exempt;
+  }
+  /// Grows `into` to hold the displacement `u`.
+  static void grow(MotionBox& into, const Vec3& u) {
+    for (Eigen::Index k = 0; k < 3; ++k) {
+      into.lo[k] = std::min(into.lo[k], u[k]);
+      into.hi[k] = std::max(into.hi[k], u[k]);
+    }
   }
 
   /// Builds over `slabs` (kept by reference; the caller changes them in place and refits).
@@ -309,11 +329,6 @@ class MotionTree {
     std::uint32_t begin = 0, end = 0;  ///< items [begin, end)
     std::uint32_t left = 0, right = 0;  ///< children (inner nodes); right 0: a leaf
   };
-  static void merge(MotionBox& into, const MotionBox& b) {
-    into.lo = into.lo.cwiseMin(b.lo);
-    into.hi = into.hi.cwiseMax(b.hi);
-    into.exempt = into.exempt || b.exempt;
-  }
   static void merge(geometry::CcdSlabs& into, const geometry::CcdSlabs& b) {
     for (std::size_t tau = 0; tau < 2; ++tau) {
       into.lo[tau] = into.lo[tau].cwiseMin(b.lo[tau]);
@@ -1306,8 +1321,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
       m.exempt = bound->exempt[static_cast<std::size_t>(t[0])] != 0;
       for (std::size_t k = 1; k < 3; ++k) {
         const auto v = static_cast<std::size_t>(t[k]);
-        m.lo = m.lo.cwiseMin(s.motion[v]);
-        m.hi = m.hi.cwiseMax(s.motion[v]);
+        MotionTree::grow(m, s.motion[v]);
         m.exempt = m.exempt || bound->exempt[v] != 0;
       }
     }
@@ -1520,10 +1534,7 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
       for (std::size_t v = 0; v < nv; ++v) {
         MotionTree::MotionBox ring{step.motion[v], step.motion[v], step.exempt[v] != 0};
         for (const Index f : topo.vertex_faces()[static_cast<Index>(v)]) {
-          const MotionTree::MotionBox& m = step.face_motion[static_cast<std::size_t>(f)];
-          ring.lo = ring.lo.cwiseMin(m.lo);
-          ring.hi = ring.hi.cwiseMax(m.hi);
-          ring.exempt = ring.exempt || m.exempt;
+          MotionTree::merge(ring, step.face_motion[static_cast<std::size_t>(f)]);
         }
         s.calm[v] = MotionTree::together(ring, ring, step.reach2);
       }
