@@ -11,8 +11,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <random>
@@ -211,6 +214,99 @@ TEST(ContinuousMoved, NoFlagGivesNoImpactAndWrongSizesThrow) {
 // A two-turn fan around a star (more than 64 faces: its orphans found each step) crossing
 // itself, and a vertex of no face dropping through it; flags on the rim, on the centre only
 // and on the lone vertex only.
+// The motion bound (`ContinuousQuery::MotionBound`): of the flagged impacts of the full query,
+// every one with an exempt vertex or a relative displacement above the reach is kept, bit for
+// bit and in order, and nothing else is added; likewise the sweep with the bound (`query`, every
+// vertex flagged: its face pairs and its orphans around calm vertices dropped). Half of a crumpled lattice falls as one (its
+// near pairs, within δ, move together and may be left out), the rest jitters; random exempt
+// flags; the reach below and above the jitter. A bound that compared the displacement boxes'
+// nearest points instead of their farthest fails it.
+TEST(ContinuousMoved, AMotionBoundLeavesOutOnlyPairsThatMoveTogether) {
+  const TriMesh mesh = shapes::lattice(12, 11);
+  const auto topo = mesh.topology_ptr();
+  const std::size_t n = mesh.positions().size();
+  std::size_t left_out = 0, kept_apart = 0, kept_exempt = 0, sweep_left_out = 0;
+  for (const std::uint64_t seed : {1u, 2u}) {
+    const Positions x0 = testing::crumple_lattice(mesh, 0.15, seed);
+    Positions x1 = testing::jitter(x0, 0.04, seed + 10);
+    for (std::size_t v = 0; v < n; ++v) {
+      if (mesh.positions()[v].x() < 0.5) x1[v] = x0[v] + Vec3(0.01, -0.02, -0.3);
+    }
+    const std::vector<char> exempt = random_flags(n, 0.05, seed + 20);
+    const auto u = [&](Index v) { return x1[static_cast<std::size_t>(v)] - x0[static_cast<std::size_t>(v)]; };
+    // The largest |uᵢ − uⱼ| over i in [0, first_b), j in [first_b, 4), and whether one is exempt.
+    const auto apart = [&](const std::array<Index, 4>& v, std::size_t first_b, Scalar reach) {
+      Scalar most = 0;
+      for (std::size_t i = 0; i < first_b; ++i) {
+        for (std::size_t j = first_b; j < 4; ++j) most = std::max(most, (u(v[i]) - u(v[j])).norm());
+      }
+      return most > reach * (1 + 1e-12);
+    };
+    const auto is_exempt = [&](const std::array<Index, 4>& v) {
+      return exempt[static_cast<std::size_t>(v[0])] || exempt[static_cast<std::size_t>(v[1])] ||
+             exempt[static_cast<std::size_t>(v[2])] || exempt[static_cast<std::size_t>(v[3])];
+    };
+    for (const int threads : {1, 3}) {
+      ContinuousOptions options;
+      options.min_separation = 0.02;
+      options.threads = threads;
+      ContinuousQuery query(topo, options);
+      ImpactSet full, got;
+      query.query(x0, x1, full);
+      for (const int mode : {0, 1, 2}) {  // query_moved with every flag, with some; the sweep
+        const std::vector<char> moved = mode == 1 ? random_flags(n, 0.3, seed + 30) : std::vector<char>(n, 1);
+        const ImpactSet want = flagged_only(*topo, full, moved);
+        for (const Scalar reach : {0.01, 0.05}) {
+          SCOPED_TRACE(::testing::Message() << "seed " << seed << " threads " << threads << " reach " << reach
+                                            << " mode " << mode);
+          if (mode == 2) {
+            query.query(x0, x1, {exempt, reach}, got);
+          } else {
+            query.query_moved(x0, x1, moved, {exempt, reach}, got);
+          }
+          // `got` is a subsequence of `want`, bit for bit, holding every impact that must stay.
+          const auto check = [&](const auto& have, const auto& all, const auto& vertices, std::size_t first_b) {
+            std::size_t k = 0;
+            for (const auto& impact : all) {
+              const std::array<Index, 4> v = vertices(impact);
+              const bool must = is_exempt(v) || apart(v, first_b, reach);
+              if (k < have.size() && same(have[k], impact)) {
+                ++k;
+                kept_apart += apart(v, first_b, reach) ? 1 : 0;
+                kept_exempt += is_exempt(v) ? 1 : 0;
+              } else {
+                EXPECT_FALSE(must) << "an impact that moves apart or has an exempt vertex is missing";
+                ++left_out;
+              }
+            }
+            EXPECT_EQ(k, have.size()) << "an impact not in the query's, or out of order";
+          };
+          check(got.vf, want.vf, [&](const VertexFaceImpact& i) {
+            const Face& t = topo->face(i.face);
+            return std::array<Index, 4>{i.vertex, t[0], t[1], t[2]};
+          }, 1);
+          check(got.ee, want.ee, [](const EdgeEdgeImpact& i) { return std::array<Index, 4>{i.a[0], i.a[1], i.b[0], i.b[1]}; }, 2);
+          if (mode == 2) sweep_left_out += want.size() - got.size();
+        }
+      }
+    }
+  }
+  // Non-vacuous: pairs left out, and kept both for their motion and for their exempt flags.
+  EXPECT_GT(left_out, 50u);
+  EXPECT_GT(sweep_left_out, 20u);
+  EXPECT_GT(kept_apart, 50u);
+  EXPECT_GT(kept_exempt, 5u);
+  // Bad flags or reach.
+  ContinuousQuery query(topo, {});
+  ImpactSet out;
+  const Positions x0 = mesh.positions();
+  EXPECT_THROW(query.query_moved(x0, x0, std::vector<char>(n, 1), {std::vector<char>(n - 1, 0), 0.1}, out), InputError);
+  const std::vector<char> none(n, 0);
+  EXPECT_THROW(query.query_moved(x0, x0, std::vector<char>(n, 1), {none, -1.0}, out), InputError);
+  EXPECT_THROW(query.query(x0, x0, {std::vector<char>(n + 1, 0), 0.1}, out), InputError);
+  EXPECT_THROW(query.query(x0, x0, {none, std::numeric_limits<Scalar>::infinity()}, out), InputError);
+}
+
 TEST(ContinuousMoved, StarsAndLoneVerticesMatchTheFullQuery) {
   const Index n = 160;
   Positions x0, x1, x1_moved;

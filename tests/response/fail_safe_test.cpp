@@ -645,6 +645,69 @@ TEST(FailSafe, FirstQueryRestrictedByTheStartProximityGivesTheSameCorrection) {
   EXPECT_GE(partly_flagged, 12) << "most restricted queries must leave vertices out";
 }
 
+// The motion bound (`FailSafeOptions::motion_bound`): the first query leaves out the pairs that
+// move together (relative displacement within s, no exempt vertex). Both sheets fall farther
+// than R in the frame, the upper one faster, through the lower one (they start farther apart
+// than R, so nothing is listed and no vertex exempt): only the relative motion of the sheets
+// tells these pairs from those within each sheet. Then a band of the upper sheet, listed near
+// the lower one, sinks through it while both fall (exempt by its own test, its relative motion
+// within s). Either way the same correction as the sweep's and as the restriction without the
+// bound, bit for bit, restricted to the fast sheet or sweeping the mesh; a bound that left out a pair moving apart by more than s, or that
+// ignored the exempt flags, misses the crossing.
+TEST(FailSafe, FirstQueryLeavesOutPairsThatMoveTogether) {
+  const Scalar radius = 0.1;
+  const std::size_t nv = 49;  // per sheet
+  struct Frame {
+    const char* what;
+    Scalar gap, slope, fall, extra;  // both sheets fall by `fall`, the upper's band by `extra` more
+  };
+  for (const Frame& frame : {Frame{"the upper sheet falls through the lower", 0.15, 0, 0.3, 0.25},
+                             Frame{"a near band sinks through while both fall", 0.05, 0.3, 0.3, 0.07}}) {
+    for (const Scalar jitter : {0.0, 0.004}) {
+      SCOPED_TRACE(::testing::Message() << frame.what << ", jitter " << jitter);
+      const Sheets sheets = two_sheets(frame.gap, frame.slope);
+      const Positions& start = sheets.start;
+      Positions proposed = start;
+      std::mt19937_64 rng(7);
+      std::uniform_real_distribution<Scalar> d(-jitter, jitter);
+      for (std::size_t i = 0; i < proposed.size(); ++i) {
+        proposed[i].z() -= frame.fall + (i >= nv ? frame.extra : 0);
+        proposed[i] += Vec3(d(rng), d(rng), d(rng));
+      }
+      std::vector<Scalar> inv_mass(start.size(), 1);
+      auto detector = make_detector(MethodSpec::parse("naive"), {.thickness = radius, .threads = 1});
+      detector->set_topology(sheets.topology);
+      ContactSet near;
+      detector->update(start, near);
+      const StartProximity proximity{radius, &near};
+      FailSafeStats stats[4];
+      Positions end[4], velocity[4];
+      for (int run = 0; run < 4; ++run) {  // the sweep; restricted without the bound, with it; the sweep with it
+        FailSafeOptions o = options(3, 8);
+        o.min_separation = 0.01;
+        o.restricted_share = run == 3 ? 0 : 1;
+        o.motion_bound = run >= 2;
+        CcdFailSafe safe(sheets.topology, o);
+        end[run] = proposed;
+        velocity[run] = Positions(start.size(), Vec3::Zero());
+        stats[run] = safe.apply(start, inv_mass, 1.0 / 60, end[run], velocity[run], run > 0 ? &proximity : nullptr);
+        EXPECT_EQ(touching_pairs(sheets.topology, start, end[run]), 0u) << "run " << run;
+      }
+      EXPECT_GT(stats[0].impacts, 0u) << "the frame must pass a sheet through the other";
+      EXPECT_FALSE(stats[0].first_restricted);
+      EXPECT_TRUE(stats[2].first_restricted);
+      EXPECT_FALSE(stats[3].first_restricted);
+      for (int run = 1; run < 4; ++run) {
+        EXPECT_EQ(stats[run].impacts, stats[0].impacts) << "run " << run;
+        EXPECT_EQ(stats[run].queries + stats[run].unchanged, stats[0].queries + stats[0].unchanged);
+        EXPECT_EQ(stats[run].frozen, stats[0].frozen);
+        EXPECT_TRUE(end[run] == end[0]) << "run " << run << ": the corrected ends differ";
+        EXPECT_TRUE(velocity[run] == velocity[0]) << "run " << run << ": the corrected velocities differ";
+      }
+    }
+  }
+}
+
 // A start proximity that cannot bound the motion (a radius at or below δ (1 + σ)) leaves the
 // first query a sweep of the mesh.
 TEST(FailSafe, StartProximityWithinTheSeparationIsNotUsed) {

@@ -164,6 +164,41 @@ __attribute__((target("avx2"), noinline)) bool boxes_apart_avx2(const detail::Fa
 /// apart at each end while their swept boxes overlap. Built once, refitted as faces move.
 class MotionTree {
  public:
+  /// The box of some vertices' displacements x¹ − x⁰, and whether one of them is exempt from
+  /// the motion bound (`ContinuousQuery::MotionBound`).
+  struct MotionBox {
+    Vec3 lo, hi;
+    bool exempt = false;
+  };
+  /// Whether every displacement in `a` lies within √reach2 of every one in `b` (neither
+  /// exempt): the largest distance between the boxes' points, per axis the larger of the two
+  /// far-side differences. (Per coordinate, here and below: Eigen's cwise expressions were
+  /// library loops, not inlined.)
+  static bool together(const MotionBox& a, const MotionBox& b, Scalar reach2) {
+    if (a.exempt || b.exempt) return false;
+    Scalar sum = 0;
+    for (Eigen::Index k = 0; k < 3; ++k) {
+      const Scalar far = std::max(a.hi[k] - b.lo[k], b.hi[k] - a.lo[k]);
+      sum += far * far;
+    }
+    return sum <= reach2;  // NaN: not together
+  }
+  /// Grows `into` to hold `b`.
+  static void merge(MotionBox& into, const MotionBox& b) {
+    for (Eigen::Index k = 0; k < 3; ++k) {
+      into.lo[k] = std::min(into.lo[k], b.lo[k]);
+      into.hi[k] = std::max(into.hi[k], b.hi[k]);
+    }
+    into.exempt = into.exempt || b.exempt;
+  }
+  /// Grows `into` to hold the displacement `u`.
+  static void grow(MotionBox& into, const Vec3& u) {
+    for (Eigen::Index k = 0; k < 3; ++k) {
+      into.lo[k] = std::min(into.lo[k], u[k]);
+      into.hi[k] = std::max(into.hi[k], u[k]);
+    }
+  }
+
   /// Builds over `slabs` (kept by reference; the caller changes them in place and refits).
   void build(std::span<const geometry::CcdSlabs> slabs) {
     slabs_ = slabs;
@@ -188,6 +223,24 @@ class MotionTree {
     }
   }
 
+  /// Sets every node's motion box from the faces' (`faces[i]`: face i's corners'; kept by
+  /// reference until the next call), for `query` with a motion. After `build`.
+  void fit_motion(std::span<const MotionBox> faces) {
+    face_motion_ = faces;
+    node_motion_.resize(nodes_.size());
+    for (std::size_t i = nodes_.size(); i-- > 0;) {
+      const Node& node = nodes_[i];
+      MotionBox& m = node_motion_[i];
+      if (node.right == 0) {
+        m = faces[items_[node.begin]];
+        for (std::uint32_t k = node.begin + 1; k < node.end; ++k) merge(m, faces[items_[k]]);
+      } else {
+        m = node_motion_[node.left];
+        merge(m, node_motion_[node.right]);
+      }
+    }
+  }
+
   /// Calls hit(i) for every face i whose slabs are not apart from `query`'s by `bound`.
   template <class Hit>
   void query(const geometry::CcdSlabs& query, Scalar bound, const Hit& hit) const {
@@ -207,6 +260,67 @@ class MotionTree {
         stack[top++] = node.left;
       }
     }
+  }
+
+  /// Calls hit(i, j) once for every unordered pair of distinct faces, one of them flagged in
+  /// `flagged` (#faces), whose slabs are not apart by `bound` and, with `motion` (after
+  /// `fit_motion`), whose motion boxes are not `together` within √reach2: exactly the pairs
+  /// that `query` from each flagged face reports (each once). A dual traversal of the tree with
+  /// itself: a pair of nodes is passed over whole when neither holds a flagged face, their slabs
+  /// are apart, or their displacements all lie within the reach of each other.
+  template <class Hit>
+  void self_pairs(std::span<const char> flagged, Scalar bound, bool motion, Scalar reach2, const Hit& hit) {
+    if (nodes_.empty()) return;
+    node_flag_.resize(nodes_.size());
+    for (std::size_t i = nodes_.size(); i-- > 0;) {
+      const Node& node = nodes_[i];
+      bool any = false;
+      if (node.right == 0) {
+        for (std::uint32_t k = node.begin; k < node.end; ++k) any = any || flagged[items_[k]] != 0;
+      } else {
+        any = node_flag_[node.left] || node_flag_[node.right];
+      }
+      node_flag_[i] = any;
+    }
+    const auto face_pair = [&](std::uint32_t f, std::uint32_t g) {
+      if (!flagged[f] && !flagged[g]) return;
+      if (geometry::ccd_slabs_apart(slabs_[f], slabs_[g], bound)) return;
+      if (motion && together(face_motion_[f], face_motion_[g], reach2)) return;
+      hit(f, g);
+    };
+    const auto join = [&](const auto& self, std::uint32_t a, std::uint32_t b) -> void {
+      if (!node_flag_[a] && !node_flag_[b]) return;
+      const Node& na = nodes_[a];
+      const Node& nb = nodes_[b];
+      if (geometry::ccd_slabs_apart(na.box, nb.box, bound)) return;
+      if (motion && together(node_motion_[a], node_motion_[b], reach2)) return;
+      if (na.right == 0 && nb.right == 0) {
+        for (std::uint32_t i = na.begin; i < na.end; ++i) {
+          for (std::uint32_t j = nb.begin; j < nb.end; ++j) face_pair(items_[i], items_[j]);
+        }
+      } else if (nb.right == 0 || (na.right != 0 && na.end - na.begin >= nb.end - nb.begin)) {
+        self(self, na.left, b);
+        self(self, na.right, b);
+      } else {
+        self(self, a, nb.left);
+        self(self, a, nb.right);
+      }
+    };
+    const auto within = [&](const auto& self, std::uint32_t a) -> void {
+      if (!node_flag_[a]) return;
+      if (motion && together(node_motion_[a], node_motion_[a], reach2)) return;
+      const Node& na = nodes_[a];
+      if (na.right == 0) {
+        for (std::uint32_t i = na.begin; i < na.end; ++i) {
+          for (std::uint32_t j = i + 1; j < na.end; ++j) face_pair(items_[i], items_[j]);
+        }
+        return;
+      }
+      self(self, na.left);
+      self(self, na.right);
+      join(join, na.left, na.right);
+    };
+    within(within, 0);
   }
 
  private:
@@ -263,12 +377,15 @@ class MotionTree {
   std::span<const geometry::CcdSlabs> slabs_;
   std::vector<std::uint32_t> items_;
   std::vector<Node> nodes_;
+  std::span<const MotionBox> face_motion_;
+  std::vector<MotionBox> node_motion_;
+  std::vector<char> node_flag_;  ///< `self_pairs`' scratch
 };
 
 /// Counters of one chunk of work, summed into the query's stats under a lock.
 struct Counts {
   double vf_box_rejected = 0, ee_box_rejected = 0, vf_tests = 0, ee_tests = 0, boxes = 0, face_pairs_apart = 0,
-         advance_steps = 0;
+         advance_steps = 0, face_pairs_together = 0, orphans_calm = 0;
   std::array<double, geometry::kCcdOutcomeCount> outcomes{};  ///< narrow-phase tests per `CcdOutcome`
   void add(const Counts& o) {
     for (std::size_t k = 0; k < outcomes.size(); ++k) outcomes[k] += o.outcomes[k];
@@ -279,6 +396,8 @@ struct Counts {
     boxes += o.boxes;
     advance_steps += o.advance_steps;
     face_pairs_apart += o.face_pairs_apart;
+    face_pairs_together += o.face_pairs_together;
+    orphans_calm += o.orphans_calm;
   }
 };
 
@@ -295,10 +414,34 @@ struct Step {
   const char* moved = nullptr;
   /// Whether the face-level test runs four-wide (`boxes_apart_avx2`).
   bool avx2 = geometry::detail::ccd_has_avx2();
-  /// Whether the sub-pair of these four vertices is tested (one of them flagged).
-  bool wanted(Index a, Index b, Index c, Index d) const {
+  /// With a `ContinuousQuery::MotionBound`: per vertex its displacement x¹ − x⁰ (as the query
+  /// sees them: scaled) and its exempt flag, and the bound's reach squared (scaled); else null.
+  const Vec3* motion = nullptr;
+  const char* exempt = nullptr;
+  Scalar reach2 = 0;
+  /// The sweep's motion bound, per face: a face pair whose boxes are `together` is dropped.
+  const MotionTree::MotionBox* face_motion = nullptr;
+  /// Whether the sub-pair of these four vertices is tested: one of them flagged and, with a
+  /// motion bound, one exempt or the sides' relative displacement above the reach. The sides
+  /// are a, b, c, d [0, first_b) and [first_b, 4): 1 for VF (the vertex, then the face's
+  /// corners), 2 for EE.
+  bool wanted(Index a, Index b, Index c, Index d, int first_b) const {
+    if (moved == nullptr) return true;  // the sweep: its motion bound acts per face pair and orphan hub
     const auto flagged = [&](Index v) { return moved[static_cast<std::size_t>(v)] != 0; };
-    return moved == nullptr || flagged(a) || flagged(b) || flagged(c) || flagged(d);
+    if (!(flagged(a) || flagged(b) || flagged(c) || flagged(d))) return false;
+    if (motion == nullptr) return true;
+    const std::array<Index, 4> v{a, b, c, d};
+    for (const Index i : v) {
+      if (exempt[static_cast<std::size_t>(i)]) return true;
+    }
+    for (int i = 0; i < first_b; ++i) {
+      for (int j = first_b; j < 4; ++j) {
+        const Vec3 d_ij = motion[static_cast<std::size_t>(v[static_cast<std::size_t>(i)])] -
+                          motion[static_cast<std::size_t>(v[static_cast<std::size_t>(j)])];
+        if (!(d_ij.squaredNorm() <= reach2)) return true;
+      }
+    }
+    return false;
   }
 };
 
@@ -561,7 +704,7 @@ struct Tester {
   void vertex_face(Index v, Index f) {
     if (done()) return;
     const Face& t = step.topo.face(f);
-    if (!step.wanted(v, t[0], t[1], t[2])) return;
+    if (!step.wanted(v, t[0], t[1], t[2], 1)) return;
     const auto s = [&](Index i) { return step.x0[static_cast<std::size_t>(i)]; };
     const auto e = [&](Index i) { return step.x1[static_cast<std::size_t>(i)]; };
     const geometry::CcdPoints start{s(v), s(t[0]), s(t[1]), s(t[2])}, end{e(v), e(t[0]), e(t[1]), e(t[2])};
@@ -576,7 +719,7 @@ struct Tester {
   void edge_edge(Index e0, Index e1) {
     if (done()) return;
     Edge a = step.topo.edge(e0), b = step.topo.edge(e1);
-    if (!step.wanted(a[0], a[1], b[0], b[1])) return;
+    if (!step.wanted(a[0], a[1], b[0], b[1], 2)) return;
     if (b < a) {
       std::swap(a, b);
       std::swap(e0, e1);
@@ -597,7 +740,7 @@ struct Tester {
   void orphan_vertex_face(Index v, Index f) {
     if (done()) return;
     const Face& t = step.topo.face(f);
-    if (!step.wanted(v, t[0], t[1], t[2])) return;
+    if (!step.wanted(v, t[0], t[1], t[2], 1)) return;
     if (geometry::ccd_slabs_apart(slabs_of(step.x0, step.x1, std::array<Index, 1>{v}), slabs_of(step.x0, step.x1, t),
                                   step.hull_bound)) {
       ++counts.vf_box_rejected;
@@ -609,7 +752,7 @@ struct Tester {
   /// An orphan edge pair, as `orphan_vertex_face`, with the edges' vertices from the list.
   void orphan_edge_edge(const exact::OrphanEdges& o) {
     if (done()) return;
-    if (!step.wanted(o.a[0], o.a[1], o.b[0], o.b[1])) return;
+    if (!step.wanted(o.a[0], o.a[1], o.b[0], o.b[1], 2)) return;
     if (geometry::ccd_slabs_apart(slabs_of(step.x0, step.x1, o.a), slabs_of(step.x0, step.x1, o.b), step.hull_bound)) {
       ++counts.ee_box_rejected;
       return;
@@ -626,6 +769,12 @@ struct Tester {
     const OwnedFace& f = rf.own;
     const OwnedFace& g = rg.own;
     const int ee_count = bits(f.edge_mask) * bits(g.edge_mask);
+    if (step.face_motion != nullptr &&
+        MotionTree::together(step.face_motion[static_cast<std::size_t>(fi)], step.face_motion[static_cast<std::size_t>(gi)],
+                             step.reach2)) {
+      ++counts.face_pairs_together;
+      return;  // every sub-pair moves within the reach, none exempt
+    }
     if (step.avx2 ? boxes_apart_avx2(rf.box, rg.box, step.hull_bound) : boxes_apart(rf.box, rg.box, step.hull_bound)) {
       counts.vf_box_rejected += bits(f.vertex_mask) + bits(g.vertex_mask);
       counts.ee_box_rejected += ee_count;
@@ -667,7 +816,7 @@ struct Tester {
   __attribute__((always_inline)) void vertex_face(const OwnedFace& f, const FaceFrame& rf, int k, Index gi,
                                                   const FaceFrame& rg, const geometry::CcdSlabs& gs) {
     const auto uk = static_cast<std::size_t>(k);
-    if (!step.wanted(f.v[uk], rg.own.v[0], rg.own.v[1], rg.own.v[2])) return;
+    if (!step.wanted(f.v[uk], rg.own.v[0], rg.own.v[1], rg.own.v[2], 1)) return;
     geometry::CcdSlabs vs;
     vs.lo = vs.hi = {rf.x[0][uk], rf.x[1][uk]};
     if (geometry::ccd_slabs_apart(vs, gs, step.hull_bound)) {
@@ -688,7 +837,7 @@ struct Tester {
   /// Side i of face f (corners ci, vertex ids increasing) against side j of face g.
   void edge_edge(const OwnedFace& f, const FaceFrame& rf, int i, const std::array<std::uint8_t, 2>& ci,
                  const OwnedFace& g, const FaceFrame& rg, int j, const std::array<std::uint8_t, 2>& cj) {
-    if (!step.wanted(f.v[ci[0]], f.v[ci[1]], g.v[cj[0]], g.v[cj[1]])) return;
+    if (!step.wanted(f.v[ci[0]], f.v[ci[1]], g.v[cj[0]], g.v[cj[1]], 2)) return;
     Index e0 = f.e[static_cast<std::size_t>(i)], e1 = g.e[static_cast<std::size_t>(j)];
     Edge a{f.v[ci[0]], f.v[ci[1]]}, b{g.v[cj[0]], g.v[cj[1]]};
     const FaceFrame* ra = &rf;
@@ -790,6 +939,44 @@ void index_by_vertex(std::size_t nv, std::size_t count, const Vertices& vertices
   }
 }
 
+/// Per orphan (`orphans.vf`, then `orphans.ee`), a vertex whose closed one-ring (itself and the
+/// corners of its faces) holds the orphan's four vertices, or -1 when none does. (Every orphan
+/// has one: its two features lie in faces sharing a vertex, each face in that vertex's ring.)
+std::vector<Index> orphan_hubs(const Topology& topo, const exact::Orphans& orphans) {
+  const auto in_ring = [&](Index w, Index x) {
+    if (x == w) return true;
+    for (const Index f : topo.vertex_faces()[w]) {
+      const Face& t = topo.face(f);
+      if (t[0] == x || t[1] == x || t[2] == x) return true;
+    }
+    return false;
+  };
+  const auto hub = [&](const std::array<Index, 4>& v) -> Index {
+    const auto holds_all = [&](Index w) {
+      return in_ring(w, v[0]) && in_ring(w, v[1]) && in_ring(w, v[2]) && in_ring(w, v[3]);
+    };
+    // Likely first: the four themselves (a VF orphan's shared vertex is a corner of its face);
+    // then every candidate: a vertex both faces share is v[0] or a corner of a face around it.
+    for (const Index w : v) {
+      if (holds_all(w)) return w;
+    }
+    for (const Index f : topo.vertex_faces()[v[0]]) {
+      for (const Index w : topo.face(f)) {
+        if (holds_all(w)) return w;
+      }
+    }
+    return -1;
+  };
+  std::vector<Index> out;
+  out.reserve(orphans.vf.size() + orphans.ee.size());
+  for (const auto& o : orphans.vf) {
+    const Face& t = topo.face(o[1]);
+    out.push_back(hub({o[0], t[0], t[1], t[2]}));
+  }
+  for (const auto& o : orphans.ee) out.push_back(hub({o.a[0], o.a[1], o.b[0], o.b[1]}));
+  return out;
+}
+
 OrphansOf index_orphans(const Topology& topo, const exact::Orphans& orphans) {
   const auto nv = static_cast<std::size_t>(topo.num_vertices());
   OrphansOf out;
@@ -868,6 +1055,15 @@ struct ContinuousQuery::State {
   Positions face_x0, face_x1;
   std::vector<char> face_dirty;
   std::vector<Index> dirty;
+  /// A restricted query's motion bound (`MotionBound`): per vertex its displacement (scaled)
+  /// and per face its corners' motion box.
+  Positions motion;
+  std::vector<MotionTree::MotionBox> face_motion;
+  /// Per orphan (VF, then EE), a vertex whose closed one-ring holds its four vertices, or -1
+  /// (built at the first sweep with a motion bound); per vertex, whether its closed one-ring
+  /// moves within the bound's reach with no exempt vertex (each such sweep).
+  std::vector<Index> orphan_hub;
+  std::vector<char> calm;
   std::vector<std::uint32_t> orphan_seen;  ///< per orphan, the restricted query that gathered it
   std::uint32_t orphan_stamp = 0;
 };
@@ -1013,6 +1209,21 @@ void ContinuousQuery::query(PositionsView previous, PositionsView current, Impac
   run(previous, current, {}, out, nullptr);
 }
 
+void ContinuousQuery::query(PositionsView previous, PositionsView current, const MotionBound& bound,
+                            ImpactSet& out) {
+  const auto nv = static_cast<std::size_t>(topology_->num_vertices());
+  if (bound.exempt.size() != nv) {
+    out.clear();
+    throw InputError("continuous query: " + std::to_string(bound.exempt.size()) + " exempt flags for " +
+                     std::to_string(nv) + " vertices");
+  }
+  if (!(bound.reach >= 0 && std::isfinite(bound.reach))) {
+    out.clear();
+    throw InputError("continuous query: the motion bound's reach must be finite and >= 0");
+  }
+  run(previous, current, {}, out, nullptr, &bound);
+}
+
 void ContinuousQuery::query_moved(PositionsView previous, PositionsView current, std::span<const char> moved,
                                   ImpactSet& out) {
   const auto nv = static_cast<std::size_t>(topology_->num_vertices());
@@ -1023,6 +1234,21 @@ void ContinuousQuery::query_moved(PositionsView previous, PositionsView current,
   }
   // Empty means "all" to `run`: a mesh with no vertex has no impact either way.
   run(previous, current, moved, out, nullptr);
+}
+
+void ContinuousQuery::query_moved(PositionsView previous, PositionsView current, std::span<const char> moved,
+                                  const MotionBound& bound, ImpactSet& out) {
+  const auto nv = static_cast<std::size_t>(topology_->num_vertices());
+  if (moved.size() != nv || bound.exempt.size() != nv) {
+    out.clear();
+    throw InputError("continuous query: " + std::to_string(moved.size()) + " moved and " +
+                     std::to_string(bound.exempt.size()) + " exempt flags for " + std::to_string(nv) + " vertices");
+  }
+  if (!(bound.reach >= 0 && std::isfinite(bound.reach))) {
+    out.clear();
+    throw InputError("continuous query: the motion bound's reach must be finite and >= 0");
+  }
+  run(previous, current, moved, out, nullptr, &bound);
 }
 
 void ContinuousQuery::update_moved(PositionsView previous, PositionsView current, std::span<const char> moved,
@@ -1061,7 +1287,7 @@ Scalar ContinuousQuery::collision_free_step(PositionsView previous, PositionsVie
 }
 
 void ContinuousQuery::run(PositionsView given_previous, PositionsView given_current, std::span<const char> moved,
-                          ImpactSet& out, std::atomic<Scalar>* earliest) {
+                          ImpactSet& out, std::atomic<Scalar>* earliest, const MotionBound* bound) {
   out.clear();
   State& s = *state_;
   const Topology& topo = *topology_;
@@ -1096,13 +1322,39 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
       for (std::size_t f = begin; f < end; ++f) fill_frame(f);
     });
   }
-  const Step step{topo,
-                  previous,
-                  current,
-                  s.frames,
-                  geometry::ccd_hull_bound(magnitude, scaled.delta),
-                  scaled.narrow,
-                  moved.empty() ? nullptr : moved.data()};
+  Step bounded{topo,
+               previous,
+               current,
+               s.frames,
+               geometry::ccd_hull_bound(magnitude, scaled.delta),
+               scaled.narrow,
+               moved.empty() ? nullptr : moved.data()};
+  if (bound != nullptr) {
+    // The displacements as the query sees them (scaled by 2^k: exact, as is the reach's scaling).
+    const auto nv = static_cast<std::size_t>(topo.num_vertices());
+    s.motion.resize(nv);
+    for (std::size_t v = 0; v < nv; ++v) s.motion[v] = current[v] - previous[v];
+    const Scalar r = std::ldexp(bound->reach, scaled.exponent);
+    bounded.motion = s.motion.data();
+    bounded.exempt = bound->exempt.data();
+    bounded.reach2 = r * r;
+    // Every face's motion box: its corners' displacements, exempt with one of them.
+    const auto nf = static_cast<std::size_t>(topo.num_faces());
+    s.face_motion.resize(nf);
+    for (std::size_t f = 0; f < nf; ++f) {
+      MotionTree::MotionBox& m = s.face_motion[f];
+      const Face& t = topo.face(static_cast<Index>(f));
+      m.lo = m.hi = s.motion[static_cast<std::size_t>(t[0])];
+      m.exempt = bound->exempt[static_cast<std::size_t>(t[0])] != 0;
+      for (std::size_t k = 1; k < 3; ++k) {
+        const auto v = static_cast<std::size_t>(t[k]);
+        MotionTree::grow(m, s.motion[v]);
+        m.exempt = m.exempt || bound->exempt[v] != 0;
+      }
+    }
+    if (moved.empty()) bounded.face_motion = s.face_motion.data();
+  }
+  const Step& step = bounded;
   Sink sink;
   const Scalar half = reach / 2;
   const auto swept_box = [&](Index u) { return s.vertex_box[static_cast<std::size_t>(u)]; };
@@ -1180,6 +1432,8 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
       }
     }
     if (refitted > 0) s.face_tree.refit();
+    const bool by_motion = step.motion != nullptr && !touched.empty();
+    if (by_motion) s.face_tree.fit_motion(s.face_motion);  // the nodes' motion boxes
     // Each touching face queries the tree: the face pairs with a touching face whose swept
     // boxes meet, as in the broad phase, each unordered pair once (a pair of two touching
     // faces is found from both), less those whose slabs are apart: every sub-pair's slabs then
@@ -1196,25 +1450,46 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
       return box;
     };
     std::vector<FacePair> pairs;
-    std::mutex pairs_mutex;
-    parallel_for_chunks(touched.size(), threads, 256, [&](std::size_t begin, std::size_t end) {
-      std::vector<FacePair> found;
-      for (std::size_t k = begin; k < end; ++k) {
-        const Index f = touched[k];
-        const Face& tf = topo.face(f);
-        const Box box = swept(s.face_slabs[static_cast<std::size_t>(f)]);
-        s.face_tree.query(s.face_slabs[static_cast<std::size_t>(f)], step.hull_bound, [&](std::uint32_t gu) {
-          const auto g = static_cast<Index>(gu);
-          if (g == f || (face_moved[gu] && g < f) || !box.overlaps(swept(s.face_slabs[gu]))) return;
-          for (const Index u : topo.face(g)) {
-            if (u == tf[0] || u == tf[1] || u == tf[2]) return;
-          }
-          found.push_back({f, g});
-        });
+    const auto keep = [&](Index f, Index g) {  // as the broad phase: swept boxes meet, no shared vertex
+      if (!swept(s.face_slabs[static_cast<std::size_t>(f)]).overlaps(swept(s.face_slabs[static_cast<std::size_t>(g)]))) {
+        return;
       }
-      const std::lock_guard lock(pairs_mutex);
-      pairs.insert(pairs.end(), found.begin(), found.end());
-    });
+      const Face& tf = topo.face(f);
+      for (const Index u : topo.face(g)) {
+        if (u == tf[0] || u == tf[1] || u == tf[2]) return;
+      }
+      pairs.push_back({f, g});
+    };
+    if (by_motion) {
+      // With a motion bound, a dual traversal of the tree with itself (`self_pairs`), which
+      // passes over whole node pairs whose corners move within the reach of each other: every
+      // sub-pair of such faces has a relative displacement within it and no exempt vertex, so
+      // `wanted` would drop it. (Per-face queries pruned the same way cost more than the sweep:
+      // each of the many fast faces descended the tree to its own neighbourhood.)
+      s.face_tree.self_pairs(face_moved, step.hull_bound, true, step.reach2, [&](std::uint32_t f, std::uint32_t g) {
+        keep(static_cast<Index>(f), static_cast<Index>(g));
+      });
+    } else {
+      std::mutex pairs_mutex;
+      parallel_for_chunks(touched.size(), threads, 256, [&](std::size_t begin, std::size_t end) {
+        std::vector<FacePair> found;
+        for (std::size_t k = begin; k < end; ++k) {
+          const Index f = touched[k];
+          const Face& tf = topo.face(f);
+          const Box box = swept(s.face_slabs[static_cast<std::size_t>(f)]);
+          s.face_tree.query(s.face_slabs[static_cast<std::size_t>(f)], step.hull_bound, [&](std::uint32_t gu) {
+            const auto g = static_cast<Index>(gu);
+            if (g == f || (face_moved[gu] && g < f) || !box.overlaps(swept(s.face_slabs[gu]))) return;
+            for (const Index u : topo.face(g)) {
+              if (u == tf[0] || u == tf[1] || u == tf[2]) return;
+            }
+            found.push_back({f, g});
+          });
+        }
+        const std::lock_guard lock(pairs_mutex);
+        pairs.insert(pairs.end(), found.begin(), found.end());
+      });
+    }
     stats_.set("face_tree_built", build && !touched.empty() ? 1 : 0);
     stats_.set("face_slabs_refitted", static_cast<double>(refitted));
     // The records of the faces of these pairs only.
@@ -1276,14 +1551,45 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
   const auto& ovf = s.orphans.vf;
   const auto& oee = s.orphans.ee;
   if (step.moved == nullptr) {
+    // With a motion bound, the orphans around a calm vertex (its closed one-ring moves within
+    // the reach, none exempt) are dropped: their four vertices lie in that one-ring.
+    const bool by_motion = step.face_motion != nullptr;
+    if (by_motion) {
+      if (s.orphan_hub.size() != ovf.size() + oee.size()) s.orphan_hub = orphan_hubs(topo, s.orphans);
+      const auto nv = static_cast<std::size_t>(topo.num_vertices());
+      s.calm.resize(nv);
+      for (std::size_t v = 0; v < nv; ++v) {
+        MotionTree::MotionBox ring{step.motion[v], step.motion[v], step.exempt[v] != 0};
+        for (const Index f : topo.vertex_faces()[static_cast<Index>(v)]) {
+          MotionTree::merge(ring, step.face_motion[static_cast<std::size_t>(f)]);
+        }
+        s.calm[v] = MotionTree::together(ring, ring, step.reach2);
+      }
+    }
+    const auto calm = [&](std::size_t orphan) {
+      const Index hub = s.orphan_hub[orphan];
+      return hub >= 0 && s.calm[static_cast<std::size_t>(hub)];
+    };
     parallel_for_chunks(ovf.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
       Tester tester(step, earliest);
-      for (std::size_t i = begin; i < end; ++i) tester.orphan_vertex_face(ovf[i][0], ovf[i][1]);
+      for (std::size_t i = begin; i < end; ++i) {
+        if (by_motion && calm(i)) {
+          ++tester.counts.orphans_calm;
+          continue;
+        }
+        tester.orphan_vertex_face(ovf[i][0], ovf[i][1]);
+      }
       sink.take(tester, 0);
     });
     parallel_for_chunks(oee.size(), threads, 4096, [&](std::size_t begin, std::size_t end) {
       Tester tester(step, earliest);
-      for (std::size_t i = begin; i < end; ++i) tester.orphan_edge_edge(oee[i]);
+      for (std::size_t i = begin; i < end; ++i) {
+        if (by_motion && calm(ovf.size() + i)) {
+          ++tester.counts.orphans_calm;
+          continue;
+        }
+        tester.orphan_edge_edge(oee[i]);
+      }
       sink.take(tester, 0);
     });
   } else {
@@ -1384,6 +1690,10 @@ void ContinuousQuery::run(PositionsView given_previous, PositionsView given_curr
   stats_.set("ee_box_rejected", sink.counts.ee_box_rejected);
   stats_.set("vf_tests", sink.counts.vf_tests);
   stats_.set("face_pairs_apart", sink.counts.face_pairs_apart);
+  if (bound != nullptr) {
+    stats_.set("face_pairs_together", sink.counts.face_pairs_together);
+    stats_.set("orphans_calm", sink.counts.orphans_calm);
+  }
   stats_.set("ee_tests", sink.counts.ee_tests);
   stats_.set("narrow_boxes", sink.counts.boxes);
   stats_.set("narrow_advance_steps", sink.counts.advance_steps);

@@ -150,6 +150,32 @@ class ContinuousQuery {
   /// errors as `query`, and `InputError` when `moved` does not have #V entries.
   void query_moved(PositionsView previous, PositionsView current, std::span<const char> moved, ImpactSet& out);
 
+  /// A bound on the pairs a query needs: those whose vertices move together are left out.
+  /// A pair's *relative displacement* is the largest |uᵢ − uⱼ| over a vertex i of one side (the
+  /// vertex of a VF pair, an edge of an EE pair) and j of the other, uᵢ = x¹ᵢ − x⁰ᵢ.
+  struct MotionBound {
+    std::span<const char> exempt;  ///< #V flags: a pair with a flagged vertex is never left out
+    Scalar reach = 0;              ///< finite, >= 0
+  };
+  /// `query_moved`'s impacts less (some of) those of pairs with no vertex flagged in
+  /// `bound.exempt` and a relative displacement at most `bound.reach`: every impact of a pair
+  /// with an exempt vertex or a relative displacement above `bound.reach (1 + 1e-12)` is kept,
+  /// bit for bit and in order, and nothing else is added. Faces whose corners move together are
+  /// passed over as whole subtrees of the tree of every face (each node holds the box of its
+  /// corners' displacements), so a fast region that moves as one costs only where it meets
+  /// what moves otherwise. The caller proves the left-out pairs harmless (the fail-safe: docs/
+  /// simulation.md, "The first query restricted by the start's proximity"). Same errors as
+  /// `query_moved`, and `InputError` when `exempt` does not have #V entries or the reach is
+  /// negative or not finite.
+  void query_moved(PositionsView previous, PositionsView current, std::span<const char> moved,
+                   const MotionBound& bound, ImpactSet& out);
+  /// `query`'s impacts less (some of) those of pairs that `bound` covers, as `query_moved` with
+  /// every vertex flagged; but the sweep of the broad phase: its face pairs whose corners all
+  /// move within the reach of each other are dropped before their sub-pairs are tested, and so
+  /// are the orphan sub-pairs around a vertex whose closed one-ring (every orphan's four vertices
+  /// lie in the one-ring of a vertex both faces share) moves within the reach.
+  void query(PositionsView previous, PositionsView current, const MotionBound& bound, ImpactSet& out);
+
   /// Turns `impacts`, the query (`query`, or this call) of a motion that differs from the one
   /// from `previous` to `current` only at vertices flagged in `moved`, into the query of this
   /// one, bit for bit and in order: the impacts of pairs with a flagged vertex are replaced by
@@ -169,7 +195,9 @@ class ContinuousQuery {
   /// traversal and the narrow phase of its candidates, interleaved on the threads),
   /// `narrow_cpu_ms` (thread time spent in the narrow phase inside the stream), `orphan_ms`,
   /// `sort_ms`, `total_ms`; and the broad phase's own counters (`query_moved`: `moved_faces`,
-  /// the faces touching a flagged vertex, `face_tree_built` and `face_slabs_refitted`).
+  /// the faces touching a flagged vertex, `face_tree_built` and `face_slabs_refitted`); with a
+  /// `MotionBound`, `face_pairs_together` (the sweep's candidates dropped as moving together)
+  /// and `orphans_calm` (the sweep's orphans dropped around a calm vertex).
   const DetectorStats& stats() const { return stats_; }
 
   /// The collision-free step of the step from `previous` to `current`: exactly
@@ -187,7 +215,7 @@ class ContinuousQuery {
 
  private:
   void run(PositionsView previous, PositionsView current, std::span<const char> moved, ImpactSet& out,
-           std::atomic<Scalar>* earliest);
+           std::atomic<Scalar>* earliest, const MotionBound* bound = nullptr);
 
   std::shared_ptr<const Topology> topology_;
   ContinuousOptions options_;

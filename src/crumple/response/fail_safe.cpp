@@ -152,6 +152,7 @@ CcdFailSafe::CcdFailSafe(std::shared_ptr<const Topology> topology, FailSafeOptio
 std::size_t CcdFailSafe::flag_first_query(PositionsView start, std::span<const Vec3> positions,
                                           const StartProximity& proximity) {
   const std::size_t n = start.size();
+  motion_valid_ = false;
   if (proximity.pairs == nullptr || n == 0) return kUnrestricted;
   // The margin m: a tenth of R − δ (1 + σ), and far above the rounding of the displacements
   // and of the detector's distances (NaN anywhere: no restriction).
@@ -188,18 +189,30 @@ std::size_t CcdFailSafe::flag_first_query(PositionsView start, std::span<const V
     return count;
   };
   moved_.resize(n);
-  if (!restricted(fast(fast(median, false) <= fast(mean, false) ? median : mean, true), n)) return kUnrestricted;
-  // The pairs within R: flagged unless their own relative motion keeps them beyond δ (1 + σ) + m.
+  const bool by_motion = options_.motion_bound;
+  const std::size_t far = fast(fast(median, false) <= fast(mean, false) ? median : mean, true);
+  if (!by_motion && !restricted(far, n)) return kUnrestricted;
+  if (by_motion) {
+    exempt_.assign(n, 0);
+    motion_reach_ = bound;
+  }
+  // The pairs within R: flagged unless their own relative motion keeps them beyond δ (1 + σ) + m;
+  // with the motion bound, also exempt from it (their relative motion may be within s).
   const auto check = [&](const std::array<Index, 4>& v, std::size_t first_b, Scalar distance) {
-    for (const Index i : v) {
-      if (moved_[static_cast<std::size_t>(i)]) return;  // tested anyway
+    if (!by_motion) {
+      for (const Index i : v) {
+        if (moved_[static_cast<std::size_t>(i)]) return;  // tested anyway
+      }
     }
     Scalar most = 0;  // the largest |uᵢ − uⱼ|², i on one side, j on the other
     for (std::size_t i = 0; i < first_b; ++i) {
       for (std::size_t j = first_b; j < 4; ++j) most = std::max(most, (u(v[i]) - u(v[j])).squaredNorm());
     }
     if (distance - std::sqrt(most) >= reach + margin) return;  // NaN: flagged
-    for (const Index i : v) moved_[static_cast<std::size_t>(i)] = 1;
+    for (const Index i : v) {
+      moved_[static_cast<std::size_t>(i)] = 1;
+      if (by_motion) exempt_[static_cast<std::size_t>(i)] = 1;
+    }
   };
   const auto faces = topology_->faces();
   const auto vertex = [&](Index v) { return v >= 0 && static_cast<std::size_t>(v) < n; };
@@ -215,6 +228,7 @@ std::size_t CcdFailSafe::flag_first_query(PositionsView start, std::span<const V
     check({c.a[0], c.a[1], c.b[0], c.b[1]}, 2, c.distance);
   }
   const auto count = static_cast<std::size_t>(std::count(moved_.begin(), moved_.end(), 1));
+  motion_valid_ = by_motion;
   return restricted(count, n) ? count : kUnrestricted;
 }
 
@@ -229,10 +243,16 @@ std::size_t CcdFailSafe::detect(PositionsView start, std::span<const Vec3> posit
     const std::size_t flagged = options_.restrict_queries && proximity != nullptr
                                     ? flag_first_query(start, positions, *proximity)
                                     : kUnrestricted;
-    if (flagged != kUnrestricted) {
+    if (flagged != kUnrestricted && motion_valid_) {
+      query_.query_moved(start, end, moved_, ContinuousQuery::MotionBound{exempt_, motion_reach_}, impacts_);
+      stats.first_restricted = true;
+      stats.first_flagged = flagged;
+    } else if (flagged != kUnrestricted) {
       query_.query_moved(start, end, moved_, impacts_);
       stats.first_restricted = true;
       stats.first_flagged = flagged;
+    } else if (motion_valid_) {
+      query_.query(start, end, ContinuousQuery::MotionBound{exempt_, motion_reach_}, impacts_);
     } else {
       query_.query(start, end, impacts_);
     }

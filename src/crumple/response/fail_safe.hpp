@@ -69,6 +69,13 @@ struct FailSafeOptions {
   /// sphere's landing a quarter or a half changed the fail-safe's work by under 1 %
   /// (docs/simulation.md, "The CCD fail-safe").
   Scalar restricted_share = 0.125;
+  /// The first query with a `StartProximity` also leaves out the pairs whose vertices move
+  /// together (`ContinuousQuery::MotionBound`, reach s): a pair with a relative displacement
+  /// within s that is not listed near started farther than R and stays beyond δ (1 + σ), and
+  /// a listed one is exempt unless its own test clears it (docs/simulation.md, "Pairs that
+  /// move together"). The same impacts otherwise; the sweep drops such face pairs and orphans
+  /// before testing them, the restricted query whole subtrees of its tree.
+  bool motion_bound = true;
 };
 
 /// What the caller knows of the frame's start, to spare the first query the sweep of the whole
@@ -131,7 +138,10 @@ class CcdFailSafe {
   /// beyond δ (1 + σ) + m: if it was R or more apart, since that is at most s; if closer, it is
   /// in `proximity` and passed its own test. The whole mesh is swept instead when more than
   /// `FailSafeOptions::restricted_share` of the vertices are flagged (docs/simulation.md, "The CCD
-  /// fail-safe").
+  /// fail-safe"). With `FailSafeOptions::motion_bound` the same argument also runs pair by pair:
+  /// every pair of `proximity` is tested (its vertices *exempt* when the test fails), and the
+  /// first query, restricted or the sweep, leaves out the pairs with no exempt vertex whose
+  /// largest |uᵢ − uⱼ| across the sides is at most s (`ContinuousQuery::MotionBound`).
   FailSafeStats apply(PositionsView start, std::span<const Scalar> inv_mass, Scalar duration,
                       std::span<Vec3> positions, std::span<Vec3> velocities,
                       const StartProximity* proximity = nullptr);
@@ -155,9 +165,11 @@ class CcdFailSafe {
     return static_cast<Scalar>(count) <= options_.restricted_share * static_cast<Scalar>(n);
   }
   static constexpr std::size_t kUnrestricted = static_cast<std::size_t>(-1);
-  /// Flags in `moved_` the vertices the first query must cover (see `apply`); returns their
-  /// count, or `kUnrestricted` when `proximity` allows no restricted query (no bound, or more
-  /// than `restricted_share` of the vertices flagged).
+  /// Flags in `moved_` the vertices the first query must cover (see `apply`) and, with
+  /// `motion_bound`, in `exempt_` those of the listed pairs their own test does not clear
+  /// (`motion_valid_` then set, for a restricted query or a sweep); returns the count of
+  /// `moved_`, or `kUnrestricted` when `proximity` allows no restricted query (no bound, or
+  /// more than `restricted_share` of the vertices flagged).
   std::size_t flag_first_query(PositionsView start, std::span<const Vec3> positions,
                                const StartProximity& proximity);
 
@@ -173,6 +185,9 @@ class CcdFailSafe {
   std::vector<Vec3> start_;  ///< the start of the last `apply` (`restrict_queries`)
   bool same_start_ = false;  ///< this `apply`'s start is the last one's, bit for bit
   std::vector<char> moved_;    ///< per vertex, whether its end moved since the last query
+  std::vector<char> exempt_;   ///< `flag_first_query`'s exempt vertices (`motion_bound`)
+  Scalar motion_reach_ = 0;    ///< `flag_first_query`'s s (`motion_bound`)
+  bool motion_valid_ = false;  ///< `exempt_` and `motion_reach_` hold for this frame's first query
   std::vector<Scalar> scratch_;                ///< `flag_first_query`'s
 };
 
