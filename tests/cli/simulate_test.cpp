@@ -202,7 +202,7 @@ TEST(Simulate, FailSafeFlagIsSavedAndChecked) {
   EXPECT_NE(r.out.find("--fail-safe expects on or off, got 'maybe'"), std::string::npos) << r.out;
 }
 
-// The motion settings: the scene's by default (crumple retries once), overridden by the options,
+// The motion settings: the scene's by default (crumple retries twice), overridden by the options,
 // saved in state.json and kept by a resumed run; a bad value is refused with the option's name.
 TEST(Simulate, MotionSettingsAreSavedAndKept) {
   const testing::TempDir dir;
@@ -212,7 +212,7 @@ TEST(Simulate, MotionSettingsAreSavedAndKept) {
   };
   auto r = run_cli("simulate crumple:n=4 --frames 1 -q -o " + (dir / "scene").string());
   ASSERT_EQ(r.status, 0) << r.out;
-  EXPECT_NE(state_json("scene").find("\"motion_retries\":1"), std::string::npos) << state_json("scene");
+  EXPECT_NE(state_json("scene").find("\"motion_retries\":2"), std::string::npos) << state_json("scene");
   EXPECT_NE(state_json("scene").find("\"motion_search\":false"), std::string::npos);
   EXPECT_NE(state_json("scene").find("\"push_relaxation\":0.5"), std::string::npos) << state_json("scene");
   r = run_cli("simulate crumple:n=4 --frames 1 -q --motion-retries 0 --motion-search on --push-relaxation 0.25 -o " +

@@ -221,8 +221,8 @@ def test_fail_safe_setting_and_its_figures():
 
 
 def test_motion_settings_follow_the_scene_unless_given():
-    """crumple retries a frame once by default; the keywords override the scene's motion settings."""
-    assert crumple.Simulation("crumple:n=6", threads=1).settings["motion_retries"] == 1
+    """crumple retries a frame up to twice by default; the keywords override the scene's motion settings."""
+    assert crumple.Simulation("crumple:n=6", threads=1).settings["motion_retries"] == 2
     assert crumple.Simulation("cloth-on-sphere:n=6", threads=1).settings["motion_retries"] == 0
     s = crumple.Simulation("crumple:n=6", threads=1, motion_retries=0, motion_search=True)
     assert s.settings["motion_retries"] == 0 and s.settings["motion_search"] is True

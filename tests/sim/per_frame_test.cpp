@@ -266,6 +266,42 @@ TEST(PerFrame, MotionRetryCatchesAPairThePredictionMisses) {
   }
 }
 
+// B thrown at 8 h a frame onto a free triangle A, which lies 2.5 h above a pinned one C (both
+// gaps beyond the radius of 2 h; no motion search, so nothing predicts B): the first run carries
+// B through A, and its retry has B hit A, which then moves into C, a pair that only the rerun's
+// motion brings. With one retry the fail-safe stops A against C at the frame's end; with two
+// (the `crumple` scene's count) the frame runs a third time with A–C among its contacts, A stays
+// about h above C and the fail-safe finds nothing.
+TEST(PerFrame, SecondRetryCatchesAPairTheFirstRerunBrings) {
+  const auto run = [](int retries) {
+    TwoTriangles scene(0, 0, false);
+    const Scalar h = TwoTriangles::h;
+    scene.model = Model::create({0.01, 0.01, 0.01, 0.01, 0.01, 0.01, 0, 0, 0}, {},
+                                {{0, 1, 2}, {3, 4, 5}, {6, 7, 8}});
+    scene.state.x.push_back(Vec3(-0.05, -0.05, -2.5 * h));
+    scene.state.x.push_back(Vec3(0.2, -0.05, -2.5 * h));
+    scene.state.x.push_back(Vec3(-0.05, 0.2, -2.5 * h));
+    scene.state.v.assign(9, Vec3::Zero());
+    for (std::size_t i = 3; i < 6; ++i) scene.state.v[i].z() = -8 * h * 60;
+    scene.settings.motion_retries = retries;
+    Simulation sim = scene.make();
+    const FrameStats st = sim.advance_frame();
+    return std::make_pair(st, sim.state().x);
+  };
+  const auto [once, x_once] = run(1);
+  const auto [twice, x] = run(2);
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_GT(x[i].z(), -1.51 * TwoTriangles::h) << "A held about h above C, vertex " << i;
+  }
+  EXPECT_EQ(once.retries, 1);
+  EXPECT_GT(once.ccd_impacts, 0u) << "A stopped against C by the fail-safe";
+  EXPECT_EQ(twice.retries, 2);
+  EXPECT_GT(twice.motion_pairs, once.motion_pairs) << "A against C joins the contacts";
+  EXPECT_EQ(twice.ccd_impacts, 0u);
+  EXPECT_EQ(make_scene(SceneSpec::parse("crumple:n=16"), 1).settings.motion_retries, 2);
+  EXPECT_EQ(make_scene(SceneSpec::parse("crumple:n=100"), 1).settings.motion_retries, 2);
+}
+
 // A frame whose motion the detection's radius covers (B falls under plain gravity, 1.4 mm a
 // frame against a radius of 2 h) runs once, bit for bit as without retries.
 TEST(PerFrame, MotionRetryLeavesACoveredFrameAlone) {
