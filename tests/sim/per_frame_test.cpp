@@ -300,6 +300,8 @@ TEST(PerFrame, SecondRetryCatchesAPairTheFirstRerunBrings) {
   EXPECT_EQ(twice.ccd_impacts, 0u);
   EXPECT_EQ(make_scene(SceneSpec::parse("crumple:n=16"), 1).settings.motion_retries, 2);
   EXPECT_EQ(make_scene(SceneSpec::parse("crumple:n=100"), 1).settings.motion_retries, 2);
+  EXPECT_EQ(make_scene(SceneSpec::parse("crumple:n=101"), 1).settings.motion_retries, 1)
+      << "above n = 100 the count the n = 200 run was measured with";
 }
 
 // A frame whose motion the detection's radius covers (B falls under plain gravity, 1.4 mm a
