@@ -321,7 +321,7 @@ std::uint64_t state_digest(const State& s) {
 /// exact detector (kdop, kinds tt, as the rows do). `--search-factor` sets
 /// `Settings::search_factor` (the proximity radius in thicknesses), `--motion-search=on`
 /// turns `Settings::motion_search` on (contacts from the frame's predicted motion), `--motion-retries`
-/// sets `Settings::motion_retries` (the scene's otherwise: 1 for crumple and for cloth-on-sphere above n = 100, 0 for
+/// sets `Settings::motion_retries` (the scene's otherwise: 1 for crumple and for cloth-on-sphere above n = 100, 3 for twisted-ribbon above nx = 100, 0 for
 /// the others), `--contact-forces` sets `Settings::contact_forces` (the scene's otherwise), `--relaxation`
 /// `Settings::proximity_relaxation` (the scene's otherwise: 0.5 for crumple, 1 for the others); `--rho`, `--iterations` and
 /// `--settle` the projective step's Chebyshev ρ, iterations and settling tolerance (a fraction of
