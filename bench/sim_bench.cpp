@@ -312,7 +312,7 @@ std::uint64_t state_digest(const State& s) {
 }  // namespace
 
 /// `--check-frames=SPEC [--frames=N] [--fail-safe=off] [--response=on] [--search-factor=F]
-/// [--motion-search=on] [--motion-retries=N] [--relaxation=W] [--rho=R] [--iterations=N] [--settle=F]
+/// [--motion-search=on] [--motion-retries=N] [--contact-forces=on|off] [--relaxation=W] [--rho=R] [--iterations=N] [--settle=F]
 /// [--substeps=S] [--threads=T]
 /// [--verbose]`:
 /// runs N frames (1000) of the built-in scene SPEC with the `frame/` rows' settings
@@ -321,8 +321,8 @@ std::uint64_t state_digest(const State& s) {
 /// exact detector (kdop, kinds tt, as the rows do). `--search-factor` sets
 /// `Settings::search_factor` (the proximity radius in thicknesses), `--motion-search=on`
 /// turns `Settings::motion_search` on (contacts from the frame's predicted motion), `--motion-retries`
-/// sets `Settings::motion_retries` (the scene's otherwise: 1 for crumple and for cloth-on-sphere above n = 100, 0 for
-/// the others), `--relaxation`
+/// sets `Settings::motion_retries` (the scene's otherwise: 1 for crumple and for cloth-on-sphere above n = 100, 3 for twisted-ribbon above nx = 100, 0 for
+/// the others), `--contact-forces` sets `Settings::contact_forces` (the scene's otherwise), `--relaxation`
 /// `Settings::proximity_relaxation` (the scene's otherwise: 0.5 for crumple, 1 for the others); `--rho`, `--iterations` and
 /// `--settle` the projective step's Chebyshev ρ, iterations and settling tolerance (a fraction of
 /// h_c, as the ribbon's `settle` key); `--substeps` the steps per frame (the frame's length kept);
@@ -345,6 +345,7 @@ int check_frames(int argc, char** argv) {
   int iterations_option = 0, substeps = 0;  // 0: the scene's
   int flat_rings = -1;                      // < 0: the default
   int motion_retries = -1;                  // < 0: the scene's
+  int contact_forces = -1;                  // < 0: the scene's, else 0 (off) or 1 (on)
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
@@ -382,6 +383,8 @@ int check_frames(int argc, char** argv) {
         const double v = number_option(a, 17);
         if (!(v >= 0) || v != std::floor(v) || v > 100) throw InputError("--motion-retries expects an integer in [0, 100]");
         motion_retries = static_cast<int>(v);
+      } else if (a == "--contact-forces=on" || a == "--contact-forces=off") {
+        contact_forces = a == "--contact-forces=on" ? 1 : 0;
       } else if (a.rfind("--substeps=", 0) == 0) {
         const double v = number_option(a, 11);
         if (!(v >= 1) || v != std::floor(v) || v > 1000) throw InputError("--substeps expects an integer >= 1");
@@ -418,6 +421,7 @@ int check_frames(int argc, char** argv) {
   settings.motion_search = settings.motion_search || motion_search;
   if (flat_rings >= 0) settings.flat_neighbour_rings = flat_rings;
   if (motion_retries >= 0) settings.motion_retries = motion_retries;
+  if (contact_forces >= 0) settings.contact_forces = contact_forces == 1;
   if (relaxation > 0) settings.proximity_relaxation = relaxation;
   if (rho >= 0) settings.integrator_options.projective_rho = rho;
   if (iterations_option > 0) settings.integrator_options.projective_iterations = iterations_option;

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
 
 namespace crumple::sim {
 namespace {
@@ -368,6 +369,44 @@ TEST(PerFrame, SphereRetriesItsFramesAboveOneHundredQuads) {
   EXPECT_THROW(retries("n=16,motion-retries=once"), InputError);
 }
 
+// `twisted-ribbon` turns its contact forces and motion retries on above 100 quads along the
+// ribbon and takes more steps a frame above 200 (the finer ribbons ran away once their coils
+// touched; ContactForcesAndRetriesKeepAStiffRibbonCalm below); the 48 × 3 and 96 × 6 ribbons keep
+// their bits. Its keys set them at any size.
+TEST(PerFrame, RibbonTurnsItsContactCuresOnAboveOneHundredQuadsAlong) {
+  const auto settings = [](const std::string& spec) {
+    return make_scene(SceneSpec::parse("twisted-ribbon" + spec), 1).settings;
+  };
+  for (const std::string spec : {"", ":nx=96,ny=6", ":nx=100,ny=25"}) {
+    SCOPED_TRACE(spec);
+    EXPECT_FALSE(settings(spec).contact_forces);
+    EXPECT_EQ(settings(spec).motion_retries, 0);
+  }
+  for (const std::string spec : {":nx=101", ":nx=400,ny=25"}) {
+    SCOPED_TRACE(spec);
+    EXPECT_TRUE(settings(spec).contact_forces);
+    EXPECT_EQ(settings(spec).motion_retries, 3);
+  }
+  EXPECT_TRUE(settings(":contact-forces=on").contact_forces);
+  EXPECT_FALSE(settings(":nx=400,ny=25,contact-forces=off").contact_forces);
+  EXPECT_EQ(settings(":motion-retries=2").motion_retries, 2);
+  EXPECT_EQ(settings(":nx=400,ny=25,motion-retries=0").motion_retries, 0);
+  EXPECT_THROW(settings(":contact-forces=maybe"), InputError);
+  EXPECT_THROW(settings(":motion-retries=-1"), InputError);
+  // Steps a frame: 4 up to nx = 200, 4 more for each further 200 (the frame stays 1/60 s).
+  for (const auto& [spec, steps] : {std::pair{"", 4}, std::pair{":nx=200,ny=12", 4}, std::pair{":nx=201", 8},
+                                    std::pair{":nx=400,ny=25", 8}, std::pair{":nx=800,ny=50", 16},
+                                    std::pair{":steps=6", 6}}) {
+    SCOPED_TRACE(spec);
+    const Settings s = settings(spec);
+    EXPECT_EQ(s.substeps, steps);
+    EXPECT_EQ(s.dt, 1.0 / (60 * steps));
+  }
+  EXPECT_EQ(settings("").dt, 1.0 / 240);  // the coarse ribbons' step, bit for bit
+  EXPECT_THROW(settings(":steps=0"), InputError);
+  EXPECT_THROW(settings(":steps=many"), InputError);
+}
+
 // The landing of `cloth-on-sphere` at n = 200's ωh, in small: `n=24` with the stiffness scaled
 // by (200/24)², its contact forces on (as at n = 200), and a thickness of 0.1 edge, so that the
 // skirt's folds falling onto the cloth on the floor (~3 m/s, 5 cm a frame) close in from
@@ -405,6 +444,58 @@ TEST(PerFrame, MotionRetriesKeepAStiffLandingCalm) {
   EXPECT_LT(with.impacts, 10u);
   EXPECT_LT(with.longest, 1.25);
   EXPECT_LT(with.energy, 20) << "J";
+}
+
+// The coiling ribbon at the ωh of `twisted-ribbon:nx=400,ny=25`, in small: 48 × 3 with the
+// stiffness scaled by (400/48)² and a thickness of 0.03 edge (h_c = 1.5 mm, near 400 × 25's
+// 1.9 mm), so that its coils close in from farther than the search radius (2 h_c) within a frame
+// (~1 m/s, 1.7 cm a frame), as at 400 × 25. Measured: with the push-outs after the steps alone it
+// runs away once the coils touch (11.5 J at frame 166, diverged at 210); with the contact forces
+// alone the fail-safe's stops at the frames' ends start it (9 J at frame 157, diverged at 220);
+// with one motion retry alone the push-outs' exchange with the springs does, later (6.7 J at
+// frame 246, diverged at 281); with both it stays at most 0.15 J with springs at most 1.01x
+// their rest length and one live impact in 300 frames. Intersection-free every way.
+TEST(PerFrame, ContactForcesAndRetriesKeepAStiffRibbonCalm) {
+  struct Run {
+    Scalar energy = 0, longest = 0;  // the most over the frames run
+    std::size_t impacts = 0;         // the fail-safe's live impacts, summed
+    int frames = 0;                  // frames run: up to the first past 5 J, or a divergence
+  };
+  const auto run = [](bool forces, int retries, int frames) {
+    Scene s = make_scene(SceneSpec::parse("twisted-ribbon:stretch=27778,thickness=0.03,contact-forces=" +
+                                          std::string(forces ? "on" : "off") +
+                                          ",motion-retries=" + std::to_string(retries)),
+                         1);
+    s.settings.detector.threads = s.settings.integrator_options.threads = 1;
+    Simulation sim(std::move(s.model), std::move(s.state), s.field, std::move(s.obstacles), std::move(s.kinematics),
+                   s.settings);
+    Run out;
+    for (int f = 1; f <= frames && out.energy <= 5; ++f) {
+      FrameStats st;
+      try {
+        st = sim.advance_frame();
+      } catch (const DivergenceError&) {
+        out.energy = std::numeric_limits<Scalar>::infinity();
+        break;
+      }
+      EXPECT_EQ(st.intersecting_pairs, 0) << "frame " << f << ", forces " << forces << ", retries " << retries;
+      out.impacts += st.ccd_impacts;
+      out.energy = std::max(out.energy, st.energy);
+      out.longest = std::max(out.longest, st.longest_spring);
+      out.frames = f;
+    }
+    return out;
+  };
+  const Run with = run(true, 1, 260);
+  EXPECT_EQ(with.frames, 260);
+  EXPECT_LT(with.energy, 0.5) << "J";
+  EXPECT_LT(with.longest, 1.1);
+  EXPECT_LE(with.impacts, 10u);
+  for (const auto& [forces, retries] : {std::pair{false, 0}, std::pair{true, 0}, std::pair{false, 1}}) {
+    const Run without = run(forces, retries, 260);
+    EXPECT_GT(without.energy, 5) << "J; forces " << forces << ", retries " << retries << ", " << without.frames
+                                 << " frames";
+  }
 }
 
 // `crumple:n=16` with the stiffness scaled by (200/16)², so that its steps have the ωh of

@@ -36,14 +36,15 @@ namespace {
       {"air", air, "air damping (1/s): force -air * m * v"},                                            \
       {"thickness", thickness, "contact thickness, as a fraction of the mean edge length"}
 
-// The key of `Settings::contact_forces` and its rule (`contact_forces_key`), shared by the scenes
-// whose n = 200 ran warm on the push-outs alone.
-#define CRUMPLE_CONTACT_FORCES_KEY(what)                                                                    \
+// The key of `Settings::contact_forces` and its rule (`contact_forces_key`: auto = on above 100
+// quads, counted by the scene's key `count`), shared by the scenes whose finest cloths ran warm on
+// the push-outs alone.
+#define CRUMPLE_CONTACT_FORCES_KEY(count, what)                                                             \
   {"contact-forces", "auto",                                                                               \
    "on | off | auto: the contacts also act as forces inside the projective step, so the springs and the " \
-   "contacts reach a compromise within the step (auto: on above n = 100, where the push-outs after the " \
-   "steps alone let " what " heat up; at n <= 100 they keep it calm, and the forces' second solve per "  \
-   "iteration costs more)"}
+   "contacts reach a compromise within the step (auto: on above " count " = 100, where the push-outs "    \
+   "after the steps alone let " what " heat up; at " count " <= 100 they keep it calm, and the forces' "  \
+   "second solve per iteration costs more)"}
 
 constexpr std::array<SceneParamInfo, 17> kHanging{{
     {"nx", "10", "quads along x"},
@@ -77,14 +78,14 @@ constexpr std::array<SceneParamInfo, 20> kSphere{{
     {"search", "0.01",
      "radius (m) of the frame's proximity search, at least 2 thicknesses: it must cover the relative "
      "motion of a frame, which does not shrink with the edges (2 thicknesses up to n = 100, 3.9 at 200)"},
-    CRUMPLE_CONTACT_FORCES_KEY("the cloth"),
+    CRUMPLE_CONTACT_FORCES_KEY("n", "the cloth"),
     {"motion-retries", "auto",
      "auto or a count: how many times a frame may run again with the pairs that its own motion brings together "
      "from beyond the search radius among its contacts (auto: 1 above n = 100, where the fail-safe's stops of "
      "the landing's folds at the frame's end stretched springs up to 20x their rest length; 0 at n <= 100)"},
 }};
 
-constexpr std::array<SceneParamInfo, 18> kRibbon{{
+constexpr std::array<SceneParamInfo, 21> kRibbon{{
     {"nx", "48", "quads along the ribbon"},
     {"ny", "3", "quads across the ribbon"},
     {"length", "2", "ribbon length along x (m)"},
@@ -95,9 +96,18 @@ constexpr std::array<SceneParamInfo, 18> kRibbon{{
     {"settle", "0.005",
      "the projective step iterates (up to 40 times) until no particle moves more than this fraction of the "
      "thickness in an iteration; 0 = a fixed 5 iterations (the coiling ribbon then heats up and diverges)"},
+    {"steps", "auto",
+     "auto or a count: projective steps per frame of 1/60 s (auto: 4 x ceil(nx / 200), so that the steps' "
+     "omega h, which grows as nx, stays at most that of nx = 200 with 4 steps; 400 x 25 with 4 steps ran away "
+     "under its coils' contacts)"},
     {"jitter", "0.01", "seeded random displacement of the initial vertices, fraction of an edge"},
     CRUMPLE_MATERIAL_KEYS("0.1", "400", "0", "2e-4", "0.01", "0", "0.5", "0.3"),
     {"self-friction", "0.2", "Coulomb friction between touching parts of the cloth"},
+    CRUMPLE_CONTACT_FORCES_KEY("nx", "the coils"),
+    {"motion-retries", "auto",
+     "auto or a count: how many times a frame may run again with the pairs that its own motion brings together "
+     "from beyond the search radius among its contacts (auto: 3 above nx = 100, where the fail-safe's stops of the "
+     "first coils to touch at the frame's end started the runaway; 0 at nx <= 100)"},
 }};
 
 constexpr std::array<SceneParamInfo, 19> kCrumple{{
@@ -116,7 +126,7 @@ constexpr std::array<SceneParamInfo, 19> kCrumple{{
     {"search", "0.0068",
      "radius (m) of the frame's proximity search, at least 2 thicknesses: it must cover the relative "
      "motion of a frame, which does not shrink with the edges (2 thicknesses up to n = 100, 4 at 200)"},
-    CRUMPLE_CONTACT_FORCES_KEY("the pile"),
+    CRUMPLE_CONTACT_FORCES_KEY("n", "the pile"),
 }};
 
 constexpr std::array<SceneParamInfo, 8> kFile{{
@@ -276,17 +286,18 @@ bool contact_forces_key(const SceneSpec& spec, Index n) {
   throw InputError("scene '" + spec.name() + "': key 'contact-forces' expects on, off or auto, got '" + value + "'");
 }
 
-/// The scene key `motion-retries` of `cloth-on-sphere`: a count, or auto = 1 above n = 100 quads
-/// a side (as `contact-forces`), 0 otherwise. Its landing brings folds onto the cloth on the
+/// The scene key `motion-retries`: a count, or auto = `above` above n = 100 quads (as
+/// `contact-forces`), 0 otherwise. `cloth-on-sphere` (auto 1 above n = 100 quads a side): its
+/// landing brings folds onto the cloth on the
 /// floor from farther than the search radius within a frame (~3 m/s, 5 cm a frame); left to the
 /// fail-safe, they are stopped at the frame's end against springs the steps did not see, and at
 /// n = 200 (ωh twice n = 100's) the next frame's release of that stretch moved the cloth farther
 /// still (a spring 20x its rest length, 94 J); a retried frame answers them with proximity
 /// contacts at every step (docs/simulation.md, "Energy under contact"). At n <= 100 the landing
 /// cools without them, and a retried frame pays its steps twice.
-int motion_retries_key(const SceneSpec& spec, Index n) {
+int motion_retries_key(const SceneSpec& spec, Index n, int above) {
   const std::string value = spec.get_string("motion-retries");
-  if (value == "auto") return n > 100 ? 1 : 0;
+  if (value == "auto") return n > 100 ? above : 0;
   const auto count = parse_integer(value);
   if (!count || *count < 0 || *count > 100) {
     throw InputError("scene '" + spec.name() + "': key 'motion-retries' expects auto or an integer in [0, 100], got '" +
@@ -367,7 +378,7 @@ Scene cloth_on_sphere(const SceneSpec& spec, std::uint64_t seed) {
   // The landing's folds that close in from beyond the radius within a frame: at n = 200 the
   // fail-safe's stops of them stretched springs 20x (94 J at frame 31); one retry keeps the
   // landing near 1 J (docs/simulation.md, "Energy under contact").
-  s.settings.motion_retries = motion_retries_key(spec, n);
+  s.settings.motion_retries = motion_retries_key(spec, n, 1);
   return s;
 }
 
@@ -409,6 +420,34 @@ Scene twisted_ribbon(const SceneSpec& spec, std::uint64_t seed) {
   const Scalar settle = spec.get_double("settle");
   if (!(settle >= 0) || !std::isfinite(settle)) throw InputError("scene key 'settle' must be finite and >= 0");
   s.settings.integrator_options.projective_tolerance = settle * s.settings.detector.thickness;
+  // Refined, the ribbon's ωh grows as 1 / edge (a spring's stiffness stays `stretch`, a vertex's
+  // mass falls as the edge squared) and its radius 2 h_c shrinks while the coils' closing speed
+  // (~1 m/s, 1.7 cm a frame) does not. At 200 × 12 and 400 × 25 the first coils to touch came in
+  // from beyond the radius: the fail-safe stopped them at the frame's end against springs the
+  // steps did not see (400 × 25: a spring 2.17x its rest length at the first touch), the next
+  // frames' push-outs and the springs traded more energy at every step than the steps took out,
+  // and both loops ran the ribbon away (101 J by frame 144 at 400 × 25; 200 × 12 diverged at frame
+  // 219). Each cure alone leaves the other loop (docs/simulation.md, "Energy under contact").
+  s.settings.contact_forces = contact_forces_key(spec, nx);
+  s.settings.motion_retries = motion_retries_key(spec, nx, 3);
+  // Three reruns: with one, 400 × 25 ran away at frame 200 (a rerun's changed motion brought in
+  // further pairs from beyond the radius, 169 live impacts). With both cures it still had frames
+  // whose fold closed in faster than three reruns could gather its pairs (frame 218: 2,095 live
+  // impacts, 7.5x, then 418 J); at half its ωh, with 8 steps a frame, it ran without a live
+  // impact. `steps=auto` keeps ωh at most that of 200 × 12 with 4 steps (docs/simulation.md,
+  // "Energy under contact"); the frame stays 1/60 s, and at nx <= 200 the step 1/240 s, bit for
+  // bit as before.
+  const std::string steps = spec.get_string("steps");
+  int count = static_cast<int>(4 * ((nx + 199) / 200));
+  if (steps != "auto") {
+    const auto n = parse_integer(steps);
+    if (!n || *n < 1 || *n > 1000) {
+      throw InputError("scene 'twisted-ribbon': key 'steps' expects auto or an integer in [1, 1000], got '" + steps + "'");
+    }
+    count = static_cast<int>(*n);
+  }
+  s.settings.substeps = count;
+  s.settings.dt = 1.0 / (60 * count);
   return s;
 }
 
