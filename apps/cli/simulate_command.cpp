@@ -695,7 +695,7 @@ Run add_simulate_command(CLI::App& app) {
                  "With response on, how many times a frame may run again when its own motion brings "
                  "pairs within the fail-safe's reach that were beyond the detection radius at its start "
                  "(they join its contacts); default: the scene's (crumple 2, 1 above n = 100; cloth-on-sphere 1 above n = 100; "
-                 "others 0)")
+                 "twisted-ribbon 3 above nx = 100; others 0)")
       ->check(CLI::Range(0, 100));
   app.add_option("--push-relaxation", args->push_relaxation,
                  "With response on, the share (0, 1] of a pair's shortfall below the thickness that each "
