@@ -566,6 +566,15 @@ Sheets two_sheets(Scalar gap, Scalar slope) {
   return {mesh.topology_ptr(), x};
 }
 
+/// The pairs within `radius` of each other at the sheets' start (the naive detector).
+ContactSet pairs_within(const Sheets& sheets, Scalar radius) {
+  auto detector = make_detector(MethodSpec::parse("naive"), {.thickness = radius, .threads = 1});
+  detector->set_topology(sheets.topology);
+  ContactSet near;
+  detector->update(sheets.start, near);
+  return near;
+}
+
 // The first query restricted by the start's proximity (`StartProximity`: the pairs within R at
 // the start, here from the naive detector) has the full query's impacts, so the whole
 // correction is the same, bit for bit. The frames exercise both halves of the argument: a band
@@ -607,10 +616,7 @@ TEST(FailSafe, FirstQueryRestrictedByTheStartProximityGivesTheSameCorrection) {
       Positions proposed = start;
       for (std::size_t i = 0; i < proposed.size(); ++i) frame.move(i, proposed[i], rng);
       std::vector<Scalar> inv_mass(start.size(), 1);
-      auto detector = make_detector(MethodSpec::parse("naive"), {.thickness = radius, .threads = 1});
-      detector->set_topology(sheets.topology);
-      ContactSet near;
-      detector->update(start, near);
+      const ContactSet near = pairs_within(sheets, radius);
       const StartProximity proximity{radius, &near};
       FailSafeStats stats[2];
       Positions end[2], velocity[2];
@@ -675,10 +681,7 @@ TEST(FailSafe, FirstQueryLeavesOutPairsThatMoveTogether) {
         proposed[i] += Vec3(d(rng), d(rng), d(rng));
       }
       std::vector<Scalar> inv_mass(start.size(), 1);
-      auto detector = make_detector(MethodSpec::parse("naive"), {.thickness = radius, .threads = 1});
-      detector->set_topology(sheets.topology);
-      ContactSet near;
-      detector->update(start, near);
+      const ContactSet near = pairs_within(sheets, radius);
       const StartProximity proximity{radius, &near};
       FailSafeStats stats[4];
       Positions end[4], velocity[4];
