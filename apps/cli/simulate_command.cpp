@@ -135,6 +135,13 @@ Start load(const SimulateArgs& args, std::optional<SideFile>& side) {
       }
       start.source = "state " + path.string() + " (" + start.scene.spec + ", frame " + std::to_string(start.frame) + ")";
     } else {
+      // A run's state without its side file would silently start over as a plain mesh file
+      // (another integrator, time 0): say so.
+      if (path.stem() == "state") {
+        std::cerr << "crumple: warning: no crumple state file " << side_path.string() << " beside "
+                  << path.string() << ": simulating it as a MassSpring file from time 0 with the file "
+                  << "defaults, not resuming its run\n";
+      }
       const sim::SceneSpec spec = apply_params(sim::SceneSpec::parse("file"), args.params);
       start.scene = sim::make_scene_from_model(std::move(model), state_from_mass_spring(data, 0), spec);
       start.source = "mass-spring " + path.string();

@@ -100,6 +100,22 @@ void expect_resume_bit_for_bit(const std::string& scene, int n, int m, const std
 
 TEST(Simulate, ResumesHangingClothBitForBit) { expect_resume_bit_for_bit("hanging-cloth:nx=5,ny=5", 6, 5, ""); }
 
+// A run's state.x3d whose state.json is gone cannot resume: the run says it starts over as a
+// plain MassSpring file instead of doing so silently.
+TEST(Simulate, StateWithoutItsSideFileIsSaidNotToResume) {
+  const testing::TempDir dir;
+  auto r = run_cli("simulate hanging-cloth:nx=4,ny=4 --frames 2 -q -o " + (dir / "run").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  r = run_cli("simulate " + (dir / "run" / "state.x3d").string() + " --frames 1 -q -o " + (dir / "again").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_EQ(r.out.find("warning"), std::string::npos) << "a state with its side file resumes: " << r.out;
+  std::filesystem::remove(dir / "run" / "state.json");
+  r = run_cli("simulate " + (dir / "run" / "state.x3d").string() + " --frames 1 -q -o " + (dir / "over").string());
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("warning: no crumple state file"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("not resuming"), std::string::npos) << r.out;
+}
+
 TEST(Simulate, ResumesWithObstaclesResponseAndKinematicsBitForBit) {
   expect_resume_bit_for_bit("cloth-on-sphere:n=5,sphere-speed=0.2", 4, 3, "--dt 0.004 --substeps 4");
   expect_resume_bit_for_bit("twisted-ribbon:nx=8,ny=1", 3, 3, "--integrator symplectic-euler --dt 0.0005");
