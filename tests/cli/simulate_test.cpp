@@ -108,7 +108,7 @@ TEST(Simulate, StateWithoutItsSideFileIsSaidNotToResume) {
   ASSERT_EQ(r.status, 0) << r.out;
   r = run_cli("simulate " + (dir / "run" / "state.x3d").string() + " --frames 1 -q -o " + (dir / "again").string());
   ASSERT_EQ(r.status, 0) << r.out;
-  EXPECT_EQ(r.out.find("warning"), std::string::npos) << "a state with its side file resumes: " << r.out;
+  EXPECT_EQ(r.out.find("no crumple state file"), std::string::npos) << "a state with its side file resumes: " << r.out;
   std::filesystem::remove(dir / "run" / "state.json");
   r = run_cli("simulate " + (dir / "run" / "state.x3d").string() + " --frames 1 -q -o " + (dir / "over").string());
   ASSERT_EQ(r.status, 0) << r.out;
