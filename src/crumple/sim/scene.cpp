@@ -286,15 +286,15 @@ bool contact_forces_key(const SceneSpec& spec, Index n) {
   throw InputError("scene '" + spec.name() + "': key 'contact-forces' expects on, off or auto, got '" + value + "'");
 }
 
-/// The scene key `motion-retries`: a count, or auto = `above` above n = 100 quads (as
-/// `contact-forces`), 0 otherwise. `cloth-on-sphere` (auto 1 above n = 100 quads a side): its
-/// landing brings folds onto the cloth on the
-/// floor from farther than the search radius within a frame (~3 m/s, 5 cm a frame); left to the
-/// fail-safe, they are stopped at the frame's end against springs the steps did not see, and at
-/// n = 200 (ωh twice n = 100's) the next frame's release of that stretch moved the cloth farther
-/// still (a spring 20x its rest length, 94 J); a retried frame answers them with proximity
-/// contacts at every step (docs/simulation.md, "Energy under contact"). At n <= 100 the landing
-/// cools without them, and a retried frame pays its steps twice.
+/// The scene key `motion-retries`: a count, or auto = `above` retries above 100 quads (`n`, as
+/// `contact-forces` counts them: a side, or the ribbon's length), 0 otherwise. `cloth-on-sphere`
+/// (auto 1): its landing brings folds onto the cloth on the floor from farther than the search
+/// radius within a frame (~3 m/s, 5 cm a frame); left to the fail-safe, they are stopped at the
+/// frame's end against springs the steps did not see, and at n = 200 (ωh twice n = 100's) the
+/// next frame's release of that stretch moved the cloth farther still (a spring 20x its rest
+/// length, 94 J); a retried frame answers them with proximity contacts at every step
+/// (docs/simulation.md, "Energy under contact"). At n <= 100 the landing cools without them, and
+/// a retried frame pays its steps twice.
 int motion_retries_key(const SceneSpec& spec, Index n, int above) {
   const std::string value = spec.get_string("motion-retries");
   if (value == "auto") return n > 100 ? above : 0;
