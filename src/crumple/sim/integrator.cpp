@@ -236,6 +236,32 @@ struct NestedDissection {
   };
 };
 
+/// Adds a spring's graph Laplacian, scaled by `weight`, to the triplets of the rows of its free
+/// ends (`row` of a pinned particle is −1: left out).
+void add_spring_triplets(const Spring& sp, Scalar weight, std::span<const Eigen::Index> row,
+                         std::vector<Eigen::Triplet<Scalar>>& t) {
+  const Eigen::Index ra = row[static_cast<std::size_t>(sp.a)], rb = row[static_cast<std::size_t>(sp.b)];
+  if (ra >= 0) t.emplace_back(ra, ra, weight);
+  if (rb >= 0) t.emplace_back(rb, rb, weight);
+  if (ra >= 0 && rb >= 0) {
+    t.emplace_back(ra, rb, -weight);
+    t.emplace_back(rb, ra, -weight);
+  }
+}
+
+/// Adds a hinge's `weight` w wᵀ to the triplets of the rows of its free vertices.
+void add_hinge_triplets(const Hinge& hg, Scalar weight, std::span<const Eigen::Index> row,
+                        std::vector<Eigen::Triplet<Scalar>>& t) {
+  for (std::size_t i = 0; i < 4; ++i) {
+    const Eigen::Index ri = row[static_cast<std::size_t>(hg.vertex[i])];
+    if (ri < 0) continue;
+    for (std::size_t j = 0; j < 4; ++j) {
+      const Eigen::Index rj = row[static_cast<std::size_t>(hg.vertex[j])];
+      if (rj >= 0) t.emplace_back(ri, rj, weight * hg.weight[i] * hg.weight[j]);
+    }
+  }
+}
+
 /// Backward Euler with one Newton step. The system matrix A = M − h ∂f/∂v − h² ∂f/∂x has a
 /// fixed block pattern (diagonal blocks plus one block pair per spring), built once per model;
 /// each step only refills the values in place.
@@ -410,27 +436,9 @@ class ImplicitEuler final : public Integrator {
       t.emplace_back(rr, rr, mass[rest_free_[r]] * (1 + h * field.air_damping));
     }
     for (std::size_t k = 0; k < springs.size(); ++k) {
-      const Scalar weight = h * damping[k] + h * h * springs[k].stiffness;
-      const Eigen::Index ra = rest_row_[static_cast<std::size_t>(springs[k].a)];
-      const Eigen::Index rb = rest_row_[static_cast<std::size_t>(springs[k].b)];
-      if (ra >= 0) t.emplace_back(ra, ra, weight);
-      if (rb >= 0) t.emplace_back(rb, rb, weight);
-      if (ra >= 0 && rb >= 0) {
-        t.emplace_back(ra, rb, -weight);
-        t.emplace_back(rb, ra, -weight);
-      }
+      add_spring_triplets(springs[k], h * damping[k] + h * h * springs[k].stiffness, rest_row_, t);
     }
-    for (const Hinge& hg : model.hinges()) {
-      const Scalar weight = h * hg.damping + h * h * hg.stiffness;
-      for (std::size_t i = 0; i < 4; ++i) {
-        const Eigen::Index ri = rest_row_[static_cast<std::size_t>(hg.vertex[i])];
-        if (ri < 0) continue;
-        for (std::size_t j = 0; j < 4; ++j) {
-          const Eigen::Index rj = rest_row_[static_cast<std::size_t>(hg.vertex[j])];
-          if (rj >= 0) t.emplace_back(ri, rj, weight * hg.weight[i] * hg.weight[j]);
-        }
-      }
-    }
+    for (const Hinge& hg : model.hinges()) add_hinge_triplets(hg, h * hg.damping + h * h * hg.stiffness, rest_row_, t);
     const auto m = static_cast<Eigen::Index>(rest_free_.size());
     Sparse k(m, m);
     k.setFromTriplets(t.begin(), t.end());
@@ -985,26 +993,8 @@ class Projective final : public Integrator {
       if (static_cast<Index>(free_[r]) == key_.drag_vertex) diagonal += key_.drag_stiffness + key_.drag_damping / h;
       t.emplace_back(rr, rr, diagonal);
     }
-    for (const Spring& sp : model.springs()) {
-      const Eigen::Index ra = row_[static_cast<std::size_t>(sp.a)], rb = row_[static_cast<std::size_t>(sp.b)];
-      if (ra >= 0) t.emplace_back(ra, ra, sp.stiffness);
-      if (rb >= 0) t.emplace_back(rb, rb, sp.stiffness);
-      if (ra >= 0 && rb >= 0) {
-        t.emplace_back(ra, rb, -sp.stiffness);
-        t.emplace_back(rb, ra, -sp.stiffness);
-      }
-    }
-    for (const Hinge& hg : model.hinges()) {
-      const Scalar weight = hg.stiffness + hg.damping / h;
-      for (std::size_t i = 0; i < 4; ++i) {
-        const Eigen::Index ri = row_[static_cast<std::size_t>(hg.vertex[i])];
-        if (ri < 0) continue;
-        for (std::size_t j = 0; j < 4; ++j) {
-          const Eigen::Index rj = row_[static_cast<std::size_t>(hg.vertex[j])];
-          if (rj >= 0) t.emplace_back(ri, rj, weight * hg.weight[i] * hg.weight[j]);
-        }
-      }
-    }
+    for (const Spring& sp : model.springs()) add_spring_triplets(sp, sp.stiffness, row_, t);
+    for (const Hinge& hg : model.hinges()) add_hinge_triplets(hg, hg.stiffness + hg.damping / h, row_, t);
     const auto m = static_cast<Eigen::Index>(free_.size());
     Sparse a(m, m);
     a.setFromTriplets(t.begin(), t.end());
